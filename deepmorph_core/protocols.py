@@ -1,0 +1,172 @@
+"""The contracts plugins implement: primitives, path segments, augmentations and detectors.
+
+Built-in kinds implement exactly these and register through the same entry-point group as
+third-party plugins (see :mod:`deepmorph_core.hookspecs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from torch import Tensor
+
+if TYPE_CHECKING:
+    from lxml import etree
+
+    from deepmorph_core.outline import Frame, Outline, OutlineBuilder
+    from deepmorph_core.svg.reader import ElementReader
+
+
+@dataclass(frozen=True)
+class ElementMorph:
+    """An element- or group-level morph, for writing back: shift, uniform scale and rotation
+    about ``centre`` (all in the element's own user units; degrees).
+    """
+
+    centre: tuple[float, float]
+    shift: tuple[float, float] = (0.0, 0.0)
+    scale: float = 1.0
+    rotate: float = 0.0
+
+    def matrix(self) -> np.ndarray:
+        """The 3x3 matrix ``T(centre + shift) R S T(-centre)``."""
+        cx, cy = self.centre
+        a = np.deg2rad(self.rotate)
+        c, s = np.cos(a) * self.scale, np.sin(a) * self.scale
+        tx = cx + self.shift[0] - (c * cx - s * cy)
+        ty = cy + self.shift[1] - (s * cx + c * cy)
+        return np.array([[c, -s, tx], [s, c, ty], [0.0, 0.0, 1.0]])
+
+    @property
+    def is_identity(self) -> bool:
+        return self.shift == (0.0, 0.0) and self.scale == 1.0 and self.rotate == 0.0
+
+
+@runtime_checkable
+class Primitive(Protocol):
+    """One drawable SVG element that DeepMorph can morph.
+
+    Class attributes:
+        kind: unique registry key, e.g. ``"circle"``.
+        tags: SVG element names (local names) this kind reads.
+        priority: when several kinds read one tag, higher priority is asked first; a kind
+            declines an element by returning ``None`` from :meth:`from_element`.
+        morphable: one line for ``list-primitives`` saying what may move.
+    """
+
+    kind: ClassVar[str]
+    tags: ClassVar[tuple[str, ...]]
+    priority: ClassVar[int]
+    morphable: ClassVar[str]
+
+    @classmethod
+    def from_element(cls, element: etree._Element, reader: ElementReader) -> Primitive | None:
+        """Read the element's geometry (local user units), or return ``None`` to decline it.
+
+        Raise :class:`~deepmorph_core.errors.SvgError` (via ``reader.error``) on bad values.
+        """
+        ...
+
+    def control_points(self) -> Tensor:
+        """``(n, 2)`` float64 control points in local user units: what per-point moves act on."""
+        ...
+
+    def outline(self, frame: Frame) -> Outline:
+        """What the element draws, in pixels, for a batch of morphed control points."""
+        ...
+
+    def sdf(self, frame: Frame, grid: Tensor, paint: str, half_width: Tensor) -> Tensor:
+        """Differentiable signed distance ``(B, P)`` (positive inside, zero on the border) of
+        the ``"stroke"`` or ``"fill"`` paint over ``grid`` ``(P, 2)`` pixel centres.
+        """
+        ...
+
+    def write(self, element: etree._Element, points: np.ndarray, morph: ElementMorph) -> None:
+        """Write morphed geometry back into ``element``.
+
+        Args:
+            element: the element this primitive was read from (in the output tree).
+            points: ``(n, 2)`` control points after per-point moves (before ``morph``).
+            morph: the element-level morph to bake in (about the element's centre).
+        """
+        ...
+
+
+@runtime_checkable
+class PathSegment(Protocol):
+    """One kind of ``<path>`` segment (e.g. arcs, cubic Béziers), registered like a primitive.
+
+    Class attributes:
+        kind: registry key, e.g. ``"cubic-bezier"``.
+        commands: the path command letters it reads, e.g. ``"CcSs"``.
+        svgpath_types: the ``svg.path`` segment classes it converts.
+        morphable: one line for ``list-primitives``.
+    """
+
+    kind: ClassVar[str]
+    commands: ClassVar[str]
+    svgpath_types: ClassVar[tuple[type, ...]]
+    morphable: ClassVar[str]
+
+    @classmethod
+    def from_svgpath(cls, segment: Any, reader: ElementReader) -> tuple[PathSegment, list[complex]]:
+        """Convert a parsed ``svg.path`` segment.
+
+        Returns:
+            The segment object and the control points it adds after its start point
+            (the last one is its end point), as complex numbers ``x + yj``.
+        """
+        ...
+
+    def add_pieces(self, builder: OutlineBuilder, frame: Frame, points: Tensor, caps: tuple[int, int]) -> None:
+        """Add this segment to ``builder``.
+
+        Args:
+            builder: the path's outline builder.
+            frame: the path's frame (use ``frame.to_pixels`` for points, ``frame.affine`` for shape).
+            points: ``(B, k + 1, 2)`` local points: the start point then the points it added.
+            caps: cap codes for its start and end (round unless it ends an open subpath).
+        """
+        ...
+
+    def flatten(self, frame: Frame, points: Tensor) -> Tensor:
+        """``(B, m, 2)`` pixel points along the segment, excluding its start (for fill rings)."""
+        ...
+
+    def to_d(self, points: np.ndarray, morph: ElementMorph) -> str:
+        """Path data for the segment (absolute commands), given its ``(k + 1, 2)`` local points
+        already mapped through ``morph``; ``morph`` is passed for shape parameters (arc radii)."""
+        ...
+
+
+@runtime_checkable
+class Augmentation(Protocol):
+    """A differentiable capture corruption applied between rasterizer and decoder.
+
+    Class attributes:
+        name: registry key used in configs, e.g. ``"gaussian_noise"``.
+    """
+
+    name: ClassVar[str]
+
+    def __call__(self, images: Tensor, generator: Any | None = None) -> Tensor:
+        """Corrupt ``(B, 1, H, W)`` images in ``[0, 1]``; differentiable w.r.t. ``images``."""
+        ...
+
+
+@runtime_checkable
+class Detector(Protocol):
+    """Finds instances of a trained drawing in a photo.
+
+    Class attributes:
+        name: registry key, e.g. ``"heatmap"``.
+    """
+
+    name: ClassVar[str]
+
+    def detect(self, image: np.ndarray) -> list[dict[str, Any]]:
+        """Return detections (bounding box, keypoints, score) for an ``(H, W)`` or
+        ``(H, W, 3)`` uint8 image; an empty list when there is none."""
+        ...

@@ -1,0 +1,1 @@
+"""SVG input and output: secure loading, values, transforms, styles, element reading, writing."""

@@ -1,0 +1,71 @@
+"""Reading one element's attributes with errors that name the file and line."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NoReturn, TypeVar
+
+import numpy as np
+from lxml import etree
+
+from deepmorph_core.errors import SvgError, UnsupportedFeatureError
+from deepmorph_core.svg import values
+from deepmorph_core.svg.style import Style
+
+if TYPE_CHECKING:
+    from deepmorph_core.plugins import Registry
+
+T = TypeVar("T")
+
+
+@dataclass
+class ElementReader:
+    """What a primitive gets to read its element: typed attribute access and error reporting.
+
+    Attributes:
+        source: label of the SVG (a path, or ``<string>``).
+        registry: the plugin registry (paths use it to find segment kinds).
+        style: the computed style of the element being read (caps, fill rule).
+    """
+
+    source: str
+    registry: Registry
+    style: Style = Style()
+
+    def error(self, element: etree._Element | None, message: str) -> NoReturn:
+        """Raise an :class:`SvgError` at ``element``'s line."""
+        raise SvgError(message, self.source, element.sourceline if element is not None else None)
+
+    def unsupported(self, element: etree._Element | None, message: str) -> NoReturn:
+        """Raise an :class:`UnsupportedFeatureError` (``unsupported: ...``) at ``element``'s line."""
+        raise UnsupportedFeatureError(
+            f"unsupported: {message}", self.source, element.sourceline if element is not None else None
+        )
+
+    def _attr(self, element: etree._Element, name: str, parse: Callable[[str], T], default: T | None) -> T:
+        raw = element.get(name)
+        if raw is None:
+            if default is None:
+                self.error(element, f"<{etree.QName(element).localname}> needs attribute {name}")
+            return default
+        try:
+            return parse(raw)
+        except ValueError as exc:
+            self.error(element, f"{name}={raw!r}: {exc}")
+
+    def number(self, element: etree._Element, name: str, default: float | None = None) -> float:
+        """A numeric attribute (``default`` when absent; required when ``default`` is None)."""
+        return self._attr(element, name, values.parse_number, default)
+
+    def length(self, element: etree._Element, name: str, default: float | None = None) -> float:
+        """A length attribute in user units (``px`` allowed)."""
+        return self._attr(element, name, values.parse_length, default)
+
+    def points(self, element: etree._Element, name: str = "points") -> np.ndarray:
+        """A point list attribute as ``(n, 2)``."""
+        return self._attr(element, name, values.parse_points, None)
+
+    def text(self, element: etree._Element, name: str) -> str:
+        """A required string attribute."""
+        return self._attr(element, name, str, None)
