@@ -1,0 +1,253 @@
+"""The morph space of a drawing: its variables, their bounds, the map T, and perturbation.
+
+Variables come in blocks:
+
+* per-point moves: two variables per control point, mapped onto a disk of radius ``dm:move``
+  (a smooth square-to-disk map, so every value of the encoder's sigmoid lands inside);
+* element- and group-level affines: shift x/y (within +-R), scale and rotation (within
+  ``[lo, hi]``), about the element's or group's centre.
+
+``T`` maps the encoder's ``(0, 1)`` outputs onto these bounds; :meth:`MorphSpace.frames`
+turns values into batched pixel-space frames for the rasterizer; :meth:`MorphSpace.write_svg`
+writes one morph back into SVG.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from lxml import etree
+from torch import Tensor
+
+from deepmorph_core.drawing import Drawing
+from deepmorph_core.outline import Frame
+from deepmorph_core.primitive import append_transform
+from deepmorph_core.protocols import ElementMorph
+from deepmorph_core.svg.values import format_matrix
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One morph variable.
+
+    Attributes:
+        owner: ``"primitive"`` or ``"group"``.
+        index: index of the owning primitive or group.
+        role: ``move-x``, ``move-y``, ``shift-x``, ``shift-y``, ``scale`` or ``rotate``.
+        point: control point index for moves, else -1.
+        lo, hi: bounds in physical units (user units, scale factor, degrees). Move bounds are
+            the disk's radius: the pair (x, y) always lies within it.
+        line: source line of the owning element.
+    """
+
+    owner: str
+    index: int
+    role: str
+    point: int
+    lo: float
+    hi: float
+    line: int | None
+
+
+_AFFINE_ROLES = ("shift-x", "shift-y", "scale", "rotate")
+
+
+class MorphSpace:
+    """Variables and bounds of a drawing, and the differentiable map from values to geometry.
+
+    Args:
+        drawing: the parsed drawing.
+    """
+
+    def __init__(self, drawing: Drawing):
+        self.drawing = drawing
+        self.variables: list[Variable] = []
+        self._prim_moves: list[np.ndarray] = []  # (n, 2) indices into padded values (N = none)
+        self._prim_affine: list[np.ndarray] = []  # (4,) shift-x, shift-y, scale, rotate
+        self._group_affine: list[np.ndarray] = []
+        for group in drawing.groups:
+            self._group_affine.append(self._affine_vars("group", group.index, group.bounds, group.line))
+        for prim in drawing.primitives:
+            n = prim.primitive.control_points().shape[0]
+            moves = np.full((n, 2), -1, dtype=np.int64)
+            if not prim.fixed:
+                radius = prim.bounds.move or 0.0
+                if radius > 0:
+                    for k in range(n):
+                        for axis, role in enumerate(("move-x", "move-y")):
+                            moves[k, axis] = self._add(Variable("primitive", prim.index, role, k, -radius, radius, prim.line))
+            self._prim_moves.append(moves)
+            affine = (
+                np.full(4, -1, dtype=np.int64)
+                if prim.fixed
+                else self._affine_vars("primitive", prim.index, prim.bounds, prim.line)
+            )
+            self._prim_affine.append(affine)
+        nv = len(self.variables)
+        lo = torch.tensor([v.lo for v in self.variables], dtype=torch.float64)
+        hi = torch.tensor([v.hi for v in self.variables], dtype=torch.float64)
+        self.lower, self.upper = lo, hi
+        # scale variables are stored as (factor - 1) so that a missing variable (0) is neutral
+        self._offset = torch.tensor([1.0 if v.role == "scale" else 0.0 for v in self.variables], dtype=torch.float64)
+        pairs = [
+            (self._prim_moves[p][k, 0], self._prim_moves[p][k, 1])
+            for p in range(len(self._prim_moves))
+            for k in range(self._prim_moves[p].shape[0])
+            if self._prim_moves[p][k, 0] >= 0
+        ]
+        self._move_pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
+        self._fix_none(nv)
+
+    # -- construction ---------------------------------------------------------------------
+
+    def _add(self, var: Variable) -> int:
+        self.variables.append(var)
+        return len(self.variables) - 1
+
+    def _affine_vars(self, owner: str, index: int, bounds, line: int | None) -> np.ndarray:
+        idx = np.full(4, -1, dtype=np.int64)
+        if bounds.shift is not None:
+            for axis, role in enumerate(("shift-x", "shift-y")):
+                r = bounds.shift[axis]
+                if r > 0:
+                    idx[axis] = self._add(Variable(owner, index, role, -1, -r, r, line))
+        if bounds.scale is not None and bounds.scale[0] < bounds.scale[1]:
+            idx[2] = self._add(Variable(owner, index, "scale", -1, bounds.scale[0], bounds.scale[1], line))
+        if bounds.rotate is not None and bounds.rotate[0] < bounds.rotate[1]:
+            idx[3] = self._add(Variable(owner, index, "rotate", -1, bounds.rotate[0], bounds.rotate[1], line))
+        return idx
+
+    def _fix_none(self, nv: int) -> None:
+        """Point "no variable" (-1) at the zero column appended to values at run time."""
+        for arr in (*self._prim_moves, *self._prim_affine, *self._group_affine):
+            arr[arr < 0] = nv
+        self._moves_t = [torch.from_numpy(a) for a in self._prim_moves]
+        self._prim_affine_t = [torch.from_numpy(a) for a in self._prim_affine]
+        self._group_affine_t = [torch.from_numpy(a) for a in self._group_affine]
+
+    # -- the map T ----------------------------------------------------------------------
+
+    @property
+    def n_variables(self) -> int:
+        """``N_v``, the number of morph variables."""
+        return len(self.variables)
+
+    def values_from_unit(self, unit: Tensor) -> Tensor:
+        """Map encoder outputs in ``[0, 1]`` onto the bounds (the paper's ``T``).
+
+        Move pairs go through the square-to-disk map ``(x sqrt(1 - y^2/2), y sqrt(1 - x^2/2))``,
+        so a point never leaves its disk. Scale values come out as ``factor - 1``.
+
+        Shape:
+            ``(B, N_v)`` -> ``(B, N_v)``.
+        """
+        if unit.shape[-1] != self.n_variables:
+            raise ValueError(f"expected {self.n_variables} variables, got shape {tuple(unit.shape)}")
+        lo = self.lower.to(unit)
+        hi = self.upper.to(unit)
+        values = lo + (hi - lo) * unit
+        if self._move_pairs.numel():
+            ix, iy = self._move_pairs[:, 0], self._move_pairs[:, 1]
+            r = hi[ix]
+            x, y = values[:, ix] / r, values[:, iy] / r
+            dx = r * x * torch.sqrt((1 - y * y / 2).clamp_min(0))
+            dy = r * y * torch.sqrt((1 - x * x / 2).clamp_min(0))
+            values = values.index_copy(1, ix, dx).index_copy(1, iy, dy)
+        return values - self._offset.to(unit)
+
+    def neutral_unit(self, batch: int = 1, dtype: torch.dtype = torch.float32) -> Tensor:
+        """Encoder outputs closest to "no morph" (0.5 for symmetric bounds).
+
+        Shape:
+            -> ``(batch, N_v)``.
+        """
+        lo, hi = self.lower, self.upper
+        neutral = self._offset  # 1 for scale, 0 otherwise
+        u = ((neutral - lo) / (hi - lo)).clamp(0, 1)
+        return u.to(dtype).expand(batch, -1).clone()
+
+    def physical(self, values: Tensor) -> Tensor:
+        """Values in the units users read (scale as a factor)."""
+        return values + self._offset.to(values)
+
+    # -- geometry -------------------------------------------------------------------------
+
+    def frames(self, values: Tensor, width: int) -> list[Frame]:
+        """Pixel-space frames of every primitive for a batch of morph values.
+
+        Args:
+            values: ``(B, N_v)`` from :meth:`values_from_unit` (``B`` perturbations).
+            width: raster width in pixels.
+
+        Returns:
+            One :class:`Frame` per primitive, in document order.
+        """
+        B = values.shape[0]
+        dtype, device = values.dtype, values.device
+        ext = torch.cat([values, values.new_zeros(B, 1)], 1)
+        pix = torch.as_tensor(self.drawing.pixel_matrix(width), dtype=dtype, device=device)
+        group_world = []
+        for group, idx in zip(self.drawing.groups, self._group_affine_t):
+            g = torch.as_tensor(group.ctm, dtype=dtype, device=device)
+            m = _affine(ext[:, idx.to(device)], group.centre)
+            group_world.append(g @ m @ torch.linalg.inv(g))
+        out = []
+        for prim, moves, aff in zip(self.drawing.primitives, self._moves_t, self._prim_affine_t):
+            a = pix.expand(B, 3, 3)
+            for gi in prim.groups:
+                a = a @ group_world[gi]
+            ctm = torch.as_tensor(prim.ctm, dtype=dtype, device=device)
+            a = a @ ctm @ _affine(ext[:, aff.to(device)], prim.centre)
+            base = prim.primitive.control_points().to(dtype=dtype, device=device)
+            local = base[None] + ext[:, moves.to(device)]
+            out.append(Frame(local, a))
+        return out
+
+    # -- writing back ---------------------------------------------------------------------
+
+    def write_svg(self, values: Tensor) -> str:
+        """The drawing with one morph baked in, as SVG text; untouched elements stay as they were.
+
+        Args:
+            values: ``(N_v,)`` or ``(1, N_v)`` morph values (from :meth:`values_from_unit`).
+        """
+        v = values.detach().reshape(-1).to(torch.float64)
+        if v.shape[0] != self.n_variables:
+            raise ValueError(f"expected {self.n_variables} values, got {v.shape[0]}")
+        ext = torch.cat([v, v.new_zeros(1)]).numpy()
+        root = copy.deepcopy(self.drawing.root)
+        twin = dict(zip(self.drawing.root.iter(), root.iter()))
+        for group, idx in zip(self.drawing.groups, self._group_affine):
+            morph = _element_morph(ext[idx], group.centre)
+            if not morph.is_identity:
+                append_transform(twin[group.element], format_matrix(morph.matrix()))
+        for prim, moves, aff in zip(self.drawing.primitives, self._prim_moves, self._prim_affine):
+            delta = ext[moves]
+            morph = _element_morph(ext[aff], prim.centre)
+            if not delta.any() and morph.is_identity:
+                continue
+            points = prim.primitive.control_points().numpy() + delta
+            prim.primitive.write(twin[prim.element], points, morph)
+        return etree.tostring(root, encoding="unicode")
+
+
+def _affine(params: Tensor, centre: np.ndarray) -> Tensor:
+    """Batched ``T(c + shift) R(rot) S(1 + s) T(-c)`` from ``(B, 4)`` [shift-x, shift-y, s, rot°]."""
+    cx, cy = float(centre[0]), float(centre[1])
+    shx, shy, s, rot = params.unbind(1)
+    ang = torch.deg2rad(rot)
+    c, sn = torch.cos(ang) * (1 + s), torch.sin(ang) * (1 + s)
+    tx = cx + shx - (c * cx - sn * cy)
+    ty = cy + shy - (sn * cx + c * cy)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    return torch.stack(
+        [torch.stack([c, -sn, tx], -1), torch.stack([sn, c, ty], -1), torch.stack([zero, zero, one], -1)], -2
+    )
+
+
+def _element_morph(params: np.ndarray, centre: np.ndarray) -> ElementMorph:
+    shx, shy, s, rot = (float(x) for x in params)
+    return ElementMorph((float(centre[0]), float(centre[1])), (shx, shy), 1.0 + s, rot)

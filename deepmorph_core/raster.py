@@ -1,0 +1,159 @@
+"""The soft rasterizer: batched, differentiable, and culled to each primitive's bounding box.
+
+Per the paper, each paint (a primitive's fill or stroke) is ``sigmoid(s * sdf)`` with ``sdf``
+in pixels; black paints add, white paints subtract, and the sum is squashed with
+``sigmoid(t * (x - 0.5))``. Runs of same-coloured paints are summed and a squash is applied
+between runs of different colour, so that a white stroke over black strokes shows white
+(bottom-up layering).
+
+Three departures from a literal reading, all measured (``bench/``):
+
+* **Culling.** The paper names the rasterizer's memory as its bottleneck. A paint is evaluated
+  only over the pixel rectangle its batch can reach (its outline's bounding box, padded by the
+  stroke half-width and the sigmoid's reach), and added into the canvas in place. Outside that
+  box ``sigmoid(s * sdf)`` is below ``1e-4``, so the result matches the dense reference.
+* **Soft union within a run.** Same-coloured paints are combined as ``1 - prod(1 - c_i)``
+  (accumulated additively as ``sum log(1 - c_i)``) instead of ``sum c_i``: where the soft edges
+  of two strokes overlap, a plain sum reads as solid ink beyond both edges (visible bulges at
+  every joint), the union does not. ``blend="sum"`` keeps the paper's sum.
+* **Normalised squash.** ``sigmoid(t (x - 0.5))`` is rescaled so that 0 ink maps to exactly 0
+  and 1 to exactly 1; otherwise blank paper would read as faint grey everywhere.
+
+Output is *ink* in ``[0, 1]`` (1 = black); :func:`ink_to_image` gives paper-white images.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+from deepmorph_core.morph import MorphSpace
+from deepmorph_core.outline import pixel_bbox
+from deepmorph_core.primitive import outline_paint_sdf
+
+#: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-9.2) ~ 1e-4.
+_SIGMOID_REACH = 9.2
+
+
+@dataclass(frozen=True)
+class RasterSettings:
+    """Soft rasterizer settings.
+
+    Attributes:
+        width: raster width in pixels (height follows the viewBox aspect).
+        sharpness: ``s``, per pixel. With ``t = 12``, ``s = 1.85`` minimises the mean
+            difference of an edge to a real renderer's one-pixel box-filtered edge.
+        squash: ``t``, the squash sharpness.
+        cull: evaluate each paint only inside its padded bounding box.
+        blend: ``"union"`` (soft union of same-coloured paints) or ``"sum"`` (the paper's).
+    """
+
+    width: int = 96
+    sharpness: float = 1.85
+    squash: float = 12.0
+    cull: bool = True
+    blend: str = "union"
+
+
+def normalised_squash(x: Tensor, t: float) -> Tensor:
+    """``sigmoid(t (x - 0.5))`` rescaled so that 0 -> 0 and 1 -> 1, clamped to ``[0, 1]``."""
+    lo = 1.0 / (1.0 + math.exp(t / 2))
+    hi = 1.0 - lo
+    return ((torch.sigmoid(t * (x - 0.5)) - lo) / (hi - lo)).clamp(0.0, 1.0)
+
+
+def ink_to_image(ink: Tensor) -> Tensor:
+    """Ink (1 = black) to image intensity (1 = white paper)."""
+    return 1.0 - ink
+
+
+class SoftRasterizer(nn.Module):
+    """Renders a batch of morphs of one drawing.
+
+    Args:
+        space: the drawing's morph space.
+        settings: raster settings.
+    """
+
+    def __init__(self, space: MorphSpace, settings: RasterSettings | None = None):
+        super().__init__()
+        self.space = space
+        self.settings = settings or RasterSettings()
+        self.height, self.width = space.drawing.pixel_size(self.settings.width)
+        self._runs = _paint_runs(space)
+
+    def forward(self, values: Tensor) -> Tensor:
+        """Render morph values.
+
+        Args:
+            values: ``(B, N_v)`` morph values (:meth:`MorphSpace.values_from_unit`).
+
+        Returns:
+            ``(B, 1, H, W)`` ink in ``[0, 1]``.
+        """
+        st = self.settings
+        B, dtype, device = values.shape[0], values.dtype, values.device
+        H, W = self.height, self.width
+        frames = self.space.frames(values, W)
+        outlines: dict[int, object] = {}
+        if st.blend not in ("union", "sum"):
+            raise ValueError(f"blend must be 'union' or 'sum', got {st.blend!r}")
+        union = st.blend == "union"
+        acc: Tensor | None = None
+        for colour, paints in self._runs:
+            canvas = torch.zeros(B, H, W, dtype=dtype, device=device)
+            for index, mode in paints:
+                prim = self.space.drawing.primitives[index]
+                frame = frames[index]
+                if index not in outlines:
+                    outlines[index] = prim.primitive.outline(frame)
+                outline = outlines[index]
+                half_width = frame.scale * (prim.style.stroke_width / 2) if mode == "stroke" else torch.zeros(
+                    B, dtype=dtype, device=device
+                )
+                reach = _SIGMOID_REACH / st.sharpness
+                if st.cull:
+                    box = pixel_bbox(outline, float(half_width.max()) + reach)
+                    x0 = max(0, int(math.floor(float(box[0]))))
+                    y0 = max(0, int(math.floor(float(box[1]))))
+                    x1 = min(W, int(math.ceil(float(box[2]))) + 1)
+                    y1 = min(H, int(math.ceil(float(box[3]))) + 1)
+                    if x1 <= x0 or y1 <= y0:
+                        continue
+                else:
+                    x0, y0, x1, y1 = 0, 0, W, H
+                grid = _pixel_grid(x0, y0, x1, y1, dtype, device)
+                sdf = outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd)
+                if union:  # log(1 - sigmoid(z)) = logsigmoid(-z)
+                    cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf)
+                else:
+                    cover = torch.sigmoid(st.sharpness * sdf)
+                canvas[:, y0:y1, x0:x1] += cover.reshape(B, y1 - y0, x1 - x0)
+            contribution = colour * (-torch.expm1(canvas) if union else canvas)
+            acc = contribution if acc is None else normalised_squash(acc, st.squash) + contribution
+        if acc is None:
+            return torch.zeros(B, 1, H, W, dtype=dtype, device=device)
+        return normalised_squash(acc, st.squash)[:, None]
+
+
+def _pixel_grid(x0: int, y0: int, x1: int, y1: int, dtype: torch.dtype, device: torch.device) -> Tensor:
+    """Pixel centres of the rectangle ``[x0, x1) x [y0, y1)``, row-major, ``(P, 2)``."""
+    ys = torch.arange(y0, y1, dtype=dtype, device=device) + 0.5
+    xs = torch.arange(x0, x1, dtype=dtype, device=device) + 0.5
+    gy, gx = torch.meshgrid(ys, xs, indexing="ij")
+    return torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)
+
+
+def _paint_runs(space: MorphSpace) -> list[tuple[int, list[tuple[int, str]]]]:
+    """Group paints in document order into runs of one colour: ``[(colour, [(prim, mode)])]``."""
+    runs: list[tuple[int, list[tuple[int, str]]]] = []
+    for prim in space.drawing.primitives:
+        for mode, colour in prim.style.paints:
+            if runs and runs[-1][0] == colour:
+                runs[-1][1].append((prim.index, mode))
+            else:
+                runs.append((colour, [(prim.index, mode)]))
+    return runs

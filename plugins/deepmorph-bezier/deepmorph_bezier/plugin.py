@@ -1,0 +1,15 @@
+"""The plugin module behind the ``bezier`` entry point of the ``deepmorph`` group."""
+
+from __future__ import annotations
+
+from deepmorph_core import hookimpl
+from deepmorph_core.plugins import Register
+
+from deepmorph_bezier.segments import CubicBezierSegment, QuadraticBezierSegment
+
+
+@hookimpl
+def deepmorph_register_primitives(register: Register) -> None:
+    """Register the cubic and quadratic Bézier path-segment kinds."""
+    register.path_segment(CubicBezierSegment)
+    register.path_segment(QuadraticBezierSegment)
