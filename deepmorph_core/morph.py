@@ -218,8 +218,8 @@ class MorphSpace:
         if v.shape[0] != self.n_variables:
             raise ValueError(f"expected {self.n_variables} values, got {v.shape[0]}")
         ext = torch.cat([v, v.new_zeros(1)]).numpy()
-        root = copy.deepcopy(self.drawing.root)
-        twin = dict(zip(self.drawing.root.iter(), root.iter()))
+        tree = copy.deepcopy(self.drawing.root.getroottree())  # keeps the prolog and comments
+        twin = dict(zip(self.drawing.root.iter(), tree.getroot().iter()))
         for group, idx in zip(self.drawing.groups, self._group_affine):
             morph = _element_morph(ext[idx], group.centre)
             if not morph.is_identity:
@@ -231,7 +231,7 @@ class MorphSpace:
                 continue
             points = prim.primitive.control_points().numpy() + delta
             prim.primitive.write(twin[prim.element], points, morph)
-        return etree.tostring(root, encoding="unicode")
+        return etree.tostring(tree, encoding="unicode")
 
 
 def _affine(params: Tensor, centre: np.ndarray) -> Tensor:

@@ -63,7 +63,7 @@ def parse_svg_bytes(data: bytes, label: str) -> etree._Element:
         load_dtd=False,
         dtd_validation=False,
         huge_tree=False,
-        remove_comments=True,
+        remove_comments=False,
         remove_pis=True,
         collect_ids=False,
     )

@@ -1,0 +1,161 @@
+"""The public Python API: load a drawing, inspect its variables, morph, render, write SVG.
+
+Example::
+
+    from deepmorph_core.api import MorphableDrawing
+
+    drawing = MorphableDrawing.load("ghost.svg", move=0.5)
+    unit = drawing.random_unit(4, seed=3)                 # (4, N_v) in [0, 1]
+    values = drawing.values_from_unit(unit)               # mapped onto the bounds (T)
+    ink = drawing.render_soft(values, width=128)          # (4, 1, H, W), differentiable
+    svg_text = drawing.to_svg(values[0])                  # a morphed SVG document
+
+The CLI is a thin layer over this module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from deepmorph_core.bounds import BoundSpec
+from deepmorph_core.drawing import Drawing, load_drawing
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.morph import MorphSpace, Variable
+from deepmorph_core.plugins import Registry, default_registry
+from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.render import render_svg_ink
+
+BUNDLED_DRAWING = Path(__file__).parent / "data" / "ghost.svg"
+
+
+def bound_defaults(
+    move: float | None = None,
+    shift: tuple[float, float] | float | None = None,
+    scale: tuple[float, float] | None = None,
+    rotate: tuple[float, float] | None = None,
+) -> BoundSpec:
+    """Default bounds for primitives that have none (validated like ``dm:`` attributes)."""
+    from pydantic import ValidationError
+
+    from deepmorph_core.bounds import format_validation_error
+
+    try:
+        return BoundSpec(move=move, shift=shift, scale=scale, rotate=rotate)
+    except ValidationError as exc:
+        raise DeepMorphError(f"default bounds: {format_validation_error(exc)}") from None
+
+
+@dataclass
+class MorphableDrawing:
+    """A drawing with its morph space: the object pipelines are composed from.
+
+    Attributes:
+        drawing: the parsed drawing.
+        space: its variables and bounds.
+    """
+
+    drawing: Drawing
+    space: MorphSpace
+
+    @classmethod
+    def load(
+        cls,
+        source: str | Path | bytes,
+        *,
+        move: float | None = None,
+        shift: tuple[float, float] | float | None = None,
+        scale: tuple[float, float] | None = None,
+        rotate: tuple[float, float] | None = None,
+        registry: Registry | None = None,
+    ) -> MorphableDrawing:
+        """Parse an SVG file or document; keyword bounds apply where the SVG says nothing."""
+        defaults = bound_defaults(move, shift, scale, rotate)
+        drawing = load_drawing(source, defaults=defaults, registry=registry or default_registry())
+        return cls(drawing, MorphSpace(drawing))
+
+    @property
+    def n_variables(self) -> int:
+        """``N_v``."""
+        return self.space.n_variables
+
+    @property
+    def variables(self) -> list[Variable]:
+        """Every variable with its owner, role and bounds."""
+        return self.space.variables
+
+    def random_unit(self, batch: int = 1, seed: int | None = None) -> Tensor:
+        """Uniform random encoder outputs ``(batch, N_v)`` in ``[0, 1]`` (seeded if asked)."""
+        gen = torch.Generator().manual_seed(seed) if seed is not None else None
+        return torch.rand(batch, self.n_variables, generator=gen)
+
+    def values_from_unit(self, unit: Tensor) -> Tensor:
+        """Map ``(B, N_v)`` in ``[0, 1]`` onto the bounds (differentiable)."""
+        return self.space.values_from_unit(unit)
+
+    def neutral_values(self, batch: int = 1) -> Tensor:
+        """Values of the unmorphed drawing ``(batch, N_v)``."""
+        return self.space.values_from_unit(self.space.neutral_unit(batch))
+
+    def rasterizer(self, width: int, **settings: Any) -> SoftRasterizer:
+        """A soft rasterizer module for this drawing (see :class:`RasterSettings`)."""
+        return SoftRasterizer(self.space, RasterSettings(width=width, **settings))
+
+    def render_soft(self, values: Tensor, width: int = 96, **settings: Any) -> Tensor:
+        """Soft-rasterize ``(B, N_v)`` values to ``(B, 1, H, W)`` ink (differentiable)."""
+        return self.rasterizer(width, **settings)(values)
+
+    def to_svg(self, values: Tensor) -> str:
+        """One morph ``(N_v,)`` written back as an SVG document."""
+        return self.space.write_svg(values)
+
+    def render_hard(self, values: Tensor | None, width: int = 96) -> np.ndarray:
+        """Render one morph (or the base drawing, for ``None``) with the real renderer, as ink."""
+        svg = self.to_svg(values) if values is not None else self.to_svg(self.neutral_values()[0])
+        return render_svg_ink(svg, width)
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-ready summary: primitives, variables, bounds, what is fixed or skipped."""
+        per_prim: dict[int, list[Variable]] = {}
+        per_group: dict[int, list[Variable]] = {}
+        for v in self.space.variables:
+            (per_prim if v.owner == "primitive" else per_group).setdefault(v.index, []).append(v)
+        prims = []
+        for p in self.drawing.primitives:
+            vs = per_prim.get(p.index, [])
+            prims.append(
+                {
+                    "index": p.index,
+                    "kind": p.primitive.kind,
+                    "line": p.line,
+                    "control_points": int(p.primitive.control_points().shape[0]),
+                    "variables": len(vs),
+                    "fixed": p.fixed,
+                    "bounds": p.bounds.model_dump(exclude_none=True),
+                    "paints": [f"{mode}:{'black' if c > 0 else 'white'}" for mode, c in p.style.paints],
+                }
+            )
+        groups = [
+            {"index": g.index, "line": g.line, "variables": len(per_group.get(g.index, [])),
+             "bounds": g.bounds.model_dump(exclude_none=True)}
+            for g in self.drawing.groups
+        ]
+        physical = lambda v: (v.lo, v.hi)  # noqa: E731
+        return {
+            "source": self.drawing.source,
+            "viewbox": list(self.drawing.viewbox),
+            "n_variables": self.n_variables,
+            "primitives": prims,
+            "groups": groups,
+            "variables": [
+                {"owner": v.owner, "index": v.index, "role": v.role, "point": v.point,
+                 "lo": physical(v)[0], "hi": physical(v)[1], "line": v.line}
+                for v in self.space.variables
+            ],
+            "skipped": [{"line": line, "reason": why} for line, why in self.drawing.skipped],
+        }
