@@ -141,8 +141,12 @@ class MorphableDrawing:
                 }
             )
         groups = [
-            {"index": g.index, "line": g.line, "variables": len(per_group.get(g.index, [])),
-             "bounds": g.bounds.model_dump(exclude_none=True)}
+            {
+                "index": g.index,
+                "line": g.line,
+                "variables": len(per_group.get(g.index, [])),
+                "bounds": g.bounds.model_dump(exclude_none=True),
+            }
             for g in self.drawing.groups
         ]
         physical = lambda v: (v.lo, v.hi)  # noqa: E731
@@ -153,8 +157,15 @@ class MorphableDrawing:
             "primitives": prims,
             "groups": groups,
             "variables": [
-                {"owner": v.owner, "index": v.index, "role": v.role, "point": v.point,
-                 "lo": physical(v)[0], "hi": physical(v)[1], "line": v.line}
+                {
+                    "owner": v.owner,
+                    "index": v.index,
+                    "role": v.role,
+                    "point": v.point,
+                    "lo": physical(v)[0],
+                    "hi": physical(v)[1],
+                    "line": v.line,
+                }
                 for v in self.space.variables
             ],
             "skipped": [{"line": line, "reason": why} for line, why in self.drawing.skipped],

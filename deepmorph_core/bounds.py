@@ -42,7 +42,7 @@ class BoundSpec(BaseModel):
         if isinstance(v, str):
             nums = parse_numbers(v)
             if len(nums) != 1:
-                raise ValueError("takes one radius, e.g. dm:move=\"0.5\"")
+                raise ValueError('takes one radius, e.g. dm:move="0.5"')
             return nums[0]
         return v
 
@@ -52,7 +52,7 @@ class BoundSpec(BaseModel):
         if isinstance(v, str):
             nums = parse_numbers(v)
             if len(nums) not in (1, 2):
-                raise ValueError("takes R or \"RX RY\"")
+                raise ValueError('takes R or "RX RY"')
             v = (nums[0], nums[-1])
         if isinstance(v, (int, float)):
             v = (float(v), float(v))
@@ -66,7 +66,7 @@ class BoundSpec(BaseModel):
         if isinstance(v, str):
             nums = parse_numbers(v)
             if len(nums) != 2:
-                raise ValueError("takes two numbers \"LO HI\"")
+                raise ValueError('takes two numbers "LO HI"')
             return tuple(nums)
         return v
 
@@ -75,7 +75,7 @@ class BoundSpec(BaseModel):
     def _fixed(cls, v: Any) -> Any:
         if isinstance(v, str):
             if v.strip().lower() not in ("true", "false"):
-                raise ValueError("is \"true\" or \"false\"")
+                raise ValueError('is "true" or "false"')
             return v.strip().lower() == "true"
         return v
 

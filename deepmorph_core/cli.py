@@ -6,17 +6,20 @@ Every user-facing failure is a :class:`~deepmorph_core.errors.DeepMorphError`, p
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional, TypeVar
 
 import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.errors import DeepMorphError
@@ -33,10 +36,30 @@ app = typer.Typer(
 out = Console()
 err = Console(stderr=True)
 
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _print_error(exc: BaseException) -> None:
+    """One line on stderr, never interpreted as markup, never wrapped."""
+    err.print(Text.assemble(("error: ", "bold red"), str(exc)), soft_wrap=True, highlight=False)
+
+
+def friendly(fn: F) -> F:
+    """Turn a DeepMorphError raised by a command into one ``error:`` line and exit status 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except DeepMorphError as exc:
+            _print_error(exc)
+            raise typer.Exit(1) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
 SvgArg = Annotated[Path, typer.Argument(help="An SVG drawing.", show_default=False)]
-MoveOpt = Annotated[
-    Optional[float], typer.Option("--move", help="Default dm:move radius for elements without bounds.")
-]
+MoveOpt = Annotated[Optional[float], typer.Option("--move", help="Default dm:move radius for elements without bounds.")]
 ShiftOpt = Annotated[Optional[str], typer.Option("--shift", help='Default dm:shift: "R" or "RX,RY".')]
 ScaleOpt = Annotated[Optional[str], typer.Option("--scale", help='Default dm:scale: "LO,HI".')]
 RotateOpt = Annotated[Optional[str], typer.Option("--rotate", help='Default dm:rotate in degrees: "LO,HI".')]
@@ -54,7 +77,7 @@ def _pair(text: str | None, name: str, single_ok: bool = False) -> tuple[float, 
     if single_ok and len(nums) == 1:
         return nums[0], nums[0]
     if len(nums) != 2:
-        raise DeepMorphError(f"--{name}={text!r}: expected two numbers \"LO,HI\"")
+        raise DeepMorphError(f'--{name}={text!r}: expected two numbers "LO,HI"')
     return nums[0], nums[1]
 
 
@@ -82,14 +105,13 @@ def _write_text_atomic(path: Path, text: str) -> None:
 
 
 @app.command("list-primitives")
+@friendly
 def list_primitives(as_json: JsonOpt = False) -> None:
     """List the primitive and path-segment kinds the installed plugins provide."""
     reg = default_registry()
     rows = []
     for r in [*reg.primitives.values(), *reg.path_segments.values()]:
-        reads = (
-            " ".join(f"<{t}>" for t in r.obj.tags) if r.category == "primitive" else f"path {r.obj.commands}"
-        )
+        reads = " ".join(f"<{t}>" for t in r.obj.tags) if r.category == "primitive" else f"path {r.obj.commands}"
         rows.append(
             {
                 "kind": r.key,
@@ -105,13 +127,14 @@ def list_primitives(as_json: JsonOpt = False) -> None:
         return
     table = Table(title="DeepMorph primitives")
     for col in ("kind", "reads", "plugin", "distribution", "morphable parameters"):
-        table.add_column(col)
+        table.add_column(col, overflow="fold")
     for row in rows:
         table.add_row(row["kind"], row["reads"], row["plugin"], row["distribution"] or "-", row["morphable"])
     out.print(table)
 
 
 @app.command()
+@friendly
 def inspect(
     svg: SvgArg,
     move: MoveOpt = None,
@@ -128,11 +151,16 @@ def inspect(
         return
     table = Table(title=f"{svg}: {len(info['primitives'])} primitives, N_v = {info['n_variables']}")
     for col in ("#", "kind", "line", "points", "variables", "bounds", "paints"):
-        table.add_column(col)
+        table.add_column(col, overflow="fold")
     for p in info["primitives"]:
         bounds = "fixed" if p["fixed"] else (", ".join(f"{k}={v}" for k, v in p["bounds"].items()) or "none")
         table.add_row(
-            str(p["index"]), p["kind"], str(p["line"]), str(p["control_points"]), str(p["variables"]), bounds,
+            str(p["index"]),
+            p["kind"],
+            str(p["line"]),
+            str(p["control_points"]),
+            str(p["variables"]),
+            bounds,
             " ".join(p["paints"]),
         )
     out.print(table)
@@ -149,6 +177,7 @@ def inspect(
 
 
 @app.command()
+@friendly
 def morph(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Where to write the morphed SVG.")],
@@ -173,6 +202,7 @@ def morph(
 
 
 @app.command()
+@friendly
 def render(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Output PNG.")],
@@ -202,6 +232,7 @@ def _render_ink(svg: Path, size: int, soft: bool) -> np.ndarray:
 
 
 @app.command()
+@friendly
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo's files.")] = Path("deepmorph-demo"),
     seed: Annotated[int, typer.Option("--seed", help="Seed of the random morph.")] = 3,
@@ -209,7 +240,9 @@ def demo(
 ) -> None:
     """Run the bundled drawing through inspect, a random morph, real and soft renders, an overlay."""
     md = MorphableDrawing.load(BUNDLED_DRAWING)
-    out.print(f"bundled drawing {BUNDLED_DRAWING.name}: {len(md.drawing.primitives)} primitives, N_v = {md.n_variables}")
+    out.print(
+        f"bundled drawing {BUNDLED_DRAWING.name}: {len(md.drawing.primitives)} primitives, N_v = {md.n_variables}"
+    )
     values = md.values_from_unit(md.random_unit(1, seed))
     out_dir.mkdir(parents=True, exist_ok=True)
     morphed_svg = md.to_svg(values[0])
@@ -231,7 +264,7 @@ def main() -> None:
     try:
         app()
     except DeepMorphError as exc:
-        err.print(f"[bold red]error:[/] {exc}", highlight=False, markup=True, soft_wrap=True)
+        _print_error(exc)
         sys.exit(1)
     except KeyboardInterrupt:
         err.print("interrupted")

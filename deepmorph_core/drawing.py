@@ -227,7 +227,9 @@ class _Walker:
                     continue
                 inner = groups
                 if not el_fixed and any(v is not None for v in (bounds.shift, bounds.scale, bounds.rotate)):
-                    drawing.groups.append(MorphGroup(len(drawing.groups), el, el_ctm, bounds, np.zeros(2), el.sourceline))
+                    drawing.groups.append(
+                        MorphGroup(len(drawing.groups), el, el_ctm, bounds, np.zeros(2), el.sourceline)
+                    )
                     inner = groups + (len(drawing.groups) - 1,)
                 self._walk(el, drawing, style, el_ctm, inner, el_move, el_fixed, depth + 1)
                 continue
@@ -255,7 +257,15 @@ class _Walker:
             centre = (pts.min(0) + pts.max(0)) / 2
             drawing.primitives.append(
                 PlacedPrimitive(
-                    len(drawing.primitives), primitive, el, style, el_ctm, groups, effective, el_fixed, centre,
+                    len(drawing.primitives),
+                    primitive,
+                    el,
+                    style,
+                    el_ctm,
+                    groups,
+                    effective,
+                    el_fixed,
+                    centre,
                     el.sourceline,
                 )
             )

@@ -208,6 +208,4 @@ def ellipse_linear(rx: Tensor, ry: Tensor, phi: Tensor) -> Tensor:
         ``(...)`` -> ``(..., 2, 2)``.
     """
     c, s = torch.cos(phi), torch.sin(phi)
-    return torch.stack(
-        [torch.stack([c * rx, -s * ry], -1), torch.stack([s * rx, c * ry], -1)], -2
-    )
+    return torch.stack([torch.stack([c * rx, -s * ry], -1), torch.stack([s * rx, c * ry], -1)], -2)

@@ -78,7 +78,9 @@ class MorphSpace:
                 if radius > 0:
                     for k in range(n):
                         for axis, role in enumerate(("move-x", "move-y")):
-                            moves[k, axis] = self._add(Variable("primitive", prim.index, role, k, -radius, radius, prim.line))
+                            moves[k, axis] = self._add(
+                                Variable("primitive", prim.index, role, k, -radius, radius, prim.line)
+                            )
             self._prim_moves.append(moves)
             affine = (
                 np.full(4, -1, dtype=np.int64)
@@ -200,10 +202,12 @@ class MorphSpace:
             for gi in prim.groups:
                 a = a @ group_world[gi]
             ctm = torch.as_tensor(prim.ctm, dtype=dtype, device=device)
-            a = a @ ctm @ _affine(ext[:, aff.to(device)], prim.centre)
+            static = a @ ctm
+            stroke_scale = torch.sqrt(torch.linalg.det(static[:, :2, :2]).abs())
+            a = static @ _affine(ext[:, aff.to(device)], prim.centre)
             base = prim.primitive.control_points().to(dtype=dtype, device=device)
             local = base[None] + ext[:, moves.to(device)]
-            out.append(Frame(local, a))
+            out.append(Frame(local, a, stroke_scale))
         return out
 
     # -- writing back ---------------------------------------------------------------------

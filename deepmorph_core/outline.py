@@ -23,10 +23,14 @@ class Frame:
         local: ``(B, n, 2)`` control points in the element's own user units, after per-point moves.
         affine: ``(B, 3, 3)`` map from those units to pixels: viewBox scale, group morphs,
             the element's CTM and its element-level morph (shift/scale/rotate).
+        stroke_scale: ``(B,)`` factor from the element's stroke width to pixels. It leaves out
+            the element-level morph, which is written back into the geometry (a stroke keeps
+            its width), but keeps group morphs, which are written back as transforms.
     """
 
     local: Tensor
     affine: Tensor
+    stroke_scale: Tensor | None = None
 
     def to_pixels(self, points: Tensor) -> Tensor:
         """Map ``(B, ..., 2)`` local points to pixels with this frame's affine."""

@@ -95,9 +95,7 @@ class Register:
             raise PluginError(f"plugin {self._plugin!r}: {category} must be a class, got {obj!r}")
         missing = [name for name in _REQUIRED[protocol] if not hasattr(obj, name)]
         if missing:
-            raise PluginError(
-                f"plugin {self._plugin!r}: {category} {obj.__name__} lacks {', '.join(sorted(missing))}"
-            )
+            raise PluginError(f"plugin {self._plugin!r}: {category} {obj.__name__} lacks {', '.join(sorted(missing))}")
 
     def primitive(self, cls: type[Primitive]) -> None:
         """Register a primitive kind (keyed by ``cls.kind``)."""

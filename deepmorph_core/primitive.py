@@ -14,8 +14,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from deepmorph_core.outline import Frame, Outline, fill_sdf, stroke_sdf
+from deepmorph_core.geometry import CAP_CODES, CAP_ROUND
+from deepmorph_core.outline import Frame, Outline, OutlineBuilder, fill_sdf, stroke_sdf
 from deepmorph_core.protocols import ElementMorph
+from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
 
 
@@ -84,3 +86,32 @@ def unit_circle(builder_dtype: torch.dtype, device: torch.device) -> tuple[Tenso
     """``theta0 = 0`` and ``dtheta = 2*pi`` scalars for full circles."""
     zero = torch.zeros((), dtype=builder_dtype, device=device)
     return zero, zero + 2 * torch.pi
+
+
+def builder_for(frame: Frame) -> OutlineBuilder:
+    """An empty outline builder matching the frame's batch, dtype and device."""
+    return OutlineBuilder(frame.local.shape[0], frame.local.dtype, frame.local.device)
+
+
+def cap_of(reader: ElementReader) -> int:
+    """The cap code of the element being read (from its computed style)."""
+    return CAP_CODES.get(reader.style.linecap, CAP_ROUND)
+
+
+def add_polyline(builder: OutlineBuilder, px: Tensor, closed: bool, cap: int) -> None:
+    """Line pieces through ``px`` ``(B, n, 2)``; open ends get ``cap``, joins are round."""
+    n = px.shape[1]
+    count = n if closed else n - 1
+    for k in range(count):
+        a, b = px[:, k], px[:, (k + 1) % n]
+        start = cap if (not closed and k == 0) else CAP_ROUND
+        end = cap if (not closed and k == count - 1) else CAP_ROUND
+        builder.line(a, b, start, end)
+    builder.ring(px)
+
+
+def circle_linear(frame: Frame, rx: Tensor | float, ry: Tensor | float) -> Tensor:
+    """``(B, 2, 2)`` map from the unit circle to the pixel-space ellipse of radii rx, ry."""
+    diag = torch.zeros(2, 2, dtype=frame.local.dtype, device=frame.local.device)
+    diag[0, 0], diag[1, 1] = rx, ry
+    return frame.linear @ diag

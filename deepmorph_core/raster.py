@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from deepmorph_core.morph import MorphSpace
-from deepmorph_core.outline import pixel_bbox
+from deepmorph_core.outline import Frame, pixel_bbox
 from deepmorph_core.primitive import outline_paint_sdf
 
 #: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-9.2) ~ 1e-4.
@@ -111,12 +111,10 @@ class SoftRasterizer(nn.Module):
                 if index not in outlines:
                     outlines[index] = prim.primitive.outline(frame)
                 outline = outlines[index]
-                half_width = frame.scale * (prim.style.stroke_width / 2) if mode == "stroke" else torch.zeros(
-                    B, dtype=dtype, device=device
-                )
+                half_width = stroke_half_width(frame, prim.style.stroke_width, mode)
                 reach = _SIGMOID_REACH / st.sharpness
                 if st.cull:
-                    box = pixel_bbox(outline, float(half_width.max()) + reach)
+                    box = pixel_bbox(outline, float(half_width.detach().max()) + reach)
                     x0 = max(0, int(math.floor(float(box[0]))))
                     y0 = max(0, int(math.floor(float(box[1]))))
                     x1 = min(W, int(math.ceil(float(box[2]))) + 1)
@@ -137,6 +135,12 @@ class SoftRasterizer(nn.Module):
         if acc is None:
             return torch.zeros(B, 1, H, W, dtype=dtype, device=device)
         return normalised_squash(acc, st.squash)[:, None]
+
+
+def stroke_half_width(frame: Frame, stroke_width: float, mode: str) -> Tensor:
+    """``(B,)`` half the stroke width in pixels (zero for fills)."""
+    scale = frame.stroke_scale if frame.stroke_scale is not None else frame.scale
+    return scale * (stroke_width / 2) if mode == "stroke" else torch.zeros_like(scale)
 
 
 def _pixel_grid(x0: int, y0: int, x1: int, y1: int, dtype: torch.dtype, device: torch.device) -> Tensor:

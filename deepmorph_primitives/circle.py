@@ -13,6 +13,8 @@ from deepmorph_core.primitive import (
     append_transform,
     apply_affine,
     as_points,
+    builder_for,
+    circle_linear,
     rotate_about,
     unit_circle,
     without_rotation,
@@ -20,7 +22,6 @@ from deepmorph_core.primitive import (
 from deepmorph_core.protocols import ElementMorph
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
-from deepmorph_primitives._common import builder_for, circle_linear
 
 
 class Ellipse(BasePrimitive):

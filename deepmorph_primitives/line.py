@@ -7,11 +7,10 @@ from lxml import etree
 from torch import Tensor
 
 from deepmorph_core.outline import Frame, Outline
-from deepmorph_core.primitive import BasePrimitive, apply_affine, as_points
+from deepmorph_core.primitive import BasePrimitive, apply_affine, as_points, builder_for, cap_of
 from deepmorph_core.protocols import ElementMorph
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
-from deepmorph_primitives._common import builder_for, cap_of
 
 
 class Line(BasePrimitive):
@@ -27,8 +26,10 @@ class Line(BasePrimitive):
 
     @classmethod
     def from_element(cls, element: etree._Element, reader: ElementReader) -> Line:
-        pts = [[reader.number(element, "x1", 0.0), reader.number(element, "y1", 0.0)],
-               [reader.number(element, "x2", 0.0), reader.number(element, "y2", 0.0)]]
+        pts = [
+            [reader.number(element, "x1", 0.0), reader.number(element, "y1", 0.0)],
+            [reader.number(element, "x2", 0.0), reader.number(element, "y2", 0.0)],
+        ]
         return cls(np.asarray(pts), cap_of(reader))
 
     def control_points(self) -> Tensor:

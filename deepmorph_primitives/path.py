@@ -21,11 +21,10 @@ from torch import Tensor
 
 from deepmorph_core.geometry import CAP_ROUND
 from deepmorph_core.outline import Frame, Outline
-from deepmorph_core.primitive import BasePrimitive, apply_affine, as_points
+from deepmorph_core.primitive import BasePrimitive, apply_affine, as_points, builder_for, cap_of
 from deepmorph_core.protocols import ElementMorph, PathSegment
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import check_finite, format_number
-from deepmorph_primitives._common import builder_for, cap_of
 
 _COMMAND_LETTERS = {CubicBezier: ("C", "S"), QuadraticBezier: ("Q", "T")}
 

@@ -7,11 +7,10 @@ from lxml import etree
 from torch import Tensor
 
 from deepmorph_core.outline import Frame, Outline
-from deepmorph_core.primitive import BasePrimitive, apply_affine, as_points
+from deepmorph_core.primitive import BasePrimitive, add_polyline, apply_affine, as_points, builder_for, cap_of
 from deepmorph_core.protocols import ElementMorph
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
-from deepmorph_primitives._common import add_polyline, builder_for, cap_of
 
 
 class Polyline(BasePrimitive):

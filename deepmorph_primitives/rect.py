@@ -17,13 +17,13 @@ from deepmorph_core.primitive import (
     append_transform,
     apply_affine,
     as_points,
+    builder_for,
     rotate_about,
     without_rotation,
 )
 from deepmorph_core.protocols import ElementMorph
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
-from deepmorph_primitives._common import builder_for
 
 
 class Rect(BasePrimitive):

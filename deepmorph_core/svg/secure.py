@@ -65,12 +65,13 @@ def parse_svg_bytes(data: bytes, label: str) -> etree._Element:
         huge_tree=False,
         remove_comments=False,
         remove_pis=True,
-        collect_ids=False,
     )
     try:
         root = etree.fromstring(data, parser)
     except etree.XMLSyntaxError as exc:
-        msg = str(exc.msg or exc).split(" (line")[0]
+        msg = re.sub(r",? line \d+, column \d+.*$", "", str(exc.msg or exc))
+        if "Excessive depth" in msg:
+            raise SvgError("elements nested too deeply (over 256 levels)", label, exc.lineno) from None
         raise SvgError(f"malformed XML: {msg}", label, exc.lineno) from None
     except ValueError as exc:
         raise SvgError(f"malformed XML: {exc}", label) from None

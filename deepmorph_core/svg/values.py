@@ -53,7 +53,7 @@ def parse_numbers(text: str) -> list[float]:
     pos = 0
     for m in _NUMBER_RE.finditer(text):
         if not _SEPARATOR_RE.match(text[pos : m.start()]):
-            raise ValueError(f"unexpected {text[pos:m.start()].strip()!r} in number list")
+            raise ValueError(f"unexpected {text[pos : m.start()].strip()!r} in number list")
         out.append(check_finite(float(m.group(0))))
         pos = m.end()
     if not _SEPARATOR_RE.match(text[pos:]):
@@ -79,7 +79,7 @@ def parse_transform(text: str) -> np.ndarray:
     while pos < len(text):
         m = _TRANSFORM_RE.match(text, pos)
         if not m:
-            raise ValueError(f"cannot read transform at {text[pos:pos + 20]!r}")
+            raise ValueError(f"cannot read transform at {text[pos : pos + 20]!r}")
         name, args = m.group(1), parse_numbers(m.group(2))
         out = out @ _transform_matrix(name, args)
         pos = m.end()

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+from deepmorph_bezier.segments import CubicBezierSegment, QuadraticBezierSegment
 from deepmorph_core import hookimpl
 from deepmorph_core.plugins import Register
-
-from deepmorph_bezier.segments import CubicBezierSegment, QuadraticBezierSegment
 
 
 @hookimpl

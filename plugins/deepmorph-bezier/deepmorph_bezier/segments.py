@@ -30,7 +30,8 @@ from deepmorph_core.svg.values import format_number
 
 @lru_cache(maxsize=256)
 def _bernstein_table(degree: int, pieces: int) -> np.ndarray:
-    """Bernstein weights at ``pieces + 1`` evenly spaced parameters (float64, cached).
+    """Bernstein weights at ``pieces + 1`` evenly spaced parameters (float64, cached and
+    read-only; :func:`bernstein_weights` hands out tensor copies).
 
     Shape:
         ``(pieces + 1, degree + 1)``; row ``i`` holds ``C(d, k) t^k (1 - t)^(d - k)`` at
@@ -50,7 +51,7 @@ def bernstein_weights(degree: int, pieces: int, dtype: torch.dtype, device: torc
     Shape:
         ``(pieces + 1, degree + 1)``.
     """
-    return torch.as_tensor(_bernstein_table(degree, pieces), dtype=dtype, device=device)
+    return torch.tensor(_bernstein_table(degree, pieces), dtype=dtype, device=device)
 
 
 def evaluate_bezier(control: Tensor, pieces: int) -> Tensor:

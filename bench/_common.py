@@ -1,0 +1,95 @@
+"""Helpers shared by the benchmark scripts: threads, environment, tables, JSON."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def set_threads(n: int) -> int:
+    """Pin torch (and the BLAS/OpenMP pools of any child process) to ``n`` threads."""
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(n)
+    import torch
+
+    torch.set_num_threads(n)
+    try:
+        torch.set_num_interop_threads(1)
+    except RuntimeError:  # already set (only allowed once per process)
+        pass
+    return torch.get_num_threads()
+
+
+def environment() -> dict[str, Any]:
+    """What the numbers were measured on."""
+    import torch
+
+    return {
+        "torch": torch.__version__,
+        "threads": torch.get_num_threads(),
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "processor": _cpu_name(),
+        "cpus": os.cpu_count(),
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+    }
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "?"
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """A GitHub-flavoured markdown table (also readable in a terminal); text columns left-aligned."""
+    cells = [[_fmt(c) for c in row] for row in rows]
+    widths = [max([len(h), *(len(r[i]) for r in cells)]) for i, h in enumerate(headers)]
+    numeric = [all(_numeric(row[i]) for row in rows) for i in range(len(headers))]
+    just = lambda c, i: c.rjust(widths[i]) if numeric[i] else c.ljust(widths[i])  # noqa: E731
+    line = lambda r: "| " + " | ".join(just(c, i) for i, c in enumerate(r)) + " |"  # noqa: E731
+    sep = "|" + "|".join(("-" * (w + 1) + ":") if n else (":" + "-" * (w + 1)) for w, n in zip(widths, numeric)) + "|"
+    return "\n".join([line(headers), sep, *(line(r) for r in cells)])
+
+
+def _numeric(value: Any) -> bool:
+    return value is None or isinstance(value, (int, float)) or str(value)[:1] in "~0123456789.-"
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if value != value:  # nan
+            return "-"
+        if value == 0 or abs(value) >= 100:
+            return f"{value:.0f}"
+        if abs(value) >= 1:
+            return f"{value:.1f}"
+        if abs(value) >= 1e-3:
+            return f"{value:.4f}"
+        return f"{value:.1e}"
+    return str(value)
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """Write ``data`` as indented JSON, creating the folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=2) + "\n")
+    return path
+
+
+def parse_ints(text: str) -> list[int]:
+    """``"64,128"`` -> ``[64, 128]``."""
+    return [int(x) for x in text.replace(" ", "").split(",") if x]

@@ -1,0 +1,50 @@
+"""Shared fixtures. Tests never depend on whatever plugins happen to be installed: an autouse
+fixture makes the process-wide registry the built-in primitives only, and tests that need the
+Bézier plugin ask for it explicitly."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+import deepmorph_primitives.plugin as builtin_plugin
+from deepmorph_core.plugins import Registry, load_registry, set_default_registry
+
+DATA = Path(__file__).parent / "data"
+FEATHER = DATA / "feather"
+
+
+def make_svg(body: str, root: str = 'viewBox="0 0 24 24"', style: str = "") -> bytes:
+    """A small SVG document (with the dm namespace declared) around ``body``."""
+    return (
+        f'<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" {root} {style}>\n{body}\n</svg>'
+    ).encode()
+
+
+@pytest.fixture
+def builtin_registry() -> Registry:
+    return load_registry([builtin_plugin], entry_points=False)
+
+
+@pytest.fixture
+def bezier_registry() -> Registry:
+    bez = pytest.importorskip("deepmorph_bezier.plugin", reason="the example Bézier plugin is not installed")
+    return load_registry([builtin_plugin, bez], entry_points=False)
+
+
+@pytest.fixture(autouse=True)
+def isolated_plugins(builtin_registry: Registry) -> Iterator[None]:
+    set_default_registry(builtin_registry)
+    try:
+        yield
+    finally:
+        set_default_registry(None)
+
+
+@pytest.fixture
+def with_bezier(bezier_registry: Registry) -> Registry:
+    """Make the process-wide registry the built-ins plus the Bézier plugin."""
+    set_default_registry(bezier_registry)
+    return bezier_registry
