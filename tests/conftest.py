@@ -8,6 +8,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests are deterministic (same examples every run) so that CI cannot flake.
+settings.register_profile("deepmorph", derandomize=True, deadline=None)
+settings.load_profile("deepmorph")
 
 import deepmorph_primitives.plugin as builtin_plugin
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
