@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from deepmorph_core.morph import MorphSpace
-from deepmorph_core.outline import Frame, pixel_bbox
+from deepmorph_core.outline import Frame, pixel_bbox, pixel_grid, stroke_sdf_tiled
 from deepmorph_core.primitive import outline_paint_sdf
 
 #: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-9.2) ~ 1e-4.
@@ -123,8 +123,12 @@ class SoftRasterizer(nn.Module):
                         continue
                 else:
                     x0, y0, x1, y1 = 0, 0, W, H
-                grid = _pixel_grid(x0, y0, x1, y1, dtype, device)
-                sdf = outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd)
+                n_pieces = outline.line_a.shape[1] + outline.arc_center.shape[1]
+                if st.cull and mode == "stroke" and n_pieces > 1:
+                    sdf = stroke_sdf_tiled(outline, (x0, y0, x1, y1), half_width, reach)
+                else:
+                    grid = pixel_grid(x0, y0, x1, y1, dtype, device)
+                    sdf = outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd)
                 if union:  # log(1 - sigmoid(z)) = logsigmoid(-z)
                     cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf)
                 else:
@@ -141,14 +145,6 @@ def stroke_half_width(frame: Frame, stroke_width: float, mode: str) -> Tensor:
     """``(B,)`` half the stroke width in pixels (zero for fills)."""
     scale = frame.stroke_scale if frame.stroke_scale is not None else frame.scale
     return scale * (stroke_width / 2) if mode == "stroke" else torch.zeros_like(scale)
-
-
-def _pixel_grid(x0: int, y0: int, x1: int, y1: int, dtype: torch.dtype, device: torch.device) -> Tensor:
-    """Pixel centres of the rectangle ``[x0, x1) x [y0, y1)``, row-major, ``(P, 2)``."""
-    ys = torch.arange(y0, y1, dtype=dtype, device=device) + 0.5
-    xs = torch.arange(x0, x1, dtype=dtype, device=device) + 0.5
-    gy, gx = torch.meshgrid(ys, xs, indexing="ij")
-    return torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)
 
 
 def _paint_runs(space: MorphSpace) -> list[tuple[int, list[tuple[int, str]]]]:

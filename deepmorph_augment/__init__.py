@@ -1,0 +1,1 @@
+"""Differentiable capture corruptions (print-and-photo), each a registered plugin."""

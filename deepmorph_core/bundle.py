@@ -1,0 +1,143 @@
+"""Model bundles: one ``.dmm`` file holding everything needed to encode and decode.
+
+The file is a safetensors file. Its tensors are the network weights (and, in a training
+checkpoint, the optimiser state and random-generator states). Its metadata holds one JSON
+document, validated by :class:`BundleMeta`, with the drawing's SVG text, the bound defaults,
+the codec, raster size, decoder architecture, augmentation and training configuration, the
+versions that wrote it and the training record. Loading never unpickles and never runs code:
+safetensors reads raw tensors, pydantic validates the JSON, and anything else (a corrupt,
+truncated or foreign file) is one :class:`~deepmorph_core.errors.DeepMorphError`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from safetensors import SafetensorError
+from safetensors.torch import load as load_bytes
+from safetensors.torch import save as save_bytes
+from torch import Tensor
+
+from deepmorph_core.bounds import format_validation_error
+from deepmorph_core.codec import CodecSpec
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.model import DecoderConfig
+
+FORMAT = "deepmorph-model/1"
+_META_KEY = "deepmorph"
+MAX_BUNDLE_BYTES = 512 * 1024 * 1024
+
+
+class TrainingRecord(BaseModel):
+    """What training did: steps, stages, time, and the last measured accuracies."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    step: int = 0
+    total_steps: int = 0
+    stage: Literal[1, 2] = 1
+    stage2_start: int | None = None
+    elapsed_s: float = 0.0
+    finished: bool = False
+    device: str = "cpu"
+    threads: int = 1
+    metrics: dict[str, float] = Field(default_factory=dict)
+
+
+class BundleMeta(BaseModel):
+    """The JSON part of a bundle (everything but tensors)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    format: Literal["deepmorph-model/1"] = FORMAT
+    versions: dict[str, str]
+    drawing_name: str
+    drawing_svg: str
+    bounds_defaults: dict[str, Any]
+    n_variables: int = Field(ge=1)
+    codec: CodecSpec
+    image_width: int = Field(ge=16, le=1024)
+    raster: dict[str, Any]
+    decoder: DecoderConfig
+    augment: dict[str, Any]
+    train: dict[str, Any]
+    record: TrainingRecord
+
+
+def _bad(path: Path | str, why: str) -> DeepMorphError:
+    return DeepMorphError(f"{path}: not a usable DeepMorph model file ({why})")
+
+
+def save_bundle(path: str | Path, meta: BundleMeta, tensors: dict[str, Tensor]) -> None:
+    """Write a bundle atomically: a crash or Ctrl-C never leaves a half-written file behind."""
+    path = Path(path)
+    payload = save_bytes(
+        {k: v.detach().contiguous().cpu() for k, v in tensors.items()},
+        metadata={_META_KEY: meta.model_dump_json()},
+    )
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise DeepMorphError(f"{path}: cannot write model file: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:
+    """Read and validate a bundle.
+
+    Raises:
+        DeepMorphError: missing, unreadable, truncated, corrupt or foreign files, and files from
+            an incompatible format version.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise DeepMorphError(f"{path}: cannot read model file: {exc.strerror or exc}") from None
+    if not path.is_file():
+        raise _bad(path, "not a regular file")
+    if size > MAX_BUNDLE_BYTES:
+        raise _bad(path, f"{size} bytes is larger than any model")
+    data = path.read_bytes()
+    try:
+        tensors = load_bytes(data)
+        header_len = int.from_bytes(data[:8], "little")
+        header = json.loads(data[8 : 8 + header_len])
+    except (SafetensorError, ValueError, UnicodeDecodeError, OverflowError) as exc:
+        raise _bad(path, f"corrupt or truncated: {str(exc).splitlines()[0][:120]}") from None
+    raw = (header.get("__metadata__") or {}).get(_META_KEY)
+    if raw is None:
+        raise _bad(path, "a safetensors file without DeepMorph metadata")
+    try:
+        fmt = json.loads(raw).get("format")
+    except (ValueError, AttributeError):
+        raise _bad(path, "its metadata is not JSON") from None
+    if fmt != FORMAT:
+        raise _bad(path, f"format {fmt!r}, this version reads {FORMAT!r}")
+    try:
+        meta = BundleMeta.model_validate_json(raw)
+    except ValidationError as exc:
+        raise _bad(path, format_validation_error(exc).replace("dm:", "")) from None
+    return meta, tensors
+
+
+def versions() -> dict[str, str]:
+    """Versions recorded in bundles."""
+    from deepmorph_core import __version__
+
+    return {"deepmorph": __version__, "torch": torch.__version__.split("+")[0]}

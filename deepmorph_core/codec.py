@@ -1,0 +1,467 @@
+"""Payload codec: payload bits -> CRC -> shortened BCH code -> whitened code bits, and back.
+
+The decoder network outputs one probability per *code bit*. This module turns a payload into
+those ``N_b`` code bits and turns the network's probabilities back into a payload, correcting
+up to ``t`` wrong bits with BCH (hard decisions) and more with a Chase-II search over the least
+reliable bits (soft decisions), and saying whether the CRC vouches for the result.
+
+Code word layout (most significant bit first everywhere)::
+
+    info  = payload bits (P) | CRC of the payload (C)           K = P + C bits
+    data  = info + zero bits up to a byte boundary              (padding is never sent)
+    ecc   = bchlib.BCH(t, m).encode(data), first ecc_bits bits  (its byte padding is never sent)
+    code  = (info | ecc) XOR whitening mask                     N_b = P + C + ecc_bits
+
+The whitening mask is a fixed pseudo-random bit string (SHA-256 of a constant), so that a
+constant network output (a blank or unrelated picture read as all zeros or all ones) is not a
+code word and the bits the encoder network must embed are balanced. See ``docs/codec.md``.
+
+An unchecked payload is never presented as valid: ``DecodeResult.ok`` is True only when a CRC
+was checked and matches, so with ``crc_bits=0`` it is always False.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Literal
+
+import bchlib
+import crc
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from deepmorph_core.errors import DeepMorphError
+
+MAX_PAYLOAD_BITS = 256
+MAX_BCH_T = 16
+BCH_M_RANGE = (5, 15)
+_CRC_CONFIGS = {8: crc.Crc8.CCITT, 16: crc.Crc16.XMODEM}
+_WHITENING_SEED = b"deepmorph payload codec whitening/1"
+_PROB_EPS = 1e-9
+
+
+@lru_cache(maxsize=None)
+def _bch_ecc_bits(t: int, m: int) -> int | None:
+    """ECC bits of the BCH code (t, m), or None where the Linux BCH library has no such code."""
+    try:
+        return int(bchlib.BCH(t, m=m).ecc_bits)
+    except (RuntimeError, ValueError):
+        return None
+
+
+def _bch_data_capacity(t: int, m: int) -> int:
+    """Most data bits a (byte-aligned) shortened BCH(t, m) code word can carry; 0 if none."""
+    ecc = _bch_ecc_bits(t, m)
+    if ecc is None:
+        return 0
+    return max(0, ((2**m - 1 - ecc) // 8) * 8)
+
+
+def _data_bits(payload_bits: int, crc_bits: int) -> int:
+    """Payload + CRC bits padded to whole bytes: what the BCH encoder sees."""
+    return 8 * math.ceil((payload_bits + crc_bits) / 8)
+
+
+class CodecSpec(BaseModel):
+    """How payload bits become code bits (frozen; stored in model bundles).
+
+    Attributes:
+        payload_bits: bits the user hides, 1..256.
+        crc_bits: CRC width (0, 8 or 16). Without a CRC nothing can vouch for a decoded payload,
+            so :attr:`DecodeResult.ok` is always False.
+        bch_t: bit errors the BCH code corrects (0 = no error correction), at most 16.
+        bch_m: Galois field order 5..15 of the BCH code; None picks the smallest that fits.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    payload_bits: int = Field(ge=1, le=MAX_PAYLOAD_BITS)
+    crc_bits: Literal[0, 8, 16] = 8
+    bch_t: int = Field(default=2, ge=0, le=MAX_BCH_T)
+    bch_m: int | None = Field(default=None, ge=BCH_M_RANGE[0], le=BCH_M_RANGE[1])
+
+    @model_validator(mode="after")
+    def _fits(self) -> CodecSpec:
+        if self.bch_t == 0:
+            if self.bch_m is not None:
+                raise ValueError(f"bch_m={self.bch_m} has no effect without error correction (bch_t=0); leave it unset")
+            return self
+        need = _data_bits(self.payload_bits, self.crc_bits)
+        smallest = _smallest_m(self.bch_t, need)
+        if smallest is None:
+            raise ValueError(
+                f"no BCH code corrects bch_t={self.bch_t} errors in {need} payload+CRC bits "
+                f"(Galois field order up to {BCH_M_RANGE[1]}); lower bch_t or payload_bits"
+            )
+        if self.bch_m is not None and self.bch_m < smallest:
+            have = _bch_data_capacity(self.bch_t, self.bch_m)
+            raise ValueError(
+                f"bch_m={self.bch_m} is too small: with bch_t={self.bch_t} its code words carry {have} data bits, "
+                f"but payload+CRC need {need} (byte-padded); use bch_m >= {smallest} or leave bch_m unset"
+            )
+        if self.bch_m is not None and _bch_ecc_bits(self.bch_t, self.bch_m) is None:  # pragma: no cover
+            raise ValueError(f"the BCH library has no code with bch_t={self.bch_t}, bch_m={self.bch_m}")
+        return self
+
+    @property
+    def field_order(self) -> int | None:
+        """The Galois field order ``m`` in use (``bch_m`` or the smallest that fits); None if ``bch_t=0``."""
+        if self.bch_t == 0:
+            return None
+        if self.bch_m is not None:
+            return self.bch_m
+        return _smallest_m(self.bch_t, _data_bits(self.payload_bits, self.crc_bits))
+
+    @property
+    def ecc_bits(self) -> int:
+        """Transmitted BCH parity bits (``bchlib``'s ``ecc_bits``; about ``m * t``)."""
+        m = self.field_order
+        return 0 if m is None else int(_bch_ecc_bits(self.bch_t, m))
+
+    @property
+    def code_bits(self) -> int:
+        """``N_b``: the bits the network embeds, ``payload_bits + crc_bits + ecc_bits``."""
+        return self.payload_bits + self.crc_bits + self.ecc_bits
+
+
+@lru_cache(maxsize=None)
+def _smallest_m(t: int, data_bits: int) -> int | None:
+    for m in range(BCH_M_RANGE[0], BCH_M_RANGE[1] + 1):
+        if _bch_data_capacity(t, m) >= data_bits:
+            return m
+    return None
+
+
+def format_codec_error(exc: ValidationError) -> str:
+    """One readable ``field: problem`` line per problem of a :class:`CodecSpec`."""
+    lines = []
+    for err in exc.errors():
+        loc = ".".join(str(x) for x in err["loc"])
+        msg = err["msg"].removeprefix("Value error, ")
+        if err["type"] == "extra_forbidden":
+            known = ", ".join(CodecSpec.model_fields)
+            lines.append(f"unknown codec setting {loc!r} (known: {known})")
+        else:
+            lines.append(f"{loc}: {msg}" if loc else msg)
+    return "; ".join(lines)
+
+
+def choose_codec(payload_bits: int, crc_bits: int | None = None, bch_t: int | None = None) -> CodecSpec:
+    """A codec with sensible defaults for a payload size.
+
+    Defaults: an 8-bit CRC for payloads up to 32 bits, 16 bits above; ``t = 1`` for payloads up to
+    8 bits, ``t = 2`` above; the smallest Galois field that fits.
+
+    Raises:
+        DeepMorphError: an impossible combination, with one readable line per problem.
+    """
+    if crc_bits is None:
+        crc_bits = 8 if payload_bits <= 32 else 16
+    if bch_t is None:
+        bch_t = 1 if payload_bits <= 8 else 2
+    try:
+        return CodecSpec(payload_bits=payload_bits, crc_bits=crc_bits, bch_t=bch_t)
+    except ValidationError as exc:
+        raise DeepMorphError(f"invalid codec: {format_codec_error(exc)}") from None
+
+
+@lru_cache(maxsize=8)
+def _whitening_mask(n: int) -> np.ndarray:
+    """The first ``n`` bits of SHA-256(seed || counter) blocks: fixed forever, for every spec."""
+    blocks = math.ceil(n / 256)
+    raw = b"".join(hashlib.sha256(_WHITENING_SEED + i.to_bytes(4, "big")).digest() for i in range(blocks))
+    mask = np.unpackbits(np.frombuffer(raw, dtype=np.uint8))[:n].copy()
+    mask.setflags(write=False)
+    return mask
+
+
+# --------------------------------------------------------------------------- payload text
+
+
+def _check_payload_bits(payload_bits: int) -> None:
+    if not 1 <= payload_bits <= MAX_PAYLOAD_BITS:
+        raise DeepMorphError(f"payload_bits must be between 1 and {MAX_PAYLOAD_BITS}, got {payload_bits}")
+
+
+def _hex_digits(payload_bits: int) -> int:
+    return math.ceil(payload_bits / 4)
+
+
+def _int_to_bits(value: int, n: int) -> np.ndarray:
+    return np.array([(value >> (n - 1 - i)) & 1 for i in range(n)], dtype=np.uint8)
+
+
+def parse_payload(text: str, payload_bits: int) -> np.ndarray:
+    """Read a payload written as hex (``0xA1B2C3``) or as exactly ``payload_bits`` binary digits.
+
+    Hex needs the ``0x`` prefix and exactly ``ceil(payload_bits / 4)`` digits, and its value must
+    fit in ``payload_bits`` bits. Bits are most significant first: with 24 bits ``0xA1B2C3`` is
+    ``101000011011001011000011``.
+
+    Returns:
+        ``(payload_bits,)`` uint8 array of 0/1.
+
+    Raises:
+        DeepMorphError: anything else, saying what was expected.
+    """
+    _check_payload_bits(payload_bits)
+    digits = _hex_digits(payload_bits)
+    example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
+    expected = f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, or {payload_bits} binary digits"
+    s = text.strip() if isinstance(text, str) else None
+    if not s:
+        raise DeepMorphError(f"empty payload; {expected}")
+    if s[:2] in ("0x", "0X"):
+        body = s[2:]
+        bad = [c for c in body if c not in "0123456789abcdefABCDEF"]
+        if bad:
+            raise DeepMorphError(f"payload {s!r}: {bad[0]!r} is not a hex digit; {expected}")
+        if len(body) != digits:
+            raise DeepMorphError(f"payload {s!r} has {len(body)} hex digits; {expected}")
+        value = int(body, 16)
+        if value >> payload_bits:
+            raise DeepMorphError(
+                f"payload {s!r} needs {value.bit_length()} bits, more than {payload_bits}; {expected} "
+                f"(at most 0x{(1 << payload_bits) - 1:0{digits}X})"
+            )
+        return _int_to_bits(value, payload_bits)
+    if set(s) <= {"0", "1"}:
+        if len(s) != payload_bits:
+            raise DeepMorphError(f"payload has {len(s)} binary digits; {expected}")
+        return np.frombuffer(s.encode(), dtype=np.uint8) - ord("0")
+    raise DeepMorphError(f"payload {s[:40]!r} is neither 0x-prefixed hex nor binary digits; {expected}")
+
+
+def _as_bits(bits: Any, n: int | None, what: str) -> np.ndarray:
+    arr = np.asarray(bits)
+    if arr.ndim != 1 or (n is not None and arr.shape[0] != n):
+        want = f"({n},)" if n is not None else "(n,)"
+        raise DeepMorphError(f"{what} must have shape {want}, got {tuple(arr.shape)}")
+    if arr.size and not np.isin(arr, (0, 1)).all():
+        raise DeepMorphError(f"{what} must hold only 0 and 1")
+    return arr.astype(np.uint8)
+
+
+def format_payload(bits: np.ndarray) -> dict[str, str]:
+    """``{"hex": "0x..", "bits": ".."}`` for a payload (most significant bit first)."""
+    arr = _as_bits(bits, None, "payload")
+    n = arr.shape[0]
+    text = "".join("1" if b else "0" for b in arr)
+    value = int(text, 2) if n else 0
+    return {"hex": f"0x{value:0{_hex_digits(n)}X}", "bits": text}
+
+
+def random_payloads(n: int, payload_bits: int, generator: np.random.Generator) -> np.ndarray:
+    """``(n, payload_bits)`` uniformly random uint8 payloads, drawn from ``generator``."""
+    _check_payload_bits(payload_bits)
+    return generator.integers(0, 2, size=(n, payload_bits), dtype=np.uint8)
+
+
+# --------------------------------------------------------------------------- decode result
+
+
+@dataclass(frozen=True, eq=False)
+class DecodeResult:
+    """What decoding one code word found.
+
+    Attributes:
+        payload: ``(payload_bits,)`` uint8 best guess, always present (even when ``ok`` is False).
+        ok: True only when the CRC matches after correction; never without a CRC.
+        corrected_bits: code bits the decoder changed relative to the hard decisions (BCH
+            corrections plus soft flips); -1 when decoding failed.
+        confidence: geometric mean of ``max(p, 1 - p)`` over the code bits, in [0.5, 1].
+    """
+
+    payload: np.ndarray
+    ok: bool
+    corrected_bits: int
+    confidence: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "payload": format_payload(self.payload),
+            "ok": bool(self.ok),
+            "corrected_bits": int(self.corrected_bits),
+            "confidence": float(self.confidence),
+        }
+
+
+# --------------------------------------------------------------------------- the codec
+
+
+class PayloadCodec:
+    """Encode payloads to code bits and decode code-bit probabilities to payloads.
+
+    Args:
+        spec: the code.
+        soft_bits: ``L``, how many least reliable bits the Chase-II search flips (up to
+            ``2**L - 1`` test patterns); 0 disables soft decoding.
+        soft_candidates: most distinct code words the soft search may put to the CRC. Each one is
+            a ``2**-crc_bits`` chance of accepting garbage, so the false-accept rate of a random
+            input is at most ``(1 + soft_candidates) * 2**-crc_bits``. Default: 64 with a 16-bit
+            CRC (<= 0.1%), 2 with an 8-bit CRC (<= 1.2%).
+        reliable_above: bits whose ``max(p, 1 - p)`` reaches this are never flipped by the soft
+            search (saturated outputs say nothing about which bits are wrong).
+    """
+
+    def __init__(
+        self,
+        spec: CodecSpec,
+        *,
+        soft_bits: int = 6,
+        soft_candidates: int | None = None,
+        reliable_above: float = 0.95,
+    ) -> None:
+        if not 0 <= soft_bits <= 12:
+            raise DeepMorphError(f"soft_bits must be between 0 and 12, got {soft_bits}")
+        self.spec = spec
+        self.soft_bits = soft_bits
+        if soft_candidates is None:
+            soft_candidates = {0: 2**soft_bits, 8: 2, 16: 64}[spec.crc_bits]
+        self.soft_candidates = soft_candidates
+        self.reliable_above = reliable_above
+        self._k = spec.payload_bits + spec.crc_bits
+        self._mask = _whitening_mask(spec.code_bits)
+        self._bch = bchlib.BCH(spec.bch_t, m=spec.field_order) if spec.bch_t else None
+        self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
+
+    def __repr__(self) -> str:
+        return f"PayloadCodec({self.spec!r})"
+
+    # -- pieces
+
+    def _crc_bits_of(self, payload: np.ndarray) -> np.ndarray:
+        """CRC of the payload's value as big-endian bytes (left-padded with zeros)."""
+        pad = (-payload.shape[0]) % 8
+        data = np.packbits(np.concatenate([np.zeros(pad, np.uint8), payload])).tobytes()
+        return _int_to_bits(self._crc.checksum(data), self.spec.crc_bits)
+
+    def _crc_ok(self, info: np.ndarray) -> bool:
+        p = self.spec.payload_bits
+        return bool(np.array_equal(self._crc_bits_of(info[:p]), info[p:]))
+
+    def _ecc(self, info: np.ndarray) -> np.ndarray:
+        ecc = self._bch.encode(np.packbits(info).tobytes())
+        return np.unpackbits(np.frombuffer(ecc, dtype=np.uint8))[: self.spec.ecc_bits]
+
+    def _bch_correct(self, word: np.ndarray) -> np.ndarray | None:
+        """Hard BCH decoding of an (unwhitened) word: the nearest code word within ``t``, or None."""
+        if self._bch is None:
+            return word
+        k, ecc_bits = self._k, self.spec.ecc_bits
+        data = bytearray(np.packbits(word[:k]).tobytes())
+        ecc = bytearray(np.packbits(word[k:]).tobytes())
+        nerr = self._bch.decode(data, ecc)
+        if nerr < 0:
+            return None
+        if nerr == 0:
+            return word
+        self._bch.correct(data, ecc)
+        data_bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8))
+        ecc_all = np.unpackbits(np.frombuffer(bytes(ecc), dtype=np.uint8))
+        if data_bits[k:].any() or ecc_all[ecc_bits:].any():
+            return None  # a "correction" of padding we know is zero: more errors than t
+        return np.concatenate([data_bits[:k], ecc_all[:ecc_bits]])
+
+    # -- public
+
+    def encode(self, payload: np.ndarray) -> np.ndarray:
+        """Code bits for a payload.
+
+        Shape:
+            ``(payload_bits,)`` -> ``(code_bits,)``, or ``(B, payload_bits)`` -> ``(B, code_bits)``.
+            Values 0/1; the result is uint8.
+        """
+        arr = np.asarray(payload)
+        if arr.ndim == 2:
+            if arr.shape[1] != self.spec.payload_bits:
+                raise DeepMorphError(
+                    f"payloads must have shape (B, {self.spec.payload_bits}), got {tuple(arr.shape)}"
+                )
+            return np.stack([self.encode(row) for row in arr]) if len(arr) else np.zeros((0, self.spec.code_bits), np.uint8)
+        bits = _as_bits(arr, self.spec.payload_bits, "payload")
+        info = np.concatenate([bits, self._crc_bits_of(bits)]) if self._crc else bits
+        word = np.concatenate([info, self._ecc(info)]) if self._bch else info
+        return word ^ self._mask
+
+    def decode(self, probs: np.ndarray, soft: bool = True) -> DecodeResult:
+        """Payload from the decoder network's probabilities.
+
+        Args:
+            probs: ``(code_bits,)`` values in [0, 1], each P(code bit = 1).
+            soft: when hard decoding fails, search flips of the least reliable bits (Chase-II).
+        """
+        q = self._probabilities(probs)
+        conf = float(np.exp(np.mean(np.log(np.maximum(q, 1.0 - q)))))
+        q = np.where(self._mask == 1, 1.0 - q, q)  # undo whitening
+        hard = (q > 0.5).astype(np.uint8)
+        cost = np.abs(np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS))  # |LLR| of each bit
+        p, checked = self.spec.payload_bits, self._crc is not None
+
+        word = self._bch_correct(hard)
+        if word is not None and (not checked or self._crc_ok(word)):
+            return self._result(word[:p], ok=checked, flips=int(np.count_nonzero(word != hard)), conf=conf)
+        if soft:
+            found = self._chase(hard, cost, first=word)
+            if found is not None:
+                return self._result(found[:p], ok=checked, flips=int(np.count_nonzero(found != hard)), conf=conf)
+        return self._result(hard[:p], ok=False, flips=-1, conf=conf)
+
+    def decode_batch(self, probs: np.ndarray, soft: bool = True) -> list[DecodeResult]:
+        """:meth:`decode` for each row of a ``(B, code_bits)`` array."""
+        arr = np.asarray(probs, dtype=np.float64)
+        if arr.ndim != 2:
+            raise DeepMorphError(f"probabilities must have shape (B, {self.spec.code_bits}), got {tuple(arr.shape)}")
+        return [self.decode(row, soft=soft) for row in arr]
+
+    # -- decoding internals
+
+    def _probabilities(self, probs: Any) -> np.ndarray:
+        q = np.asarray(probs, dtype=np.float64)
+        if q.shape != (self.spec.code_bits,):
+            raise DeepMorphError(f"probabilities must have shape ({self.spec.code_bits},), got {tuple(q.shape)}")
+        if not np.isfinite(q).all() or (q < 0).any() or (q > 1).any():
+            raise DeepMorphError("probabilities must be finite and lie in [0, 1]")
+        return q
+
+    def _chase(self, hard: np.ndarray, cost: np.ndarray, first: np.ndarray | None) -> np.ndarray | None:
+        """Chase-II: BCH-decode the hard word with each combination of the ``L`` least reliable
+        bits flipped; of the distinct code words found (at most ``soft_candidates`` of them go to
+        the CRC), return the most likely that passes the CRC (without a CRC: the most likely)."""
+        reliable_cost = math.log(self.reliable_above / (1.0 - self.reliable_above)) if self.reliable_above < 1 else math.inf
+        order = np.argsort(cost, kind="stable")
+        weak = [int(i) for i in order[: self.soft_bits] if cost[i] < reliable_cost]
+        if not weak:
+            return None
+        patterns = [c for r in range(1, len(weak) + 1) for c in itertools.combinations(weak, r)]
+        patterns.sort(key=lambda c: (sum(cost[i] for i in c), len(c)))  # most likely flips first
+        seen = {first.tobytes()} if first is not None else set()
+        budget = self.soft_candidates
+        best, best_cost = None, math.inf
+        for flips in patterns:
+            trial = hard.copy()
+            trial[list(flips)] ^= 1
+            word = self._bch_correct(trial)
+            if word is None:
+                continue
+            key = word.tobytes()
+            if key in seen:
+                continue
+            seen.add(key)
+            if self._crc is None or self._crc_ok(word):
+                c = float(cost[word != hard].sum())  # -log-likelihood relative to the hard decision
+                if c < best_cost:
+                    best, best_cost = word, c
+            budget -= 1
+            if budget <= 0:
+                break
+        return best
+
+    def _result(self, payload: np.ndarray, ok: bool, flips: int, conf: float) -> DecodeResult:
+        out = np.array(payload, dtype=np.uint8)
+        out.setflags(write=False)
+        return DecodeResult(payload=out, ok=ok, corrected_bits=flips, confidence=conf)

@@ -1,0 +1,234 @@
+"""A trained DeepMorph model: drawing + codec + encoder + decoder, and what it does.
+
+:class:`DeepMorphModel` encodes payloads into morphed SVG, reads images back into payloads,
+and saves/loads itself as a bundle (:mod:`deepmorph_core.bundle`). Training lives in
+:mod:`deepmorph_core.train`; the CLI and :mod:`deepmorph_core.api` call this module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from deepmorph_core.api import MorphableDrawing
+from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
+from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, format_payload
+from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.model import Decoder, DecoderConfig, Encoder
+from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.render import render_svg
+from deepmorph_core.imaging import align_to_frame, to_gray
+
+
+@dataclass
+class Detection:
+    """One decoded drawing in an image (in this stage, the whole frame)."""
+
+    result: DecodeResult
+    probabilities: np.ndarray
+    bbox: tuple[int, int, int, int] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out = self.result.to_json()
+        out["bit_probabilities"] = [round(float(p), 4) for p in self.probabilities]
+        if self.bbox is not None:
+            out["bbox"] = list(self.bbox)
+        return out
+
+
+@dataclass
+class DeepMorphModel:
+    """Everything needed to hide payloads in one drawing and read them back.
+
+    Attributes:
+        drawing: the morphable drawing (with the bound defaults it was trained with).
+        codec: payload <-> code bits.
+        encoder, decoder: the networks.
+        width: image width (pixels) the decoder reads; height follows the drawing's aspect.
+        meta: the bundle metadata (configuration, versions, training record).
+    """
+
+    drawing: MorphableDrawing
+    codec: PayloadCodec
+    encoder: Encoder
+    decoder: Decoder
+    width: int
+    meta: BundleMeta
+    extra_tensors: dict[str, Tensor] = field(default_factory=dict)
+
+    # -- construction and files -----------------------------------------------------------
+
+    @classmethod
+    def create(
+        cls,
+        drawing_svg: str,
+        drawing_name: str,
+        bounds_defaults: dict[str, Any],
+        codec: CodecSpec,
+        width: int,
+        raster: dict[str, Any],
+        augment: dict[str, Any],
+        train: dict[str, Any],
+        decoder_config: DecoderConfig | None = None,
+    ) -> DeepMorphModel:
+        """A fresh (untrained) model for a drawing."""
+        md = MorphableDrawing.load(drawing_svg.encode(), **_bound_kwargs(bounds_defaults))
+        if md.n_variables == 0:
+            raise DeepMorphError(
+                f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; "
+                "add dm: bounds or pass --move"
+            )
+        height, _ = md.drawing.pixel_size(width)
+        dcfg = decoder_config or DecoderConfig()
+        meta = BundleMeta(
+            versions=versions(),
+            drawing_name=drawing_name,
+            drawing_svg=drawing_svg,
+            bounds_defaults=bounds_defaults,
+            n_variables=md.n_variables,
+            codec=codec,
+            image_width=width,
+            raster=raster,
+            decoder=dcfg,
+            augment=augment,
+            train=train,
+            record=TrainingRecord(),
+        )
+        return cls(
+            md,
+            PayloadCodec(codec),
+            Encoder(codec.code_bits, md.n_variables),
+            Decoder(codec.code_bits, (height, width), dcfg),
+            width,
+            meta,
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> DeepMorphModel:
+        """Load a bundle (``.dmm``); one clear error for anything unusable."""
+        meta, tensors = load_bundle(path)
+        try:
+            md = MorphableDrawing.load(meta.drawing_svg.encode(), **_bound_kwargs(meta.bounds_defaults))
+        except SvgError as exc:
+            raise DeepMorphError(f"{path}: the drawing inside the model cannot be read: {exc.message}") from None
+        if md.n_variables != meta.n_variables:
+            raise DeepMorphError(
+                f"{path}: the drawing now has {md.n_variables} variables but the model was trained with "
+                f"{meta.n_variables} (a primitive plugin is missing or changed?)"
+            )
+        height, _ = md.drawing.pixel_size(meta.image_width)
+        model = cls(
+            md,
+            PayloadCodec(meta.codec),
+            Encoder(meta.codec.code_bits, md.n_variables),
+            Decoder(meta.codec.code_bits, (height, meta.image_width), meta.decoder),
+            meta.image_width,
+            meta,
+        )
+        nets = {k: v for k, v in tensors.items() if k.startswith(("encoder.", "decoder."))}
+        model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets}
+        try:
+            model.encoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("encoder.")})
+            model.decoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("decoder.")})
+        except RuntimeError as exc:
+            first = str(exc).splitlines()[0][:160]
+            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (weights do not fit: {first})") from None
+        model.eval()
+        return model
+
+    def save(self, path: str | Path, extra: dict[str, Tensor] | None = None) -> None:
+        """Write the bundle atomically (``extra``: optimiser/RNG state in checkpoints)."""
+        tensors = {f"encoder.{k}": v for k, v in self.encoder.state_dict().items()}
+        tensors.update({f"decoder.{k}": v for k, v in self.decoder.state_dict().items()})
+        tensors.update(extra or {})
+        save_bundle(path, self.meta, tensors)
+
+    def eval(self) -> DeepMorphModel:
+        self.encoder.eval()
+        self.decoder.eval()
+        return self
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """``(H, W)`` of decoder inputs."""
+        return self.decoder.image_size
+
+    def rasterizer(self) -> SoftRasterizer:
+        """The soft rasterizer at the model's size and settings."""
+        settings = RasterSettings(**{**self.meta.raster, "width": self.width})
+        return SoftRasterizer(self.drawing.space, settings)
+
+    # -- encoding -------------------------------------------------------------------------
+
+    def morph_values(self, code_bits: Tensor) -> Tensor:
+        """Morph values for ``(B, N_b)`` code bits (no gradient)."""
+        with torch.no_grad():
+            return self.drawing.values_from_unit(self.encoder(code_bits.float()))
+
+    def encode(self, payload: np.ndarray) -> str:
+        """The morphed SVG document carrying ``payload`` (``(payload_bits,)`` 0/1)."""
+        code = self.codec.encode(np.asarray(payload, dtype=np.uint8))
+        values = self.morph_values(torch.from_numpy(code.astype(np.float32))[None])
+        return self.drawing.to_svg(values[0])
+
+    # -- decoding -------------------------------------------------------------------------
+
+    def canonical_ink_box(self) -> tuple[float, float, float, float]:
+        """Where the unmorphed drawing's ink sits in the decoder's frame (x0, y0, x1, y1)."""
+        if not hasattr(self, "_ink_box"):
+            h, w = self.image_size
+            base = render_svg(self.drawing.to_svg(self.drawing.neutral_values()[0]), w)
+            ys, xs = np.nonzero(base < 0.5)
+            self._ink_box = (float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1))
+        return self._ink_box
+
+    def probabilities(self, images: Tensor) -> Tensor:
+        """Per-bit probabilities for decoder-ready images ``(B, 1, H, W)``."""
+        with torch.no_grad():
+            return torch.sigmoid(self.decoder(images))
+
+    def decode_image(self, image: np.ndarray, soft: bool = True) -> list[Detection]:
+        """Decode one image in which the drawing roughly fills the frame.
+
+        Args:
+            image: ``(H, W)`` or ``(H, W, 3|4)`` array (uint8 or float in [0, 1]).
+
+        Returns:
+            One detection, or an empty list when the image holds no drawing.
+        """
+        gray = to_gray(image)
+        aligned = align_to_frame(gray, self.image_size, self.canonical_ink_box())
+        if aligned is None:
+            return []
+        frame, bbox = aligned
+        probs = self.probabilities(torch.from_numpy(frame)[None, None])[0].numpy()
+        return [Detection(self.codec.decode(probs, soft=soft), probs, bbox)]
+
+    def info(self) -> dict[str, Any]:
+        """A JSON-ready description of the bundle."""
+        m = self.meta
+        return {
+            "drawing": m.drawing_name,
+            "payload_bits": m.codec.payload_bits,
+            "code_bits": m.codec.code_bits,
+            "codec": {**m.codec.model_dump(), "ecc_bits": m.codec.ecc_bits},
+            "n_variables": m.n_variables,
+            "image_size": list(self.image_size),
+            "bounds_defaults": m.bounds_defaults,
+            "augment": m.augment,
+            "train": m.train,
+            "record": m.record.model_dump(),
+            "versions": m.versions,
+        }
+
+
+def _bound_kwargs(defaults: dict[str, Any]) -> dict[str, Any]:
+    return {k: (tuple(v) if isinstance(v, list) else v) for k, v in defaults.items() if k in ("move", "shift", "scale", "rotate")}
+
+
+__all__ = ["DeepMorphModel", "Detection", "format_payload"]

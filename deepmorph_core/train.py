@@ -1,0 +1,332 @@
+"""Training: the paper's two-stage schedule, with checkpoints, resume, logs and plots.
+
+One step: random code bits -> encoder -> morph values -> soft rasterizer -> paper-white image
+-> (a share of the batch replaced by real-renderer images of the same morphs) -> capture
+corruptions -> decoder -> sigmoid cross-entropy.
+
+* **Stage 1** keeps the encoder at its random initialisation and trains the decoder until its
+  bit accuracy plateaus (or a share of the steps is spent).
+* **Stage 2** trains both end to end.
+
+The real-renderer share closes the gap between what the soft rasterizer draws and what
+resvg (and so a printer) draws. Those rows carry no gradient to the encoder, so they only
+teach the decoder to read real renders.
+
+Checkpoints are whole bundles plus optimiser and generator state, written atomically every
+``checkpoint_every`` steps and on Ctrl-C. ``resume`` continues one exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor, nn
+
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.render import render_svg
+
+
+class TrainConfig(BaseModel):
+    """Training settings (stored in the bundle).
+
+    Attributes:
+        steps: total optimisation steps (both stages).
+        batch: perturbations per step.
+        width: image width in pixels (decoder input; the height follows the drawing).
+        lr, encoder_lr: Adam learning rates of the decoder and the encoder.
+        stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
+        plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
+            window) gains less than ``plateau_gain`` from one window to the next.
+        hard_fraction: share of each batch rendered by the real renderer (resvg).
+        severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``).
+        seed: makes a run reproducible (same seed, same threads: same model).
+        device: ``cpu`` or ``cuda``.
+        threads: torch CPU threads (``None``: torch's default).
+        checkpoint_every, log_every: in steps.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    steps: int = Field(default=3000, ge=1, le=10_000_000)
+    batch: int = Field(default=32, ge=2, le=4096)
+    width: int = Field(default=96, ge=32, le=512)
+    lr: float = Field(default=2e-3, gt=0, le=1)
+    encoder_lr: float = Field(default=1e-2, gt=0, le=10)
+    stage1_max_fraction: float = Field(default=0.35, ge=0, le=1)
+    plateau_window: int = Field(default=150, ge=10)
+    plateau_gain: float = Field(default=0.004, ge=0)
+    hard_fraction: float = Field(default=0.25, ge=0, le=1)
+    severity: Literal["none", "easy", "medium", "hard"] = "medium"
+    seed: int = 0
+    device: Literal["cpu", "cuda"] = "cpu"
+    threads: int | None = Field(default=None, ge=1, le=256)
+    checkpoint_every: int = Field(default=250, ge=1)
+    log_every: int = Field(default=25, ge=1)
+
+
+@dataclass
+class StepMetrics:
+    """What one logged step reports."""
+
+    step: int
+    stage: int
+    loss: float
+    bit_acc: float
+    word_acc: float
+    elapsed_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: (round(v, 5) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
+
+
+class Interrupted(DeepMorphError):
+    """Training stopped by Ctrl-C after writing a checkpoint."""
+
+
+def build_augment(severity: str, config: dict[str, Any] | None = None) -> nn.Module:
+    """The capture-corruption pipeline for a preset (or a stored config)."""
+    from deepmorph_augment.pipeline import AugmentConfig, AugmentPipeline
+
+    cfg = AugmentConfig.model_validate(config) if config else AugmentConfig.preset(severity)
+    return AugmentPipeline(cfg)
+
+
+def real_renders(model: DeepMorphModel, values: Tensor) -> Tensor:
+    """resvg renders ``(k, 1, H, W)`` (paper white) of ``(k, N_v)`` morph values."""
+    h, w = model.image_size
+    out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
+    for i in range(values.shape[0]):
+        out[i, 0] = render_svg(model.drawing.to_svg(values[i].detach().cpu()), w)
+    return torch.from_numpy(out).to(values.device)
+
+
+class Trainer:
+    """Runs (or resumes) training of one model.
+
+    Args:
+        model: a fresh model (``DeepMorphModel.create``) or a loaded checkpoint.
+        config: training settings.
+        out: the bundle path written at checkpoints and at the end.
+        log_path: JSONL log (one line per ``log_every`` steps); a PNG plot is written beside it.
+    """
+
+    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path, log_path: Path | None = None):
+        self.model, self.cfg, self.out = model, config, Path(out)
+        self.log_path = Path(log_path) if log_path else self.out.with_suffix(".log.jsonl")
+        self.device = torch.device(config.device)
+        if config.device == "cuda" and not torch.cuda.is_available():
+            raise DeepMorphError("--device cuda was asked for but no CUDA device is available")
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        model.encoder.to(self.device)
+        model.decoder.to(self.device)
+        self.raster = model.rasterizer()
+        self.augment = build_augment(config.severity, model.meta.augment or None).to(self.device)
+        self.bce = nn.BCEWithLogitsLoss()
+        self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
+        torch.manual_seed(config.seed)
+        self.opt_dec = torch.optim.Adam(model.decoder.parameters(), lr=config.lr)
+        self.opt_enc = torch.optim.Adam(model.encoder.parameters(), lr=config.encoder_lr)
+        self.record = model.meta.record
+        self.record.total_steps = config.steps
+        self.record.device = config.device
+        self.record.threads = torch.get_num_threads()
+        self._window: list[float] = []
+        self._prev_window: float | None = None
+        self._restore(model.extra_tensors)
+
+    # -- state ----------------------------------------------------------------------------
+
+    def _extra_state(self) -> dict[str, Tensor]:
+        out: dict[str, Tensor] = {"rng.cpu": self.gen.get_state(), "rng.torch": torch.get_rng_state()}
+        for name, opt in (("opt_dec", self.opt_dec), ("opt_enc", self.opt_enc)):
+            for pid, st in opt.state_dict()["state"].items():
+                for key, val in st.items():
+                    out[f"{name}.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+        out["window"] = torch.tensor(self._window + [float("nan")] * 0, dtype=torch.float64)
+        if self._prev_window is not None:
+            out["prev_window"] = torch.tensor([self._prev_window], dtype=torch.float64)
+        return out
+
+    def _restore(self, extra: dict[str, Tensor]) -> None:
+        if not extra:
+            return
+        self.gen.set_state(extra["rng.cpu"])
+        torch.set_rng_state(extra["rng.torch"])
+        for name, opt in (("opt_dec", self.opt_dec), ("opt_enc", self.opt_enc)):
+            sd = opt.state_dict()
+            state: dict[int, dict[str, Any]] = {}
+            for key, val in extra.items():
+                if key.startswith(name + "."):
+                    _, pid, field_name = key.split(".", 2)
+                    state.setdefault(int(pid), {})[field_name] = val.to(self.device) if field_name != "step" else val
+            sd["state"] = state
+            opt.load_state_dict(sd)
+        self._window = extra["window"].tolist() if "window" in extra else []
+        self._prev_window = float(extra["prev_window"][0]) if "prev_window" in extra else None
+
+    def checkpoint(self) -> None:
+        """Write the bundle with optimiser and generator state (atomic)."""
+        self.model.meta.record = self.record
+        self.model.save(self.out, extra=None if self.record.finished else self._extra_state())
+
+    # -- one step -------------------------------------------------------------------------
+
+    def images(self, bits: Tensor, train_encoder: bool) -> Tensor:
+        """Decoder inputs for code bits: soft renders, part real renders, corrupted."""
+        with torch.set_grad_enabled(train_encoder):
+            unit = self.model.encoder(bits)
+            values = self.model.drawing.values_from_unit(unit)
+            images = 1.0 - self.raster(values)
+        k = round(self.cfg.hard_fraction * bits.shape[0])
+        if k:
+            hard = real_renders(self.model, values[:k])
+            images = torch.cat([hard, images[k:]], 0)
+        return self.augment(images, generator=self.gen)
+
+    def step(self) -> StepMetrics:
+        cfg, rec = self.cfg, self.record
+        stage2 = rec.stage == 2
+        self.model.encoder.train(stage2)
+        self.model.decoder.train()
+        bits = torch.randint(0, 2, (cfg.batch, self.model.codec.spec.code_bits), generator=self.gen).float()
+        bits = bits.to(self.device)
+        logits = self.model.decoder(self.images(bits, stage2))
+        loss = self.bce(logits, bits)
+        self.opt_dec.zero_grad(set_to_none=True)
+        self.opt_enc.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt_dec.step()
+        if stage2:
+            self.opt_enc.step()
+        with torch.no_grad():
+            right = (logits > 0) == (bits > 0.5)
+            bit_acc = right.float().mean().item()
+            word_acc = right.all(1).float().mean().item()
+        rec.step += 1
+        self._update_stage(bit_acc)
+        return StepMetrics(rec.step, rec.stage, loss.item(), bit_acc, word_acc, rec.elapsed_s)
+
+    def _update_stage(self, bit_acc: float) -> None:
+        rec, cfg = self.record, self.cfg
+        if rec.stage == 2:
+            return
+        self._window.append(bit_acc)
+        limit = math.ceil(cfg.stage1_max_fraction * cfg.steps)
+        plateau = False
+        if len(self._window) >= cfg.plateau_window:
+            mean = float(np.mean(self._window))
+            if self._prev_window is not None and mean - self._prev_window < cfg.plateau_gain:
+                plateau = True
+            self._prev_window, self._window = mean, []
+        if plateau or rec.step >= limit:
+            rec.stage, rec.stage2_start = 2, rec.step
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def run(self, on_log: Callable[[StepMetrics], None] | None = None) -> TrainingRecordSummary:
+        """Train until ``steps``; checkpoint on schedule and on Ctrl-C.
+
+        Raises:
+            Interrupted: after Ctrl-C, once the checkpoint is written.
+        """
+        cfg, rec = self.cfg, self.record
+        history = _read_log(self.log_path) if rec.step else []
+        if not rec.step:
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
+            self.log_path.write_text("")
+        start = time.perf_counter() - rec.elapsed_s
+        acc = {"loss": 0.0, "bit_acc": 0.0, "word_acc": 0.0, "n": 0}
+        try:
+            while rec.step < cfg.steps:
+                m = self.step()
+                rec.elapsed_s = time.perf_counter() - start
+                for k in ("loss", "bit_acc", "word_acc"):
+                    acc[k] += getattr(m, k)
+                acc["n"] += 1
+                if rec.step % cfg.log_every == 0 or rec.step == cfg.steps:
+                    n = acc.pop("n")
+                    logged = StepMetrics(rec.step, rec.stage, acc["loss"] / n, acc["bit_acc"] / n, acc["word_acc"] / n, rec.elapsed_s)
+                    acc = {"loss": 0.0, "bit_acc": 0.0, "word_acc": 0.0, "n": 0}
+                    history.append(logged.to_json())
+                    with self.log_path.open("a") as fh:
+                        fh.write(json.dumps(logged.to_json()) + "\n")
+                    rec.metrics = {"bit_acc": logged.bit_acc, "word_acc": logged.word_acc, "loss": logged.loss}
+                    if on_log:
+                        on_log(logged)
+                if rec.step % cfg.checkpoint_every == 0 and rec.step < cfg.steps:
+                    self.checkpoint()
+        except KeyboardInterrupt:
+            rec.elapsed_s = time.perf_counter() - start
+            self.checkpoint()
+            raise Interrupted(
+                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} "
+                f"(continue with --resume)"
+            ) from None
+        rec.finished = True
+        self.model.encoder.eval()
+        self.model.decoder.eval()
+        self.checkpoint()
+        plot = plot_history(history, self.log_path.with_suffix(".png"))
+        return TrainingRecordSummary(self.out, self.log_path, plot, rec.step, rec.stage2_start, rec.elapsed_s)
+
+
+@dataclass
+class TrainingRecordSummary:
+    """Where training wrote its files, and how it went."""
+
+    bundle: Path
+    log: Path
+    plot: Path | None
+    steps: int
+    stage2_start: int | None
+    elapsed_s: float
+
+
+def _read_log(path: Path) -> list[dict[str, Any]]:
+    if not path.is_file():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except ValueError:
+            continue  # a line cut by a crash
+    return out
+
+
+def plot_history(history: list[dict[str, Any]], path: Path) -> Path | None:
+    """Loss and bit accuracy against steps, with the stage switch marked (PNG)."""
+    if not history:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [h["step"] for h in history]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.2))
+    ax1.plot(steps, [h["loss"] for h in history])
+    ax1.set(xlabel="step", ylabel="BCE loss", yscale="log", title="loss")
+    ax2.plot(steps, [h["bit_acc"] for h in history], label="bit accuracy")
+    ax2.plot(steps, [h["word_acc"] for h in history], label="all bits right")
+    ax2.set(xlabel="step", ylim=(0, 1.01), title="accuracy (training batches)")
+    switch = next((h["step"] for h in history if h["stage"] == 2), None)
+    for ax in (ax1, ax2):
+        if switch is not None:
+            ax.axvline(switch, color="grey", linestyle=":", label="stage 2")
+    ax2.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
