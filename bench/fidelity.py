@@ -36,7 +36,6 @@ def parse_share(files: list[Path], registry) -> dict:
 
 def registries() -> dict[str, object]:
     import deepmorph_primitives.plugin as builtin
-
     from deepmorph_core.plugins import default_registry, load_registry
 
     out = {"installed (default)": default_registry(), "without bezier": load_registry([builtin], entry_points=False)}

@@ -1,8 +1,9 @@
 """Culled vs dense soft rasterizer: forward+backward time and peak memory, side by side.
 
-Each setting of each configuration is measured in two fresh subprocesses, one for peak memory
-and one for time (see ``bench/README.md`` for why); culled and dense see the same drawing and
-the same inputs, and their outputs and input gradients are compared.
+Per configuration, the peak memory of each setting is measured in a fresh subprocess of its
+own, and both settings are then timed in one more, alternating step by step (see
+``bench/README.md`` for why); culled and dense see the same drawing and the same inputs, and
+their outputs and input gradients are compared.
 
     .venv/bin/python bench/raster.py                       # full grid
     .venv/bin/python bench/raster.py --widths 64,128 --counts 10,50 --repeats 2   # quick
@@ -81,6 +82,8 @@ def _maxrss_mb() -> float:
 
 
 def worker(cfg: dict) -> dict:
+    """``mode="memory"``: peak of one step of setting ``cull``. ``mode="time"``: the settings in
+    ``culls`` timed alternately in this one process, so that both see the same background load."""
     warnings.filterwarnings("ignore", message="Converting a tensor with requires_grad")
     threads = set_threads(cfg["threads"])
     import torch
@@ -91,7 +94,6 @@ def worker(cfg: dict) -> dict:
 
     drawing = load_drawing(synthetic_svg(cfg["count"], cfg["seed"]), label="synthetic")
     space = MorphSpace(drawing)
-    raster = SoftRasterizer(space, RasterSettings(width=cfg["width"], cull=cfg["cull"]))
     u0 = torch.rand(cfg["batch"], space.n_variables, generator=torch.Generator().manual_seed(cfg["seed"]))
 
     def step(r: SoftRasterizer, u_init: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -100,19 +102,25 @@ def worker(cfg: dict) -> dict:
         ink.mean().backward()
         return ink.detach(), u.grad
 
-    out = {"threads": threads, "n_variables": space.n_variables, "pixels": raster.height * raster.width}
     if cfg["mode"] == "time":
-        t0 = time.perf_counter()
-        step(raster, u0)  # warm-up
-        out["first_ms"] = (time.perf_counter() - t0) * 1e3
-        times = []
+        rasters = {c: SoftRasterizer(space, RasterSettings(width=cfg["width"], cull=c)) for c in cfg["culls"]}
+        out = {}
+        for c, r in rasters.items():  # one warm-up each
+            t0, c0 = time.perf_counter(), time.process_time()
+            step(r, u0)
+            out[c] = {"first_ms": (time.perf_counter() - t0) * 1e3, "times_ms": [], "cpu_ms": []}
         for _ in range(cfg["repeats"]):
-            t0 = time.perf_counter()
-            step(raster, u0)
-            times.append((time.perf_counter() - t0) * 1e3)
-        out["times_ms"] = times
-        out["median_ms"] = statistics.median(times) if times else out["first_ms"]
-        return out
+            for c, r in rasters.items():
+                t0, c0 = time.perf_counter(), time.process_time()
+                step(r, u0)
+                out[c]["times_ms"].append((time.perf_counter() - t0) * 1e3)
+                out[c]["cpu_ms"].append((time.process_time() - c0) * 1e3)
+        for o in out.values():
+            o["median_ms"] = statistics.median(o["times_ms"]) if o["times_ms"] else o["first_ms"]
+            o["median_cpu_ms"] = statistics.median(o["cpu_ms"]) if o["cpu_ms"] else None
+        return {"threads": threads, "by_cull": {str(c): o for c, o in out.items()}}
+    raster = SoftRasterizer(space, RasterSettings(width=cfg["width"], cull=cfg["cull"]))
+    out = {"threads": threads, "n_variables": space.n_variables, "pixels": raster.height * raster.width}
     # mode "memory": a tiny warm-up (8 px, batch 2) so that lazy library initialisation falls
     # outside the measured step, then one full step; its peak RSS over the RSS just before it.
     step(SoftRasterizer(space, RasterSettings(width=8, cull=cfg["cull"])), u0[:2])
@@ -133,19 +141,24 @@ def worker(cfg: dict) -> dict:
 
 
 def _box_area_fraction(space, raster, u0) -> float:
-    """Mean share of the canvas inside the culled boxes (same rule as the rasterizer)."""
+    """Mean share of the canvas inside each primitive's culling box (the rasterizer's rule:
+    outline extent over the batch, padded by the half-width and the sigmoid's reach). Since
+    multi-piece strokes are now tiled per piece inside that box, it bounds the work from above."""
     import torch
 
+    from deepmorph_core import raster as R
     from deepmorph_core.outline import pixel_bbox
-    from deepmorph_core.raster import _SIGMOID_REACH
 
     st, H, W = raster.settings, raster.height, raster.width
     with torch.no_grad():
         frames = space.frames(space.values_from_unit(u0), W)
         areas = []
         for prim, frame in zip(space.drawing.primitives, frames):
-            half = float((frame.scale * prim.style.stroke_width / 2).max())
-            box = pixel_bbox(prim.primitive.outline(frame), half + _SIGMOID_REACH / st.sharpness).tolist()
+            if hasattr(R, "stroke_half_width"):
+                half = float(R.stroke_half_width(frame, prim.style.stroke_width, "stroke").max())
+            else:
+                half = float((frame.scale * prim.style.stroke_width / 2).max())
+            box = pixel_bbox(prim.primitive.outline(frame), half + R._SIGMOID_REACH / st.sharpness).tolist()
             w = min(W, math.ceil(box[2]) + 1) - max(0, math.floor(box[0]))
             h = min(H, math.ceil(box[3]) + 1) - max(0, math.floor(box[1]))
             areas.append(max(0, w) * max(0, h) / (H * W))
@@ -153,9 +166,9 @@ def _box_area_fraction(space, raster, u0) -> float:
 
 
 #: For the memory worker only: a fixed mmap threshold (which also turns off glibc's dynamic
-#: one) puts every tensor above 128 KiB in its own mapping, unmapped when freed, so the RSS
-#: high-water mark is the peak of live tensor bytes. With glibc's defaults the same dense step
-#: read anywhere from 1980 to 2450 MB over repeated runs (heap fragmentation); with this, to the MB.
+#: one) puts every allocation above 128 KiB in its own mapping, unmapped when freed, so the RSS
+#: high-water mark follows the peak of live tensor bytes. With glibc's defaults the same dense
+#: step read anywhere from 1980 to 2450 MB over repeated runs (heap reuse); with this, +-1 MB.
 MEMORY_ENV = {"MALLOC_MMAP_THRESHOLD_": "131072"}
 
 
@@ -172,22 +185,17 @@ def run_worker(cfg: dict) -> dict:
     raise RuntimeError(f"worker {cfg} failed (rc={proc.returncode}):\n{proc.stderr[-3000:]}")
 
 
-def measure(cfg: dict) -> dict:
-    """Peak memory (one process) and time (another, default allocator) of one setting."""
-    memory = run_worker({**cfg, "mode": "memory"})
-    timing = run_worker({**cfg, "mode": "time", "save": None})
-    return {**memory, **timing}
-
-
 # -- driver ----------------------------------------------------------------------------------
 
 
 def _estimate(done: list[dict], width: int, count: int, key: str) -> float | None:
-    """Extrapolate a dense cost linearly in pixels x primitives from the largest measured one."""
+    """Extrapolate a dense cost linearly in pixels x primitives from the largest measured dense
+    configuration, preferring one of the same width (per-pixel cost depends on the width)."""
     measured = [r for r in done if r.get("dense") and r["dense"].get(key) is not None]
+    same = [r for r in measured if r["width"] == width]
     if not measured:
         return None
-    ref = max(measured, key=lambda r: r["width"] ** 2 * r["count"])
+    ref = max(same or measured, key=lambda r: r["width"] ** 2 * r["count"])
     return ref["dense"][key] * (width**2 * count) / (ref["width"] ** 2 * ref["count"])
 
 
@@ -230,18 +238,24 @@ def main(argv: list[str] | None = None) -> int:
                         repeats=args.repeats)
             row: dict = {"width": width, "count": count}
             culled_file, dense_file = os.path.join(tmp, "culled.pt"), os.path.join(tmp, "dense.pt")
-            row["culled"] = measure({**base, "cull": True, "save": culled_file})
+            row["culled"] = run_worker({**base, "mode": "memory", "cull": True, "save": culled_file})
             est_mb = _estimate(results, width, count, "peak_mb")
             est_ms = _estimate(results, width, count, "median_ms")
-            est_s = est_ms * (args.repeats + 1) / 1e3 if est_ms is not None else None
+            est_s = est_ms * (args.repeats + 2) / 1e3 if est_ms is not None else None
             if est_mb is not None and est_mb > args.max_dense_mb:
                 row["dense"] = {"skipped": f"estimated peak {est_mb:.0f} MB > --max-dense-mb {args.max_dense_mb:.0f}"}
             elif est_s is not None and est_s > args.max_dense_s:
                 row["dense"] = {"skipped": f"estimated {est_s:.0f} s > --max-dense-s {args.max_dense_s:.0f}"}
             else:
-                row["dense"] = measure({**base, "cull": False, "save": dense_file})
+                row["dense"] = run_worker({**base, "mode": "memory", "cull": False, "save": dense_file})
                 row["agreement"] = compare(culled_file, dense_file)
+            culls = [True] if "skipped" in row["dense"] else [True, False]
+            timing = run_worker({**base, "mode": "time", "culls": culls})
+            row["culled"].update(timing["by_cull"]["True"])
+            if "skipped" not in row["dense"]:
+                row["dense"].update(timing["by_cull"]["False"])
                 row["speed_ratio"] = row["dense"]["median_ms"] / row["culled"]["median_ms"]
+                row["speed_ratio_cpu"] = row["dense"]["median_cpu_ms"] / row["culled"]["median_cpu_ms"]
                 row["memory_ratio"] = row["dense"]["peak_mb"] / max(row["culled"]["peak_mb"], 1e-9)
             if "skipped" in row["dense"]:
                 row["dense"]["estimated_peak_mb"], row["dense"]["estimated_ms"] = est_mb, est_ms
@@ -251,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
                   + (d["skipped"] if "skipped" in d else f"{d['median_ms']:.0f} ms {d['peak_mb']:.0f} MB"),
                   file=sys.stderr, flush=True)
 
-    headers = ["width", "prims", "N_v", "dense ms", "culled ms", "speed x", "dense MB", "culled MB", "memory x",
-               "box area", "max|d ink|", "max|d grad|"]
+    headers = ["width", "prims", "N_v", "dense ms", "culled ms", "speed x", "cpu x", "dense MB", "culled MB",
+               "memory x", "box area", "max|d ink|", "max|d grad|"]
     rows = []
     for r in results:
         d, c, agree = r["dense"], r["culled"], r.get("agreement", {})
@@ -263,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
             speed = f"~{d['estimated_ms'] / c['median_ms']:.1f}"
             memory = f"~{d['estimated_peak_mb'] / c['peak_mb']:.1f}"
         rows.append([r["width"], r["count"], c["n_variables"], dense_ms, c["median_ms"],
-                     speed, dense_mb, c["peak_mb"], memory,
+                     speed, r.get("speed_ratio_cpu"), dense_mb, c["peak_mb"], memory,
                      f"{100 * c['box_area_fraction']:.1f}%", agree.get("ink_max_abs_diff"),
                      agree.get("grad_max_abs_diff")])
     print(table(headers, rows))
@@ -283,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark": "raster",
         "environment": {**environment(), "threads": threads},
         "settings": {"batch": args.batch, "repeats": args.repeats, "seed": args.seed,
-                     "timing": "median wall time of forward+backward after one warm-up",
+                     "timing": "median wall time of forward+backward after one warm-up; culled and dense "
+                               "steps alternate in one process (cpu_ms: process CPU time of the same steps)",
                      "memory": "ru_maxrss after one step minus the RSS just before it, in a fresh process "
                                "with MALLOC_MMAP_THRESHOLD_=131072 (timing runs in another, default allocator)"},
         "target": {"config": list(TARGET_CONFIG), "speed": TARGET_SPEED, "memory": TARGET_MEMORY,

@@ -170,3 +170,87 @@ class MorphableDrawing:
             ],
             "skipped": [{"line": line, "reason": why} for line, why in self.drawing.skipped],
         }
+
+
+BUNDLED_MODEL = Path(__file__).parent / "data" / "ghost.dmm"
+
+
+def load_model(path: str | Path):
+    """Load a trained model bundle (:class:`deepmorph_core.codemodel.DeepMorphModel`)."""
+    from deepmorph_core.codemodel import DeepMorphModel
+
+    return DeepMorphModel.load(path)
+
+
+def train_model(
+    svg: str | Path,
+    out: str | Path,
+    *,
+    payload_bits: int = 24,
+    crc_bits: int | None = None,
+    ecc_t: int | None = None,
+    bounds: dict[str, Any] | None = None,
+    train: dict[str, Any] | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    on_start: Any = None,
+):
+    """Train (or resume) a model for a drawing and write its bundle.
+
+    Args:
+        svg: the drawing.
+        out: bundle path; it is also the checkpoint that ``resume`` continues.
+        payload_bits, crc_bits, ecc_t: the payload and its code (see :func:`deepmorph_core.codec.choose_codec`).
+        bounds: default bounds (``move``, ``shift``, ``scale``, ``rotate``) for unannotated elements.
+        train: :class:`deepmorph_core.train.TrainConfig` fields (``steps``, ``batch``, ``seed`` ...).
+        resume: continue the checkpoint at ``out``.
+        overwrite: replace an existing bundle at ``out`` instead of refusing.
+        on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback (progress bars).
+
+    Returns:
+        A :class:`deepmorph_core.train.TrainingRecordSummary`.
+    """
+    from pydantic import ValidationError
+
+    from deepmorph_core.bounds import format_validation_error
+    from deepmorph_core.codec import choose_codec
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.raster import RasterSettings
+    from deepmorph_core.train import Trainer, TrainConfig, build_augment
+
+    out = Path(out)
+    overrides = {k: v for k, v in (train or {}).items() if v is not None}
+    svg_text = Path(svg).read_text() if not isinstance(svg, bytes) else svg.decode()
+    try:
+        if resume:
+            model = DeepMorphModel.load(out)
+            if model.meta.drawing_svg != svg_text:
+                raise DeepMorphError(f"{out}: the checkpoint was trained on another drawing than {svg}")
+            if model.meta.record.finished:
+                raise DeepMorphError(f"{out}: training already finished; nothing to resume")
+            config = TrainConfig(**{**model.meta.train, **{k: v for k, v in overrides.items() if k in ("steps", "threads")}})
+        else:
+            if out.exists() and not overwrite:
+                raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
+            load_drawing_check = MorphableDrawing.load(Path(svg) if not isinstance(svg, bytes) else svg)
+            del load_drawing_check  # validates the SVG (with a file-and-line error) before anything else
+            config = TrainConfig(**overrides)
+            defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
+            augment = build_augment(config.severity, config.width)
+            settings = RasterSettings(width=config.width)
+            torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
+            model = DeepMorphModel.create(
+                svg_text,
+                Path(svg).name if not isinstance(svg, bytes) else "<drawing>",
+                defaults.model_dump(exclude_none=True),
+                choose_codec(payload_bits, crc_bits, ecc_t),
+                config.width,
+                {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
+                augment.config.model_dump(),
+                config.model_dump(),
+            )
+    except ValidationError as exc:
+        raise DeepMorphError(f"training settings: {format_validation_error(exc).replace('dm:', '--')}") from None
+    trainer = Trainer(model, config, out)
+    on_log = on_start(config.steps, model.meta.record.step) if on_start else None
+    return trainer.run(on_log)

@@ -231,32 +231,201 @@ def _render_ink(svg: Path, size: int, soft: bool) -> np.ndarray:
     return render_svg_ink(md.to_svg(md.neutral_values()[0]), size)
 
 
+ModelArg = Annotated[Path, typer.Argument(help="A DeepMorph model bundle (.dmm).", show_default=False)]
+
+
+@app.command()
+@friendly
+def train(
+    svg: SvgArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Model bundle to write (.dmm); also the checkpoint.")],
+    payload_bits: Annotated[int, typer.Option("--payload-bits", min=1, max=256, help="Payload length in bits.")] = 24,
+    crc: Annotated[Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")] = None,
+    ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 3000,
+    batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
+    width: Annotated[int, typer.Option("--width", min=32, max=512, help="Decoder image width in pixels.")] = 96,
+    severity: Annotated[str, typer.Option("--severity", help="Capture corruption: none, easy, medium, hard.")] = "medium",
+    hard_fraction: Annotated[float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")] = 0.25,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
+    threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+    move: MoveOpt = None,
+    shift: ShiftOpt = None,
+    scale: ScaleOpt = None,
+    rotate: RotateOpt = None,
+) -> None:
+    """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
+    from deepmorph_core.api import train_model
+
+    def on_start(total: int, done: int) -> Callable[[Any], None]:
+        progress.update(task, total=total, completed=done)
+        return lambda m: progress.update(
+            task,
+            completed=m.step,
+            description=f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}",
+        )
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        TextColumn("ETA"), TimeRemainingColumn(), console=err, transient=False,
+    ) as progress:
+        task = progress.add_task("starting", total=steps)
+        summary = train_model(
+            svg, out_path, payload_bits=payload_bits, crc_bits=crc, ecc_t=ecc_t, resume=resume,
+            bounds={"move": move, "shift": _pair(shift, "shift", single_ok=True), "scale": _pair(scale, "scale"),
+                    "rotate": _pair(rotate, "rotate")},
+            train={"steps": steps, "batch": batch, "width": width, "severity": severity, "seed": seed,
+                   "device": device, "threads": threads, "hard_fraction": hard_fraction},
+            on_start=on_start,
+        )
+    out.print(
+        f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
+        f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
+    )
+
+
+@app.command()
+@friendly
+def info(model: ModelArg, as_json: JsonOpt = False) -> None:
+    """Describe a model bundle: payload and code bits, codec, image size, bounds, training record."""
+    from deepmorph_core.codemodel import DeepMorphModel
+
+    data = DeepMorphModel.load(model).info()
+    if as_json:
+        out.print_json(json.dumps(data))
+        return
+    table = Table(title=str(model), show_header=False)
+    table.add_column("field")
+    table.add_column("value", overflow="fold")
+    codec = data["codec"]
+    rec = data["record"]
+    rows = [
+        ("drawing", data["drawing"]),
+        ("payload bits", str(data["payload_bits"])),
+        ("code bits", f"{data['code_bits']} (CRC {codec['crc_bits']}, BCH t={codec['bch_t']}: {codec['ecc_bits']} ECC bits)"),
+        ("variables N_v", str(data["n_variables"])),
+        ("image size", "x".join(map(str, data["image_size"][::-1]))),
+        ("bounds defaults", json.dumps(data["bounds_defaults"]) or "-"),
+        ("training", f"{rec['step']}/{rec['total_steps']} steps, {rec['elapsed_s']:.0f} s on {rec['device']} "
+                     f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
+                     f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}"),
+        ("last metrics", json.dumps(rec["metrics"])),
+        ("versions", json.dumps(data["versions"])),
+    ]
+    for k, v in rows:
+        table.add_row(k, v)
+    out.print(table)
+
+
+@app.command()
+@friendly
+def encode(
+    model: ModelArg,
+    payload: Annotated[str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")],
+    out_path: Annotated[Path, typer.Option("--out", help="Morphed SVG to write.")],
+    png: Annotated[Optional[Path], typer.Option("--png", help="Also render a PNG for printing.")] = None,
+    width_mm: Annotated[float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of the PNG.")] = 50.0,
+    dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of the PNG.")] = 300,
+) -> None:
+    """Hide a payload in the model's drawing and write the morphed SVG (and a print-ready PNG)."""
+    from deepmorph_core.codec import format_payload, parse_payload
+    from deepmorph_core.codemodel import DeepMorphModel
+
+    m = DeepMorphModel.load(model)
+    bits = parse_payload(payload, m.codec.spec.payload_bits)
+    svg_text = m.encode(bits)
+    _write_text_atomic(out_path, svg_text)
+    msg = f"wrote {out_path} carrying {format_payload(bits)['hex']}"
+    if png is not None:
+        px = max(16, round(width_mm / 25.4 * dpi))
+        img = render_svg_ink(svg_text, px)
+        save_gray(1.0 - img, png, dpi=dpi)
+        msg += f" and {png} ({px} px wide = {width_mm:g} mm at {dpi} dpi)"
+    out.print(msg)
+
+
+@app.command()
+@friendly
+def decode(
+    model: ModelArg,
+    images: Annotated[list[Path], typer.Argument(help="Images (PNG, JPEG, ...) to decode, each on its own.")],
+    as_json: JsonOpt = False,
+    hard_only: Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")] = False,
+) -> None:
+    """Read payloads back from images of printed or rendered codes."""
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.imaging import read_image
+
+    m = DeepMorphModel.load(model)
+    loaded = [(path, read_image(path)) for path in images]  # every file is checked before any work
+    results = []
+    for path, img in loaded:
+        dets = m.decode_image(img, soft=not hard_only)
+        results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
+    if as_json:
+        out.print_json(json.dumps(results))
+        return
+    for r in results:
+        if not r["detections"]:
+            out.print(f"{r['image']}: no drawing found")
+        for d in r["detections"]:
+            status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
+            out.print(
+                f"{r['image']}: {d['payload']['hex']} {status}, corrected {d['corrected_bits']} bits, "
+                f"confidence {d['confidence']:.3f}"
+            )
+
+
 @app.command()
 @friendly
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo's files.")] = Path("deepmorph-demo"),
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the random morph.")] = 3,
-    size: Annotated[int, typer.Option("--size", min=32, max=2048, help="Render width in pixels.")] = 256,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the payload and the photo simulation.")] = 3,
+    retrain: Annotated[bool, typer.Option("--train", help="Train a fresh model instead of loading the bundled one.")] = False,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Steps when training (--train).")] = 600,
 ) -> None:
-    """Run the bundled drawing through inspect, a random morph, real and soft renders, an overlay."""
-    md = MorphableDrawing.load(BUNDLED_DRAWING)
-    out.print(
-        f"bundled drawing {BUNDLED_DRAWING.name}: {len(md.drawing.primitives)} primitives, N_v = {md.n_variables}"
-    )
-    values = md.values_from_unit(md.random_unit(1, seed))
+    """Bundled drawing end to end: model, encode a payload, simulate print-and-photo, decode."""
+    from deepmorph_core.api import BUNDLED_MODEL, train_model
+    from deepmorph_core.capture import simulate_photo
+    from deepmorph_core.codec import format_payload, random_payloads
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.render import render_svg
+
     out_dir.mkdir(parents=True, exist_ok=True)
-    morphed_svg = md.to_svg(values[0])
-    _write_text_atomic(out_dir / "morphed.svg", morphed_svg)
-    base = md.render_hard(None, size)
-    hard = render_svg_ink(morphed_svg, size)
-    soft = md.render_soft(values, size).detach()[0, 0].numpy()
-    save_gray(1 - base, out_dir / "base.png")
-    save_gray(1 - hard, out_dir / "morphed.png")
-    save_gray(1 - soft, out_dir / "morphed-soft.png")
-    save_rgb(overlay(base, hard), out_dir / "overlay.png")
-    mad = float(np.abs(soft - hard).mean())
-    out.print(f"wrote {out_dir}/morphed.svg, base.png, morphed.png, morphed-soft.png, overlay.png")
-    out.print(f"soft vs resvg render of the morph: mean absolute difference {mad:.4f}")
+    if retrain or not BUNDLED_MODEL.is_file():
+        out.print(f"training a model for {BUNDLED_DRAWING.name} ({steps} steps) ...")
+        summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps})
+        model_path = summary.bundle
+    else:
+        model_path = BUNDLED_MODEL
+    m = DeepMorphModel.load(model_path)
+    rng = np.random.default_rng(seed)
+    payload = random_payloads(1, m.codec.spec.payload_bits, rng)[0]
+    svg_text = m.encode(payload)
+    _write_text_atomic(out_dir / "code.svg", svg_text)
+    render = render_svg(svg_text, 400)
+    save_gray(render, out_dir / "code.png")
+    base = render_svg_ink(m.drawing.to_svg(m.drawing.neutral_values()[0]), 400)
+    save_rgb(overlay(base, 1.0 - render), out_dir / "overlay.png")
+    out.print(f"model {model_path}: {m.codec.spec.payload_bits} payload bits in {m.codec.spec.code_bits} code bits")
+    out.print(f"encoded {format_payload(payload)['hex']} into {out_dir}/code.svg (and code.png, overlay.png)")
+    for severity in ("easy", "medium", "hard"):
+        photo = simulate_photo(render, severity, rng)
+        save_gray(photo / 255.0, out_dir / f"photo-{severity}.png")
+        dets = m.decode_image(photo)
+        if not dets:
+            out.print(f"photo-{severity}.png: no drawing found")
+            continue
+        r = dets[0].result
+        verdict = "ok" if r.ok and np.array_equal(r.payload, payload) else ("WRONG" if r.ok else "not verified")
+        out.print(
+            f"photo-{severity}.png: decoded {format_payload(r.payload)['hex']} ({verdict}; "
+            f"corrected {r.corrected_bits} bits, confidence {r.confidence:.3f})"
+        )
 
 
 def main() -> None:

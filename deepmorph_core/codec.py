@@ -12,9 +12,10 @@ Code word layout (most significant bit first everywhere)::
     ecc   = bchlib.BCH(t, m).encode(data), first ecc_bits bits  (its byte padding is never sent)
     code  = (info | ecc) XOR whitening mask                     N_b = P + C + ecc_bits
 
-The whitening mask is a fixed pseudo-random bit string (SHA-256 of a constant), so that a
-constant network output (a blank or unrelated picture read as all zeros or all ones) is not a
-code word and the bits the encoder network must embed are balanced. See ``docs/codec.md``.
+The whitening mask is a fixed pseudo-random bit string (SHA-256 of a constant; per spec, the
+first variant under which no constant output decodes as valid), so that a blank or unrelated
+picture read as all zeros or all ones is not a code word and the bits the encoder network must
+embed are balanced. See ``docs/codec.md``.
 
 An unchecked payload is never presented as valid: ``DecodeResult.ok`` is True only when a CRC
 was checked and matches, so with ``crc_bits=0`` it is always False.
@@ -26,7 +27,7 @@ import hashlib
 import itertools
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from typing import Any, Literal
 
 import bchlib
@@ -44,7 +45,7 @@ _WHITENING_SEED = b"deepmorph payload codec whitening/1"
 _PROB_EPS = 1e-9
 
 
-@lru_cache(maxsize=None)
+@cache
 def _bch_ecc_bits(t: int, m: int) -> int | None:
     """ECC bits of the BCH code (t, m), or None where the Linux BCH library has no such code."""
     try:
@@ -128,7 +129,7 @@ class CodecSpec(BaseModel):
         return self.payload_bits + self.crc_bits + self.ecc_bits
 
 
-@lru_cache(maxsize=None)
+@cache
 def _smallest_m(t: int, data_bits: int) -> int | None:
     for m in range(BCH_M_RANGE[0], BCH_M_RANGE[1] + 1):
         if _bch_data_capacity(t, m) >= data_bits:
@@ -169,14 +170,43 @@ def choose_codec(payload_bits: int, crc_bits: int | None = None, bch_t: int | No
         raise DeepMorphError(f"invalid codec: {format_codec_error(exc)}") from None
 
 
-@lru_cache(maxsize=8)
-def _whitening_mask(n: int) -> np.ndarray:
-    """The first ``n`` bits of SHA-256(seed || counter) blocks: fixed forever, for every spec."""
+def _mask_bits(n: int, variant: int) -> np.ndarray:
+    """``n`` pseudo-random bits: SHA-256(seed || variant || counter) blocks, fixed forever."""
     blocks = math.ceil(n / 256)
-    raw = b"".join(hashlib.sha256(_WHITENING_SEED + i.to_bytes(4, "big")).digest() for i in range(blocks))
+    raw = b"".join(
+        hashlib.sha256(_WHITENING_SEED + variant.to_bytes(2, "big") + i.to_bytes(4, "big")).digest()
+        for i in range(blocks)
+    )
     mask = np.unpackbits(np.frombuffer(raw, dtype=np.uint8))[:n].copy()
     mask.setflags(write=False)
     return mask
+
+
+@cache
+def _whitening_mask(spec: CodecSpec) -> np.ndarray:
+    """The first mask variant under which no constant output decodes as a valid payload.
+
+    With every probability equal, hard decisions are all 0 or all 1 and every bit is equally
+    (un)reliable, so the decoder sees the same thing for every constant below 0.5 (and for every
+    one above): probing 0.25 and 0.75 with the widest default soft search covers them all.
+    """
+    for variant in range(1 << 16):
+        mask = _mask_bits(spec.code_bits, variant)
+        probe = PayloadCodec._with_mask(spec, mask)
+        if not any(probe.decode(np.full(spec.code_bits, v)).ok for v in (0.25, 0.75)):
+            return mask
+    raise AssertionError("no whitening mask found")  # pragma: no cover - a try fails with p < 1%
+
+
+@cache
+def _flip_patterns(n: int) -> np.ndarray:
+    """Every non-empty subset of ``n`` positions as a ``(2**n - 1, n)`` 0/1 matrix, fewest flips first."""
+    subsets = [c for r in range(1, n + 1) for c in itertools.combinations(range(n), r)]
+    out = np.zeros((len(subsets), n), dtype=np.uint8)
+    for row, subset in enumerate(subsets):
+        out[row, list(subset)] = 1
+    out.setflags(write=False)
+    return out
 
 
 # --------------------------------------------------------------------------- payload text
@@ -211,8 +241,13 @@ def parse_payload(text: str, payload_bits: int) -> np.ndarray:
     _check_payload_bits(payload_bits)
     digits = _hex_digits(payload_bits)
     example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
-    expected = f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, or {payload_bits} binary digits"
-    s = text.strip() if isinstance(text, str) else None
+    expected = (
+        f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, "
+        f"or {payload_bits} binary digits"
+    )
+    if not isinstance(text, str):
+        raise DeepMorphError(f"payload must be text, got {type(text).__name__}; {expected}")
+    s = text.strip()
     if not s:
         raise DeepMorphError(f"empty payload; {expected}")
     if s[:2] in ("0x", "0X"):
@@ -306,6 +341,9 @@ class PayloadCodec:
             CRC (<= 0.1%), 2 with an 8-bit CRC (<= 1.2%).
         reliable_above: bits whose ``max(p, 1 - p)`` reaches this are never flipped by the soft
             search (saturated outputs say nothing about which bits are wrong).
+
+    A codec is not thread-safe (bchlib keeps the last error locations in the object): use one
+    per thread.
     """
 
     def __init__(
@@ -316,8 +354,24 @@ class PayloadCodec:
         soft_candidates: int | None = None,
         reliable_above: float = 0.95,
     ) -> None:
+        self._setup(spec, soft_bits, soft_candidates, reliable_above)
+        self._mask = _whitening_mask(spec)
+
+    @classmethod
+    def _with_mask(cls, spec: CodecSpec, mask: np.ndarray) -> PayloadCodec:
+        """A codec with the widest default soft search and a given whitening mask (to pick masks)."""
+        codec = cls.__new__(cls)
+        codec._setup(spec, soft_bits=6, soft_candidates=64, reliable_above=0.95)
+        codec._mask = mask
+        return codec
+
+    def _setup(self, spec: CodecSpec, soft_bits: int, soft_candidates: int | None, reliable_above: float) -> None:
         if not 0 <= soft_bits <= 12:
             raise DeepMorphError(f"soft_bits must be between 0 and 12, got {soft_bits}")
+        if soft_candidates is not None and soft_candidates < 0:
+            raise DeepMorphError(f"soft_candidates must be 0 or more, got {soft_candidates}")
+        if not 0.5 < reliable_above <= 1.0:
+            raise DeepMorphError(f"reliable_above must lie in (0.5, 1], got {reliable_above}")
         self.spec = spec
         self.soft_bits = soft_bits
         if soft_candidates is None:
@@ -325,7 +379,6 @@ class PayloadCodec:
         self.soft_candidates = soft_candidates
         self.reliable_above = reliable_above
         self._k = spec.payload_bits + spec.crc_bits
-        self._mask = _whitening_mask(spec.code_bits)
         self._bch = bchlib.BCH(spec.bch_t, m=spec.field_order) if spec.bch_t else None
         self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
 
@@ -340,32 +393,55 @@ class PayloadCodec:
         data = np.packbits(np.concatenate([np.zeros(pad, np.uint8), payload])).tobytes()
         return _int_to_bits(self._crc.checksum(data), self.spec.crc_bits)
 
-    def _crc_ok(self, info: np.ndarray) -> bool:
+    def _crc_ok(self, word: np.ndarray) -> bool:
         p = self.spec.payload_bits
-        return bool(np.array_equal(self._crc_bits_of(info[:p]), info[p:]))
+        return bool(np.array_equal(self._crc_bits_of(word[:p]), word[p : self._k]))
 
     def _ecc(self, info: np.ndarray) -> np.ndarray:
         ecc = self._bch.encode(np.packbits(info).tobytes())
         return np.unpackbits(np.frombuffer(ecc, dtype=np.uint8))[: self.spec.ecc_bits]
 
-    def _bch_correct(self, word: np.ndarray) -> np.ndarray | None:
-        """Hard BCH decoding of an (unwhitened) word: the nearest code word within ``t``, or None."""
+    def _bch_correct(self, words: np.ndarray) -> list[np.ndarray | None]:
+        """Hard BCH decoding of (unwhitened) words: for each, the code word within ``t`` bit flips,
+        or None where there is none.
+
+        Shape:
+            ``words``: ``(T, code_bits)``; one ``(code_bits,)`` array or None per row.
+        """
         if self._bch is None:
-            return word
+            return list(words)
+        k = self._k
+        data_rows = np.packbits(words[:, :k], axis=1)  # zero padding to whole bytes, as sent to encode
+        ecc_rows = np.packbits(words[:, k:], axis=1)
+        data_len = 8 * data_rows.shape[1]
+        out: list[np.ndarray | None] = []
+        for word, data_row, ecc_row in zip(words, data_rows, ecc_rows):
+            nerr = self._bch.decode(data_row.tobytes(), ecc_row.tobytes())
+            if nerr <= 0:
+                out.append(word if nerr == 0 else None)
+                continue
+            where = [self._errloc_to_index(loc, data_len) for loc in self._bch.errloc]
+            if None in where:
+                out.append(None)  # a "correction" of padding known to be zero: more than t errors
+                continue
+            fixed = word.copy()
+            fixed[where] ^= 1
+            out.append(fixed)
+        return out
+
+    def _errloc_to_index(self, loc: int, data_len: int) -> int | None:
+        """Index in our word of a bchlib error location, or None if it falls in the padding.
+
+        bchlib counts bits through the data bytes and then the ecc bytes, least significant bit of
+        each byte first; our words are most significant bit first and skip both paddings.
+        """
         k, ecc_bits = self._k, self.spec.ecc_bits
-        data = bytearray(np.packbits(word[:k]).tobytes())
-        ecc = bytearray(np.packbits(word[k:]).tobytes())
-        nerr = self._bch.decode(data, ecc)
-        if nerr < 0:
-            return None
-        if nerr == 0:
-            return word
-        self._bch.correct(data, ecc)
-        data_bits = np.unpackbits(np.frombuffer(bytes(data), dtype=np.uint8))
-        ecc_all = np.unpackbits(np.frombuffer(bytes(ecc), dtype=np.uint8))
-        if data_bits[k:].any() or ecc_all[ecc_bits:].any():
-            return None  # a "correction" of padding we know is zero: more errors than t
-        return np.concatenate([data_bits[:k], ecc_all[:ecc_bits]])
+        if loc < data_len:
+            index = (loc & ~7) + 7 - (loc & 7)
+            return index if index < k else None
+        loc -= data_len
+        index = (loc & ~7) + 7 - (loc & 7)
+        return k + index if index < ecc_bits else None
 
     # -- public
 
@@ -379,10 +455,11 @@ class PayloadCodec:
         arr = np.asarray(payload)
         if arr.ndim == 2:
             if arr.shape[1] != self.spec.payload_bits:
-                raise DeepMorphError(
-                    f"payloads must have shape (B, {self.spec.payload_bits}), got {tuple(arr.shape)}"
-                )
-            return np.stack([self.encode(row) for row in arr]) if len(arr) else np.zeros((0, self.spec.code_bits), np.uint8)
+                raise DeepMorphError(f"payloads must have shape (B, {self.spec.payload_bits}), got {tuple(arr.shape)}")
+            words = np.zeros((len(arr), self.spec.code_bits), np.uint8)
+            for row, payload_row in enumerate(arr):
+                words[row] = self.encode(payload_row)
+            return words
         bits = _as_bits(arr, self.spec.payload_bits, "payload")
         info = np.concatenate([bits, self._crc_bits_of(bits)]) if self._crc else bits
         word = np.concatenate([info, self._ecc(info)]) if self._bch else info
@@ -397,12 +474,13 @@ class PayloadCodec:
         """
         q = self._probabilities(probs)
         conf = float(np.exp(np.mean(np.log(np.maximum(q, 1.0 - q)))))
-        q = np.where(self._mask == 1, 1.0 - q, q)  # undo whitening
-        hard = (q > 0.5).astype(np.uint8)
+        # Hard decisions on the sent bits, then undo the whitening (so p = 0.5 everywhere is not
+        # read as the all-zero code word).
+        hard = (q > 0.5).astype(np.uint8) ^ self._mask
         cost = np.abs(np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS))  # |LLR| of each bit
         p, checked = self.spec.payload_bits, self._crc is not None
 
-        word = self._bch_correct(hard)
+        word = self._bch_correct(hard[None])[0]
         if word is not None and (not checked or self._crc_ok(word)):
             return self._result(word[:p], ok=checked, flips=int(np.count_nonzero(word != hard)), conf=conf)
         if soft:
@@ -430,36 +508,28 @@ class PayloadCodec:
 
     def _chase(self, hard: np.ndarray, cost: np.ndarray, first: np.ndarray | None) -> np.ndarray | None:
         """Chase-II: BCH-decode the hard word with each combination of the ``L`` least reliable
-        bits flipped; of the distinct code words found (at most ``soft_candidates`` of them go to
-        the CRC), return the most likely that passes the CRC (without a CRC: the most likely)."""
-        reliable_cost = math.log(self.reliable_above / (1.0 - self.reliable_above)) if self.reliable_above < 1 else math.inf
+        bits flipped, rank the distinct code words found by likelihood, and return the most likely
+        of the ``soft_candidates`` best that passes the CRC (without a CRC: the most likely)."""
+        sure = self.reliable_above
+        reliable_cost = math.log(sure / (1.0 - sure)) if sure < 1 else math.inf
         order = np.argsort(cost, kind="stable")
         weak = [int(i) for i in order[: self.soft_bits] if cost[i] < reliable_cost]
         if not weak:
             return None
-        patterns = [c for r in range(1, len(weak) + 1) for c in itertools.combinations(weak, r)]
-        patterns.sort(key=lambda c: (sum(cost[i] for i in c), len(c)))  # most likely flips first
-        seen = {first.tobytes()} if first is not None else set()
-        budget = self.soft_candidates
-        best, best_cost = None, math.inf
-        for flips in patterns:
-            trial = hard.copy()
-            trial[list(flips)] ^= 1
-            word = self._bch_correct(trial)
-            if word is None:
-                continue
-            key = word.tobytes()
-            if key in seen:
-                continue
-            seen.add(key)
-            if self._crc is None or self._crc_ok(word):
-                c = float(cost[word != hard].sum())  # -log-likelihood relative to the hard decision
-                if c < best_cost:
-                    best, best_cost = word, c
-            budget -= 1
-            if budget <= 0:
-                break
-        return best
+        trials = np.repeat(hard[None], 2 ** len(weak) - 1, axis=0)
+        trials[:, weak] ^= _flip_patterns(len(weak))
+        found = {w.tobytes(): w for w in self._bch_correct(trials) if w is not None}
+        if first is not None:
+            found.pop(first.tobytes(), None)  # the hard decoder's word already failed the CRC
+        if not found:
+            return None
+        words = np.stack(list(found.values()))
+        # -log-likelihood relative to the hard decision: the sum of |LLR| over the changed bits
+        ranked = np.argsort((words != hard) @ cost, kind="stable")[: self.soft_candidates]
+        for i in ranked:
+            if self._crc is None or self._crc_ok(words[i]):
+                return words[i]
+        return None
 
     def _result(self, payload: np.ndarray, ok: bool, flips: int, conf: float) -> DecodeResult:
         out = np.array(payload, dtype=np.uint8)

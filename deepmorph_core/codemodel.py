@@ -22,7 +22,7 @@ from deepmorph_core.errors import DeepMorphError, SvgError
 from deepmorph_core.model import Decoder, DecoderConfig, Encoder
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg
-from deepmorph_core.imaging import align_to_frame, to_gray
+from deepmorph_core.imaging import align_to_frame, render_moments, to_gray
 
 
 @dataclass
@@ -178,14 +178,13 @@ class DeepMorphModel:
 
     # -- decoding -------------------------------------------------------------------------
 
-    def canonical_ink_box(self) -> tuple[float, float, float, float]:
-        """Where the unmorphed drawing's ink sits in the decoder's frame (x0, y0, x1, y1)."""
-        if not hasattr(self, "_ink_box"):
+    def canonical_moments(self) -> Tensor:
+        """Ink moments (cx, cy, sx, sy) of the unmorphed drawing in the decoder's frame."""
+        if not hasattr(self, "_moments"):
             h, w = self.image_size
             base = render_svg(self.drawing.to_svg(self.drawing.neutral_values()[0]), w)
-            ys, xs = np.nonzero(base < 0.5)
-            self._ink_box = (float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1))
-        return self._ink_box
+            self._moments = render_moments(torch.from_numpy(base)[None, None])[0]
+        return self._moments
 
     def probabilities(self, images: Tensor) -> Tensor:
         """Per-bit probabilities for decoder-ready images ``(B, 1, H, W)``."""
@@ -202,7 +201,7 @@ class DeepMorphModel:
             One detection, or an empty list when the image holds no drawing.
         """
         gray = to_gray(image)
-        aligned = align_to_frame(gray, self.image_size, self.canonical_ink_box())
+        aligned = align_to_frame(gray, self.image_size, self.canonical_moments())
         if aligned is None:
             return []
         frame, bbox = aligned

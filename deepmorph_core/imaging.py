@@ -12,6 +12,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
 
 from deepmorph_core.errors import DeepMorphError
 
@@ -72,56 +75,119 @@ def normalise_contrast(gray: np.ndarray) -> np.ndarray | None:
     return np.clip((gray - lo) / (hi - lo), 0.0, 1.0)
 
 
-def ink_box(gray: np.ndarray) -> tuple[int, int, int, int] | None:
-    """Bounding box ``(x0, y0, x1, y1)`` of the ink (Otsu on a 3x3 blur), or ``None``."""
+def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+    """The drawing's ink: Otsu on a 3x3 blur, minus specks and anything touching the border
+    (a desk or a shadow at the edge of a cropped photo is not ink).
+
+    Returns:
+        A boolean ``(H, W)`` mask and its bounding box ``(x0, y0, x1, y1)``, or ``None``.
+    """
     u8 = np.clip(gray * 255, 0, 255).astype(np.uint8)
     blur = cv2.GaussianBlur(u8, (3, 3), 0.95)
     _, mask = cv2.threshold(blur, 0, 255, cv2.THRESH_BINARY_INV | cv2.THRESH_OTSU)
-    n, _, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n <= 1:
         return None
-    area = gray.shape[0] * gray.shape[1]
-    keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= max(4, area * 2e-5)]
+    H, W = gray.shape
+    keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= max(4, H * W * 2e-5)]
+
+    def touches_border(i: int) -> bool:
+        x, y = stats[i, cv2.CC_STAT_LEFT], stats[i, cv2.CC_STAT_TOP]
+        return x == 0 or y == 0 or x + stats[i, cv2.CC_STAT_WIDTH] >= W or y + stats[i, cv2.CC_STAT_HEIGHT] >= H
+
+    keep = [i for i in keep if not touches_border(i)] or keep
     if not keep:
         return None
     x0 = min(stats[i, cv2.CC_STAT_LEFT] for i in keep)
     y0 = min(stats[i, cv2.CC_STAT_TOP] for i in keep)
     x1 = max(stats[i, cv2.CC_STAT_LEFT] + stats[i, cv2.CC_STAT_WIDTH] for i in keep)
     y1 = max(stats[i, cv2.CC_STAT_TOP] + stats[i, cv2.CC_STAT_HEIGHT] for i in keep)
-    ink = mask[y0:y1, x0:x1].mean() / 255.0
-    if ink < 0.005 or (x1 - x0) < 4 or (y1 - y0) < 4:
+    selected = np.isin(labels, keep)
+    if selected[y0:y1, x0:x1].mean() < 0.005 or (x1 - x0) < 4 or (y1 - y0) < 4:
         return None
-    return int(x0), int(y0), int(x1), int(y1)
+    return selected, (int(x0), int(y0), int(x1), int(y1))
 
 
-def align_to_frame(
-    gray: np.ndarray, size: tuple[int, int], target_box: tuple[float, float, float, float]
-) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
-    """Map the image's ink box onto ``target_box`` in a white ``size`` = ``(H, W)`` frame.
+def mask_moments(mask: Tensor) -> Tensor:
+    """Centre and spread of ink masks: ``(B, H, W)`` bool -> ``(B, 4)`` = cx, cy, sx, sy (pixels).
+
+    Moments average over every ink pixel, so one moved control point shifts them only a
+    little: a far steadier frame than a bounding box, which any extreme point drags along.
+    An empty mask gives the frame's own centre and spread.
+    """
+    B, H, W = mask.shape
+    w = mask.to(torch.float64)
+    total = w.sum((1, 2)).clamp_min(1.0)
+    xs = torch.arange(W, dtype=torch.float64, device=mask.device) + 0.5
+    ys = torch.arange(H, dtype=torch.float64, device=mask.device) + 0.5
+    cx = (w.sum(1) * xs).sum(1) / total
+    cy = (w.sum(2) * ys).sum(1) / total
+    sx = torch.sqrt((w.sum(1) * (xs - cx[:, None]) ** 2).sum(1) / total).clamp_min(1.0)
+    sy = torch.sqrt((w.sum(2) * (ys - cy[:, None]) ** 2).sum(1) / total).clamp_min(1.0)
+    empty = mask.flatten(1).sum(1) == 0
+    frame = torch.tensor([W / 2, H / 2, W / 4, H / 4], dtype=torch.float64, device=mask.device)
+    return torch.where(empty[:, None], frame, torch.stack([cx, cy, sx, sy], 1))
+
+
+def canonicalize(images: Tensor, moments: Tensor, target: Tensor, size: tuple[int, int]) -> Tensor:
+    """Resample so that each image's ink moments land on ``target`` in a white ``size`` frame.
+
+    Used identically in training (on renders) and in decoding (on photos), so the decoder
+    always sees drawings framed the same way. Differentiable w.r.t. ``images`` (bilinear).
+
+    Shape:
+        images ``(B, 1, h, w)``, moments ``(B, 4)`` (cx, cy, sx, sy in input pixels),
+        target ``(4,)`` in output pixels -> ``(B, 1, H, W)``.
+    """
+    H, W = size
+    h_in, w_in = images.shape[-2:]
+    dtype, device = images.dtype, images.device
+    m = moments.to(dtype=dtype, device=device)
+    t = target.to(dtype=dtype, device=device)
+    u = torch.arange(W, dtype=dtype, device=device) + 0.5
+    v = torch.arange(H, dtype=dtype, device=device) + 0.5
+    x = m[:, 0:1] + (u[None] - t[0]) * (m[:, 2:3] / t[2])  # (B, W) input coordinates
+    y = m[:, 1:2] + (v[None] - t[1]) * (m[:, 3:4] / t[3])  # (B, H)
+    gx = (x / w_in * 2 - 1)[:, None, :].expand(-1, H, -1)
+    gy = (y / h_in * 2 - 1)[:, :, None].expand(-1, -1, W)
+    grid = torch.stack([gx, gy], -1)
+    # sample (image - 1) with zero padding so that everything outside the photo reads as white paper
+    out = F.grid_sample(images - 1.0, grid, mode="bilinear", padding_mode="zeros", align_corners=False) + 1.0
+    return out.clamp(0.0, 1.0)
+
+
+def render_moments(images: Tensor) -> Tensor:
+    """Ink moments of clean renders ``(B, 1, H, W)`` (ink = darker than 0.5): ``(B, 4)``."""
+    with torch.no_grad():
+        return mask_moments(images[:, 0] < 0.5)
+
+
+def align_to_frame(gray: np.ndarray, size: tuple[int, int], target: Tensor) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+    """Bring a photo or scan into the decoder's frame, as training frames its renders.
+
+    Args:
+        gray: ``(h, w)`` float image, 1 = white.
+        size: ``(H, W)`` of the decoder's frame.
+        target: ``(4,)`` ink moments of the unmorphed drawing in that frame.
 
     Returns:
-        The ``(H, W)`` float32 frame and the ink box found in the input, or ``None`` when the
-        image holds no drawing (blank, or no ink).
+        The ``(H, W)`` float32 frame and the ink's bounding box in the input, or ``None`` when
+        the image holds no drawing (blank, or no ink).
     """
     norm = normalise_contrast(gray)
     if norm is None:
         return None
-    box = ink_box(norm)
-    if box is None:
+    found = ink_mask(norm)
+    if found is None:
         return None
-    x0, y0, x1, y1 = box
-    tx0, ty0, tx1, ty1 = target_box
-    sx = (tx1 - tx0) / (x1 - x0)
-    sy = (ty1 - ty0) / (y1 - y0)
-    matrix = np.array([[sx, 0.0, tx0 - sx * x0], [0.0, sy, ty0 - sy * y0]], dtype=np.float64)
+    mask, box = found
+    moments = mask_moments(torch.from_numpy(mask)[None])
     src = norm
-    if min(sx, sy) < 0.5:  # shrink with area averaging first so that thin strokes survive
-        factor = max(1, int(1 / max(min(sx, sy), 1e-6)) // 2)
-        if factor > 1:
-            src = cv2.resize(norm, (norm.shape[1] // factor, norm.shape[0] // factor), interpolation=cv2.INTER_AREA)
-            matrix[:, :2] *= factor
-    h, w = size
-    frame = cv2.warpAffine(
-        src.astype(np.float32), matrix, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=1.0
-    )
-    return np.clip(frame, 0.0, 1.0), box
+    shrink = float(target[2] / moments[0, 2])
+    factor = int(1 / max(shrink, 1e-6)) // 2
+    if factor > 1:  # area-average large photos first so that thin strokes survive
+        src = cv2.resize(norm, (norm.shape[1] // factor, norm.shape[0] // factor), interpolation=cv2.INTER_AREA)
+        scale = torch.tensor([src.shape[1] / norm.shape[1], src.shape[0] / norm.shape[0]] * 2, dtype=torch.float64)
+        moments = moments * scale
+    frame = canonicalize(torch.from_numpy(np.ascontiguousarray(src, dtype=np.float32))[None, None], moments, target, size)
+    return frame[0, 0].numpy(), box

@@ -41,12 +41,15 @@ class DecoderConfig(BaseModel):
     """Architecture of the decoder CNN (stored in model bundles).
 
     Attributes:
+        stem: channels of a first, full-resolution convolution (0: none). Morphs move strokes by
+            a pixel or two; a stride-2 first layer sees that only half as well.
         channels: output channels of each stride-2 convolution.
         hidden: width of the first fully connected layer.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    stem: int = Field(default=16, ge=0, le=256)
     channels: tuple[int, ...] = Field(default=(32, 48, 64, 64), min_length=2, max_length=6)
     hidden: int = Field(default=128, ge=8, le=2048)
 
@@ -65,6 +68,9 @@ class Decoder(nn.Module):
         cfg = config or DecoderConfig()
         layers: list[nn.Module] = []
         c_in = 1
+        if cfg.stem:
+            layers += [nn.Conv2d(1, cfg.stem, 3, padding=1), nn.BatchNorm2d(cfg.stem), nn.ReLU(inplace=True)]
+            c_in = cfg.stem
         for c_out in cfg.channels:
             layers += [nn.Conv2d(c_in, c_out, 3, stride=2, padding=1), nn.BatchNorm2d(c_out), nn.ReLU(inplace=True)]
             c_in = c_out

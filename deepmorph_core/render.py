@@ -36,10 +36,13 @@ def render_svg_ink(svg_text: str, width: int) -> np.ndarray:
     return 1.0 - render_svg(svg_text, width)
 
 
-def save_gray(image: np.ndarray, path: str | Path) -> None:
-    """Save an ``(H, W)`` intensity image in ``[0, 1]`` as an 8-bit PNG (or any Pillow format)."""
+def save_gray(image: np.ndarray, path: str | Path, dpi: int | None = None) -> None:
+    """Save an ``(H, W)`` intensity image in ``[0, 1]`` as an 8-bit PNG (or any Pillow format).
+
+    ``dpi`` is recorded in the file so that printing it gives the intended physical size.
+    """
     arr = np.clip(np.rint(np.asarray(image) * 255), 0, 255).astype(np.uint8)
-    _save(Image.fromarray(arr, "L"), path)
+    _save(Image.fromarray(arr, "L"), path, dpi)
 
 
 def save_rgb(image: np.ndarray, path: str | Path) -> None:
@@ -48,11 +51,11 @@ def save_rgb(image: np.ndarray, path: str | Path) -> None:
     _save(Image.fromarray(arr, "RGB"), path)
 
 
-def _save(img: Image.Image, path: str | Path) -> None:
+def _save(img: Image.Image, path: str | Path, dpi: int | None = None) -> None:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        img.save(path)
+        img.save(path, **({"dpi": (dpi, dpi)} if dpi else {}))
     except (OSError, ValueError) as exc:
         raise DeepMorphError(f"{path}: cannot write image: {exc}") from None
 

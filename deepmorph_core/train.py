@@ -1,8 +1,9 @@
 """Training: the paper's two-stage schedule, with checkpoints, resume, logs and plots.
 
 One step: random code bits -> encoder -> morph values -> soft rasterizer -> paper-white image
--> (a share of the batch replaced by real-renderer images of the same morphs) -> capture
-corruptions -> decoder -> sigmoid cross-entropy.
+-> (a share of the batch replaced by real-renderer images of the same morphs) -> framing by
+the ink's centre and spread (exactly as decoding frames a photo) -> capture corruptions -> decoder
+-> sigmoid cross-entropy.
 
 * **Stage 1** keeps the encoder at its random initialisation and trains the decoder until its
   bit accuracy plateaus (or a share of the steps is spent).
@@ -33,6 +34,7 @@ from torch import Tensor, nn
 
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.imaging import canonicalize, render_moments
 from deepmorph_core.render import render_svg
 
 
@@ -48,7 +50,11 @@ class TrainConfig(BaseModel):
         plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
             window) gains less than ``plateau_gain`` from one window to the next.
         hard_fraction: share of each batch rendered by the real renderer (resvg).
-        severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``).
+        severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
+            at the end of the curriculum.
+        curriculum: share of ``steps`` over which corruption ramps up through the milder presets
+            (a decoder facing full corruption from a random start learns nothing: measured at
+            chance after 350 steps at ``medium``, against 82 % bit accuracy without corruption).
         seed: makes a run reproducible (same seed, same threads: same model).
         device: ``cpu`` or ``cuda``.
         threads: torch CPU threads (``None``: torch's default).
@@ -67,11 +73,15 @@ class TrainConfig(BaseModel):
     plateau_gain: float = Field(default=0.004, ge=0)
     hard_fraction: float = Field(default=0.25, ge=0, le=1)
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
+    curriculum: float = Field(default=0.5, ge=0, le=1)
     seed: int = 0
     device: Literal["cpu", "cuda"] = "cpu"
     threads: int | None = Field(default=None, ge=1, le=256)
     checkpoint_every: int = Field(default=250, ge=1)
     log_every: int = Field(default=25, ge=1)
+
+
+_LADDER = ["none", "easy", "medium", "hard"]
 
 
 @dataclass
@@ -93,11 +103,11 @@ class Interrupted(DeepMorphError):
     """Training stopped by Ctrl-C after writing a checkpoint."""
 
 
-def build_augment(severity: str, config: dict[str, Any] | None = None) -> nn.Module:
-    """The capture-corruption pipeline for a preset (or a stored config)."""
+def build_augment(severity: str, width: int, config: dict[str, Any] | None = None) -> nn.Module:
+    """The capture-corruption pipeline for a preset at an image width (or a stored config)."""
     from deepmorph_augment.pipeline import AugmentConfig, AugmentPipeline
 
-    cfg = AugmentConfig.model_validate(config) if config else AugmentConfig.preset(severity)
+    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width)
     return AugmentPipeline(cfg)
 
 
@@ -131,7 +141,13 @@ class Trainer:
         model.encoder.to(self.device)
         model.decoder.to(self.device)
         self.raster = model.rasterizer()
-        self.augment = build_augment(config.severity, model.meta.augment or None).to(self.device)
+        self.target = model.canonical_moments()
+        self._augments = {
+            sev: build_augment(sev, model.width).to(self.device) for sev in _LADDER[: _LADDER.index(config.severity)]
+        }
+        self._augments[config.severity] = build_augment(config.severity, model.width, model.meta.augment or None).to(
+            self.device
+        )
         self.bce = nn.BCEWithLogitsLoss()
         self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
         torch.manual_seed(config.seed)
@@ -192,7 +208,17 @@ class Trainer:
         if k:
             hard = real_renders(self.model, values[:k])
             images = torch.cat([hard, images[k:]], 0)
-        return self.augment(images, generator=self.gen)
+        images = canonicalize(images, render_moments(images), self.target, self.model.image_size)
+        return self.augment_now()(images, generator=self.gen)
+
+    def augment_now(self) -> nn.Module:
+        """The corruption of the curriculum's current rung: none, easy, ... up to ``severity``."""
+        rungs = _LADDER[: _LADDER.index(self.cfg.severity) + 1]
+        ramp = self.cfg.curriculum * self.cfg.steps
+        if ramp <= 0 or len(rungs) == 1:
+            return self._augments[self.cfg.severity]
+        rung = min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))
+        return self._augments[rungs[rung]]
 
     def step(self) -> StepMetrics:
         cfg, rec = self.cfg, self.record

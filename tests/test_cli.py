@@ -88,13 +88,6 @@ def test_render_hard_soft_and_overlay(tmp_path: Path, soft: bool) -> None:
     assert reddish.sum() > 20  # the base shows in red where the morph moved away
 
 
-def test_demo_writes_its_files(tmp_path: Path) -> None:
-    result = run("demo", "--out", tmp_path / "demo", "--size", "96")
-    assert result.exit_code == 0, result.output
-    for name in ("morphed.svg", "base.png", "morphed.png", "morphed-soft.png", "overlay.png"):
-        assert (tmp_path / "demo" / name).is_file()
-
-
 @pytest.mark.parametrize(
     "content, message",
     [

@@ -1,0 +1,40 @@
+"""The built-in augmentations' plugin module, loaded through the ``deepmorph`` entry point
+(``builtin_augmentations``) exactly as third-party plugins are."""
+
+from __future__ import annotations
+
+from deepmorph_augment.blur import Blur
+from deepmorph_augment.defocus import Defocus
+from deepmorph_augment.gaussian_noise import GaussianNoise
+from deepmorph_augment.intensity import Intensity
+from deepmorph_augment.jpeg import Jpeg
+from deepmorph_augment.lighting import Lighting
+from deepmorph_augment.motion_blur import MotionBlur
+from deepmorph_augment.perspective import Perspective
+from deepmorph_augment.rotation import Rotation
+from deepmorph_augment.salt_pepper import SaltPepper
+from deepmorph_augment.scale import Scale
+from deepmorph_augment.translation import Translation
+from deepmorph_core import hookimpl
+from deepmorph_core.plugins import Register
+
+AUGMENTATIONS = (
+    Perspective,
+    Scale,
+    Rotation,
+    Translation,
+    Blur,
+    Defocus,
+    MotionBlur,
+    Lighting,
+    Intensity,
+    GaussianNoise,
+    SaltPepper,
+    Jpeg,
+)
+
+
+@hookimpl
+def deepmorph_register_augmentations(register: Register) -> None:
+    for cls in AUGMENTATIONS:
+        register.augmentation(cls)

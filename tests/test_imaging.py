@@ -1,0 +1,73 @@
+"""Framing images for the decoder: photos and renders are framed the same way."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
+from deepmorph_core.capture import simulate_photo
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.imaging import align_to_frame, canonicalize, read_image, render_moments
+from deepmorph_core.render import render_svg, save_gray
+
+
+@pytest.fixture(scope="module")
+def ghost() -> tuple[MorphableDrawing, np.ndarray]:
+    md = MorphableDrawing.load(BUNDLED_DRAWING)
+    return md, render_svg(md.to_svg(md.neutral_values()[0]), 96)
+
+
+def test_canonical_frame_is_a_fixed_point(ghost) -> None:
+    md, base = ghost
+    img = torch.from_numpy(base)[None, None]
+    target = render_moments(img)[0]
+    framed = canonicalize(img, render_moments(img), target, (96, 96))
+    assert (framed - img).abs().mean() < 0.01
+
+
+@pytest.mark.parametrize("width, pad, tol", [(96, 0, 0.03), (300, 40, 0.03), (57, 5, 0.06)])
+def test_photo_framing_matches_render_framing(ghost, width: int, pad: int, tol: float) -> None:
+    """A larger (or smaller) render with a paper margin frames like the training render."""
+    md, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    big = np.pad(render_svg(md.to_svg(md.neutral_values()[0]), width), pad, constant_values=1.0)
+    frame, box = align_to_frame(big, (96, 96), target)
+    assert np.abs(frame - base).mean() < tol  # a smaller source is blurrier when enlarged
+    assert box[0] >= pad and box[2] <= width + pad
+
+
+def test_blank_and_flat_images_have_no_drawing(ghost) -> None:
+    md, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    assert align_to_frame(np.ones((80, 80), np.float32), (96, 96), target) is None
+    assert align_to_frame(np.full((80, 80), 0.2, np.float32), (96, 96), target) is None
+    noise = np.random.default_rng(0).uniform(0.97, 1.0, (80, 80)).astype(np.float32)
+    assert align_to_frame(noise, (96, 96), target) is None
+
+
+def test_simulated_photo_is_framed_despite_desk_and_angle(ghost) -> None:
+    md, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    photo = simulate_photo(render_svg(md.to_svg(md.neutral_values()[0]), 400), "medium", np.random.default_rng(1))
+    assert photo.dtype == np.uint8 and photo.shape == (240, 240)
+    frame, _ = align_to_frame(photo / 255.0, (96, 96), target)
+    assert np.abs(frame - base).mean() < 0.12  # same drawing, roughly registered
+
+
+def test_read_image_errors(tmp_path) -> None:
+    with pytest.raises(DeepMorphError, match="no such image file"):
+        read_image(tmp_path / "none.png")
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\nbroken")
+    with pytest.raises(DeepMorphError, match="not an image"):
+        read_image(bad)
+    empty = tmp_path / "empty.jpg"
+    empty.write_bytes(b"")
+    with pytest.raises(DeepMorphError, match="empty file"):
+        read_image(empty)
+    ok = tmp_path / "ok.png"
+    save_gray(np.linspace(0, 1, 64).reshape(8, 8), ok)
+    img = read_image(ok)
+    assert img.shape == (8, 8) and img.dtype == np.float32 and 0 <= img.min() and img.max() <= 1

@@ -1,0 +1,228 @@
+"""Training learns, checkpoints are exact, bundles round-trip and refuse bad files, and a
+small trained model survives encode -> real renderer -> decode."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from deepmorph_core.api import train_model
+from deepmorph_core.cli import app
+from deepmorph_core.codec import random_payloads
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.render import render_svg, save_gray
+from deepmorph_core.train import Interrupted
+from tests.conftest import make_svg
+
+#: A tiny drawing with generous bounds: fast to render, easy to learn.
+TINY = make_svg(
+    """<g stroke="black" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2.5">
+  <polyline points="4 6 12 4 20 6"/>
+  <line x1="4" y1="12" x2="20" y2="12"/>
+  <polyline points="4 18 12 20 20 18"/>
+  <circle cx="12" cy="12" r="3" dm:move="1.5"/>
+</g>""",
+    style='stroke-linejoin="round"',
+)
+FAST = {"width": 40, "batch": 16, "severity": "none", "hard_fraction": 0.0, "log_every": 10, "threads": 1}
+
+
+@pytest.fixture(scope="module")
+def tiny_svg(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("d") / "tiny.svg"
+    path.write_bytes(TINY)
+    return path
+
+
+@pytest.fixture(scope="module")
+def trained(tiny_svg: Path, tmp_path_factory) -> Path:
+    """An 8-bit model trained for a few hundred steps (shared by the tests below)."""
+    out = tmp_path_factory.mktemp("m") / "tiny.dmm"
+    train = {**FAST, "steps": 600, "severity": "easy", "hard_fraction": 0.25, "width": 48, "seed": 1}
+    train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=1, train=train)
+    return out
+
+
+def soft_bit_accuracy(model: DeepMorphModel, n: int = 128, seed: int = 0) -> float:
+    gen = torch.Generator().manual_seed(seed)
+    bits = torch.randint(0, 2, (n, model.codec.spec.code_bits), generator=gen).float()
+    with torch.no_grad():
+        images = 1 - model.rasterizer()(model.morph_values(bits))
+        probs = model.probabilities(images)
+    return ((probs > 0.5) == (bits > 0.5)).float().mean().item()
+
+
+def test_short_training_learns(tiny_svg: Path, tmp_path: Path) -> None:
+    out = tmp_path / "short.dmm"
+    summary = train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train={**FAST, "steps": 150})
+    model = DeepMorphModel.load(out)
+    acc = soft_bit_accuracy(model)
+    assert acc > 0.8, acc  # chance is 0.5
+    assert summary.stage2_start is not None and 0 < summary.stage2_start < 150
+    log = [json.loads(line) for line in summary.log.read_text().splitlines()]
+    assert log[-1]["step"] == 150 and {1, 2} == {row["stage"] for row in log}
+    assert summary.plot is not None and summary.plot.stat().st_size > 1000
+
+
+def test_interrupt_and_resume_equal_an_uninterrupted_run(tiny_svg: Path, tmp_path: Path) -> None:
+    cfg = {**FAST, "steps": 60, "checkpoint_every": 10, "seed": 3}
+    straight = tmp_path / "straight.dmm"
+    train_model(tiny_svg, straight, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg)
+
+    broken = tmp_path / "broken.dmm"
+
+    def stop_at_30(total: int, done: int):
+        def on_log(m):
+            if m.step == 30:
+                raise KeyboardInterrupt
+
+        return on_log
+
+    with pytest.raises(Interrupted, match="interrupted at step 30/60"):
+        train_model(tiny_svg, broken, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_30)
+    checkpoint = DeepMorphModel.load(broken)
+    assert checkpoint.meta.record.step == 30 and not checkpoint.meta.record.finished
+    with pytest.raises(DeepMorphError, match="already exists"):
+        train_model(tiny_svg, broken, payload_bits=4, train=cfg)
+    train_model(tiny_svg, broken, resume=True)
+    a, b = DeepMorphModel.load(straight), DeepMorphModel.load(broken)
+    assert b.meta.record.finished and b.meta.record.step == 60
+    for (ka, va), (kb, vb) in zip(a.decoder.state_dict().items(), b.decoder.state_dict().items()):
+        torch.testing.assert_close(va, vb, msg=ka)
+    torch.testing.assert_close(a.encoder.linear.weight, b.encoder.linear.weight)
+
+
+def test_bundle_round_trip(trained: Path, tmp_path: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    copy = tmp_path / "copy.dmm"
+    m.save(copy)
+    again = DeepMorphModel.load(copy)
+    payload = random_payloads(1, 8, np.random.default_rng(0))[0]
+    assert m.encode(payload) == again.encode(payload)
+    info = again.info()
+    assert info["payload_bits"] == 8 and info["code_bits"] == m.codec.spec.code_bits
+    assert info["record"]["finished"] and info["versions"]["torch"]
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "corrupt or truncated"),
+        (b"\x89PNG\r\n\x1a\n" + b"\0" * 64, "corrupt or truncated"),
+        (b"hello world, definitely not a model file", "corrupt or truncated"),
+    ],
+)
+def test_corrupt_bundles_are_one_clear_error(tmp_path: Path, content: bytes, message: str) -> None:
+    bad = tmp_path / "bad.dmm"
+    bad.write_bytes(content)
+    with pytest.raises(DeepMorphError, match=message):
+        DeepMorphModel.load(bad)
+
+
+def test_truncated_and_foreign_bundles(trained: Path, tmp_path: Path) -> None:
+    from safetensors.torch import save_file
+
+    data = trained.read_bytes()
+    cut = tmp_path / "cut.dmm"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DeepMorphError, match="not a usable DeepMorph model file"):
+        DeepMorphModel.load(cut)
+    foreign = tmp_path / "foreign.safetensors"
+    save_file({"w": torch.zeros(2)}, str(foreign))
+    with pytest.raises(DeepMorphError, match="without DeepMorph metadata"):
+        DeepMorphModel.load(foreign)
+    other = tmp_path / "other.dmm"
+    save_file({"w": torch.zeros(2)}, str(other), metadata={"deepmorph": json.dumps({"format": "deepmorph-model/99"})})
+    with pytest.raises(DeepMorphError, match="format 'deepmorph-model/99'"):
+        DeepMorphModel.load(other)
+    with pytest.raises(DeepMorphError, match="cannot read model file"):
+        DeepMorphModel.load(tmp_path / "missing.dmm")
+
+
+def test_encode_real_render_decode_round_trip(trained: Path, tmp_path: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    rng = np.random.default_rng(7)
+    payloads = random_payloads(20, 8, rng)
+    ok = 0
+    for i, payload in enumerate(payloads):
+        render = render_svg(m.encode(payload), 160)  # a real renderer, larger than training
+        png = tmp_path / f"p{i}.png"
+        save_gray(render, png)
+        from deepmorph_core.imaging import read_image
+
+        (det,) = m.decode_image(read_image(png))
+        if det.result.ok:
+            assert np.array_equal(det.result.payload, payload), "a wrong payload was reported ok"
+            ok += 1
+    assert ok >= 15, f"only {ok}/20 payloads recovered"
+
+
+def test_blank_image_has_no_detection(trained: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    assert m.decode_image(np.ones((100, 100), np.float32)) == []
+    assert m.decode_image(np.full((100, 100), 0.3, np.float32)) == []
+
+
+runner = CliRunner()
+
+
+def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
+    info = runner.invoke(app, ["info", str(trained), "--json"])
+    assert info.exit_code == 0, info.output
+    assert json.loads(info.stdout)["payload_bits"] == 8
+    assert runner.invoke(app, ["info", str(trained)]).exit_code == 0
+
+    svg, png = tmp_path / "code.svg", tmp_path / "code.png"
+    enc = runner.invoke(app, ["encode", str(trained), "--payload", "0xA5", "--out", str(svg), "--png", str(png),
+                              "--width-mm", "20", "--dpi", "200"])
+    assert enc.exit_code == 0, enc.output
+    assert svg.is_file() and png.is_file()
+    from PIL import Image
+
+    with Image.open(png) as img:
+        assert img.width == round(20 / 25.4 * 200)
+        assert round(img.info["dpi"][0]) == 200
+
+    blank = tmp_path / "blank.png"
+    save_gray(np.ones((50, 50)), blank)
+    dec = runner.invoke(app, ["decode", str(trained), str(png), str(blank), "--json"])
+    assert dec.exit_code == 0, dec.output
+    results = json.loads(dec.stdout)
+    assert [r["image"] for r in results] == [str(png), str(blank)]
+    (det,) = results[0]["detections"]
+    assert set(det) >= {"payload", "ok", "corrected_bits", "confidence", "bit_probabilities"}
+    assert set(det["payload"]) == {"hex", "bits"} and len(det["payload"]["bits"]) == 8
+    assert len(det["bit_probabilities"]) == DeepMorphModel.load(trained).codec.spec.code_bits
+    assert results[1]["detections"] == []
+    text = runner.invoke(app, ["decode", str(trained), str(png)])
+    assert text.exit_code == 0 and str(png) in text.stdout
+
+
+@pytest.mark.parametrize(
+    "payload, message",
+    [("0xA", "hex"), ("0x1FF", ""), ("0101", "8"), ("hello", ""), ("01010101010", "8")],
+)
+def test_cli_wrong_payload_is_an_error(trained: Path, tmp_path: Path, payload: str, message: str) -> None:
+    result = runner.invoke(app, ["encode", str(trained), "--payload", payload, "--out", str(tmp_path / "x.svg")])
+    assert result.exit_code == 1
+    assert result.stderr.startswith("error: ") and message in result.stderr
+    assert not (tmp_path / "x.svg").exists()
+
+
+def test_cli_decode_bad_files(trained: Path, tmp_path: Path) -> None:
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image")
+    for args, message in (
+        (["decode", str(trained), str(junk)], "not an image"),
+        (["decode", str(trained), str(tmp_path / "nope.png")], "no such image file"),
+        (["decode", str(junk), str(junk)], "not a usable DeepMorph model file"),
+        (["info", str(tmp_path / "nope.dmm")], "cannot read model file"),
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 1 and message in result.stderr and result.stderr.count("\n") == 1
