@@ -115,14 +115,19 @@ def arc_distance(
         grid ``(P, 2)``; center/start/end ``(B, J, 2)``; inv_linear ``(B, J, 2, 2)``;
         theta0/dtheta ``(B, J)`` -> ``(B, J, P)``.
     """
-    rel = grid[None, None] - center[:, :, None]  # (B, J, P, 2)
-    q = torch.einsum("bjkl,bjpl->bjpk", inv_linear, rel)
-    rq = safe_norm(q)
-    qhat = q / rq[..., None]
-    grad = torch.einsum("bjlk,bjpl->bjpk", inv_linear, qhat)  # inv_linear^T qhat
-    d_curve = (rq - 1.0).abs() / safe_norm(grad)
+    # Component-wise (2x2 einsums become slow batched matmuls with an inner size of 2).
+    rx = grid[:, 0][None, None] - center[..., 0][..., None]  # (B, J, P)
+    ry = grid[:, 1][None, None] - center[..., 1][..., None]
+    i00, i01 = inv_linear[..., 0, 0][..., None], inv_linear[..., 0, 1][..., None]
+    i10, i11 = inv_linear[..., 1, 0][..., None], inv_linear[..., 1, 1][..., None]
+    qx, qy = i00 * rx + i01 * ry, i10 * rx + i11 * ry
+    rq = torch.sqrt(qx * qx + qy * qy + _EPS)
+    gx, gy = (i00 * qx + i10 * qy) / rq, (i01 * qx + i11 * qy) / rq  # inv_linear^T qhat
+    d_curve = (rq - 1.0).abs() / torch.sqrt(gx * gx + gy * gy + _EPS)
+    if bool((dtheta.abs() >= 2 * math.pi - 1e-9).all()):
+        return d_curve  # full circles and ellipses: every angle is on the curve
     with torch.no_grad():
-        ang = torch.atan2(q[..., 1], q[..., 0])
+        ang = torch.atan2(qy, qx)
         sign = torch.where(dtheta >= 0, 1.0, -1.0).to(grid.dtype)[..., None]
         offset = torch.remainder(sign * (ang - theta0[..., None]), 2 * math.pi)
         inside = offset <= dtheta.abs()[..., None] + 1e-9

@@ -209,8 +209,10 @@ def stroke_sdf_tiled(
     """
     x0, y0, x1, y1 = box
     B, dtype, device = half_width.shape[0], half_width.dtype, half_width.device
-    out = torch.full((B, y1 - y0, x1 - x0), -1e3, dtype=dtype, device=device)
+    width = x1 - x0
     pad = float(half_width.detach().max()) + reach
+    slots: list[Tensor] = []
+    values: list[Tensor] = []
     with torch.no_grad():
         line_lo = torch.minimum(outline.line_a, outline.line_b).amin(0)  # (K, 2)
         line_hi = torch.maximum(outline.line_a, outline.line_b).amax(0)
@@ -248,10 +250,16 @@ def stroke_sdf_tiled(
                 outline.arc_end[:, k : k + 1],
             )[:, 0]
             sdf = half_width[:, None] - d
-        ys, xs = slice(py0 - y0, py1 - y0), slice(px0 - x0, px1 - x0)
-        current = out[:, ys, xs].clone()  # maximum saves its inputs: never the view we overwrite
-        out[:, ys, xs] = torch.maximum(current, sdf.reshape(B, py1 - py0, px1 - px0))
-    return out
+        rows = torch.arange(py0 - y0, py1 - y0, device=device)[:, None] * width
+        slots.append((rows + torch.arange(px0 - x0, px1 - x0, device=device)[None]).reshape(-1))
+        values.append(sdf)
+    out = torch.full((B, (y1 - y0) * width), -1e3, dtype=dtype, device=device)
+    if slots:
+        # One scatter for all pieces: in-place slice writes would make autograd copy the whole
+        # buffer once per piece in the backward pass.
+        index = torch.cat(slots)[None].expand(B, -1)
+        out = out.scatter_reduce(1, index, torch.cat(values, 1), reduce="amax", include_self=True)
+    return out.reshape(B, y1 - y0, width)
 
 
 def pixel_grid(x0: int, y0: int, x1: int, y1: int, dtype: torch.dtype, device: torch.device) -> Tensor:

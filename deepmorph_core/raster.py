@@ -104,7 +104,11 @@ class SoftRasterizer(nn.Module):
         union = st.blend == "union"
         acc: Tensor | None = None
         for colour, paints in self._runs:
-            canvas = torch.zeros(B, H, W, dtype=dtype, device=device)
+            # Each paint's cover over its box is gathered with the canvas positions it lands on,
+            # and added with a single index_add: in-place slice additions would make autograd
+            # copy the whole canvas once per paint in the backward pass.
+            positions: list[Tensor] = []
+            covers: list[Tensor] = []
             for index, mode in paints:
                 prim = self.space.drawing.primitives[index]
                 frame = frames[index]
@@ -133,7 +137,13 @@ class SoftRasterizer(nn.Module):
                     cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf)
                 else:
                     cover = torch.sigmoid(st.sharpness * sdf)
-                canvas[:, y0:y1, x0:x1] += cover.reshape(B, y1 - y0, x1 - x0)
+                rows = torch.arange(y0, y1, device=device)[:, None] * W
+                positions.append((rows + torch.arange(x0, x1, device=device)[None]).reshape(-1))
+                covers.append(cover.reshape(B, -1))
+            canvas = torch.zeros(B, H * W, dtype=dtype, device=device)
+            if covers:
+                canvas = canvas.index_add(1, torch.cat(positions), torch.cat(covers, 1))
+            canvas = canvas.reshape(B, H, W)
             contribution = colour * (-torch.expm1(canvas) if union else canvas)
             acc = contribution if acc is None else normalised_squash(acc, st.squash) + contribution
         if acc is None:

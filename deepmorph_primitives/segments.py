@@ -7,6 +7,7 @@ the Bézier plugin's.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ from torch import Tensor
 
 from deepmorph_core import geometry as G
 from deepmorph_core.outline import Frame, OutlineBuilder
+from deepmorph_core.primitive import apply_affine
 from deepmorph_core.protocols import ElementMorph
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
@@ -51,14 +53,41 @@ class LineSegment:
         return f"L{format_number(points[1, 0])} {format_number(points[1, 1])}"
 
 
+@dataclass(frozen=True)
+class RestArc:
+    """An arc's rest pose in centre form (local units), for arcs that follow their chord."""
+
+    start: np.ndarray
+    end: np.ndarray
+    centre: np.ndarray
+    rx: float
+    ry: float
+    theta0: float
+    dtheta: float
+    exact_half: bool
+
+    @classmethod
+    def of(cls, arc: ArcSegment, p: np.ndarray) -> RestArc:
+        t = torch.as_tensor(p, dtype=torch.float64)
+        one = torch.ones((), dtype=torch.float64)
+        centre, rx, ry, theta0, dtheta = G.endpoint_to_center(
+            t[0], t[1], one * arc.rx, one * arc.ry, one * math.radians(arc.rotation),
+            one * float(arc.large_arc), one * float(arc.sweep),
+        )
+        exact = abs(arc._radius_scale(p) - 1.0) < 1e-6 or float(rx) > arc.rx * (1 + 1e-9)
+        return cls(p[0], p[1], centre.numpy(), float(rx), float(ry), float(theta0), float(dtheta), exact)
+
+
 class ArcSegment:
     """An elliptical arc; its end points morph, radii and flags stay (radii follow element
     scale), and the centre is recomputed as SVG renderers do.
 
-    An arc drawn as (almost) exactly half an ellipse is special: SVG's centre formula has a
-    square-root singularity there, so a tiny move of an end point would swing the centre and
-    the gradient would explode. Such arcs *follow the chord* instead: the centre stays at the
-    midpoint and the radii scale with the chord (written back scaled), so they stay halves.
+    Arcs drawn as (nearly) half an ellipse are special: SVG's centre formula has a square-root
+    singularity at exactly half, so there a tiny move of an end point swings the centre and the
+    gradient explodes. Such arcs *follow their chord*: the arc moves as a similarity that takes
+    its rest chord onto the morphed chord (centre, radii and axis angle included). At rest it is
+    exactly the arc in the file, the map is smooth, and it is written back with the radii and
+    angle scaled and turned by that similarity, which SVG's own centre formula reproduces.
     """
 
     kind = "path-arc"
@@ -66,18 +95,27 @@ class ArcSegment:
     svgpath_types = (SvgArc,)
     morphable = "end point; radii follow element scale"
 
-    def __init__(self, rx: float, ry: float, rotation: float, large_arc: bool, sweep: bool, follow_chord: bool = False):
+    #: |sqrt(lambda) - 1| below which an arc follows its chord.
+    NEAR_HALF = 0.02
+
+    def __init__(self, rx: float, ry: float, rotation: float, large_arc: bool, sweep: bool):
         self.rx, self.ry, self.rotation = abs(rx), abs(ry), rotation
         self.large_arc, self.sweep = large_arc, sweep
-        self.follow_chord = follow_chord
+        self.rest: RestArc | None = None
 
     @classmethod
     def from_svgpath(cls, segment: Any, reader: ElementReader) -> tuple[ArcSegment, list[complex]]:
         arc = cls(segment.radius.real, segment.radius.imag, segment.rotation, bool(segment.arc), bool(segment.sweep))
-        if not arc.is_straight:
-            p = np.array([[segment.start.real, segment.start.imag], [segment.end.real, segment.end.imag]])
-            arc.follow_chord = abs(arc._radius_scale(p) - 1.0) < 0.01
+        p = np.array([[segment.start.real, segment.start.imag], [segment.end.real, segment.end.imag]])
+        near_half = not arc.is_straight and abs(arc._radius_scale(p) - 1.0) < cls.NEAR_HALF
+        if near_half and np.linalg.norm(p[1] - p[0]) > 1e-9:
+            arc.rest = RestArc.of(arc, p)
         return arc, [segment.end]
+
+    @property
+    def follow_chord(self) -> bool:
+        """Whether this arc moves as a similarity of its chord (see the class docstring)."""
+        return self.rest is not None
 
     def _radius_scale(self, points: np.ndarray) -> float:
         """sqrt(lambda) of SVG F.6.6: how much the radii must grow to span the end points."""
@@ -91,23 +129,34 @@ class ArcSegment:
         """Zero radii make an arc a straight line (SVG F.6.2)."""
         return self.rx == 0 or self.ry == 0
 
+    def _chord_similarity(self, points: Tensor) -> tuple[Tensor, Tensor]:
+        """``scale * R`` ``(B, 2, 2)`` taking the rest chord onto the current one, and the
+        current centre ``(B, 2)`` (local units)."""
+        assert self.rest is not None
+        rest_chord = self.rest.end - self.rest.start
+        chord = points[:, 1] - points[:, 0]
+        denom = float(rest_chord @ rest_chord)  # chord / rest_chord as complex numbers
+        re = (chord[:, 0] * rest_chord[0] + chord[:, 1] * rest_chord[1]) / denom
+        im = (chord[:, 1] * rest_chord[0] - chord[:, 0] * rest_chord[1]) / denom
+        rot = torch.stack([torch.stack([re, -im], -1), torch.stack([im, re], -1)], -2)
+        offset = torch.as_tensor(self.rest.centre - self.rest.start, dtype=points.dtype, device=points.device)
+        return rot, points[:, 0] + torch.einsum("bkl,l->bk", rot, offset)
+
     def centre_form(self, frame: Frame, points: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Pixel-space centre, unit-circle map, start angle and sweep of the arc, batched."""
         p0, p1 = points[:, 0], points[:, 1]
         like = p0[:, 0]
         phi = torch.full_like(like, math.radians(self.rotation))
-        if self.follow_chord:
-            centre = (p0 + p1) / 2
-            c, s = math.cos(math.radians(self.rotation)), math.sin(math.radians(self.rotation))
-            half = p0 - centre
-            x = (c * half[:, 0] + s * half[:, 1]) / self.rx
-            y = (-s * half[:, 0] + c * half[:, 1]) / self.ry
-            scale = torch.sqrt(x * x + y * y + 1e-12)
-            rx, ry = self.rx * scale, self.ry * scale
-            theta0 = torch.atan2(y / scale, x / scale)
-            dtheta = torch.full_like(like, math.pi if self.sweep else -math.pi)
-            linear = frame.linear @ G.ellipse_linear(rx, ry, phi)
-            return frame.to_pixels(centre[:, None])[:, 0], linear, theta0, dtheta
+        if self.rest is not None:
+            r = self.rest
+            rot, centre = self._chord_similarity(points)
+            unit_map = rot @ G.ellipse_linear(torch.full_like(like, r.rx), torch.full_like(like, r.ry), phi)
+            return (
+                frame.to_pixels(centre[:, None])[:, 0],
+                frame.linear @ unit_map,
+                torch.full_like(like, r.theta0),
+                torch.full_like(like, r.dtheta),
+            )
         centre, rx, ry, theta0, dtheta = G.endpoint_to_center(
             p0,
             p1,
@@ -136,12 +185,18 @@ class ArcSegment:
 
     def to_d(self, points: np.ndarray, morph: ElementMorph) -> str:
         f = format_number
-        grow = 1.0
-        if self.follow_chord:  # radii follow the (already morphed) chord
-            grow = ArcSegment(
-                self.rx * morph.scale, self.ry * morph.scale, self.rotation + morph.rotate, self.large_arc, self.sweep
-            )._radius_scale(points)
+        scale, angle = morph.scale, self.rotation + morph.rotate
+        if self.rest is not None:  # the similarity of the chord, measured on the written points
+            rest = apply_affine(morph.matrix(), np.stack([self.rest.start, self.rest.end]))
+            before, after = rest[1] - rest[0], points[1] - points[0]
+            scale *= float(np.hypot(*after) / np.hypot(*before))
+            angle += math.degrees(math.atan2(after[1], after[0]) - math.atan2(before[1], before[0]))
+        rx, ry = self.rx * scale, self.ry * scale
+        if self.rest is not None and self.rest.exact_half:
+            # Round the radii down: a renderer then scales them up to span the chord exactly and
+            # puts the centre on it. Rounding up would leave it where SVG's formula is singular.
+            rx, ry = math.floor(rx * 1e4) / 1e4, math.floor(ry * 1e4) / 1e4
         return (
-            f"A{f(self.rx * morph.scale * grow)} {f(self.ry * morph.scale * grow)} {f(self.rotation + morph.rotate)} "
+            f"A{f(rx)} {f(ry)} {f(angle)} "
             f"{int(self.large_arc)} {int(self.sweep)} {f(points[1, 0])} {f(points[1, 1])}"
         )

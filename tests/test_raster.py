@@ -119,7 +119,9 @@ def test_soft_render_matches_resvg(name: str, with_bezier) -> None:
         assert np.abs(soft - hard).mean() < 0.03, (name, width)
 
 
-@pytest.mark.parametrize("icon", ["activity", "airplay", "film", "aperture", "cpu", "anchor", "loader", "x-circle"])
+@pytest.mark.parametrize(
+    "icon", ["activity", "airplay", "film", "aperture", "cpu", "anchor", "loader", "x-circle", "umbrella", "unlock", "cloud-lightning"]
+)
 def test_feather_icons_match_resvg(icon: str) -> None:
     text = (FEATHER / f"{icon}.svg").read_text()
     md = MorphableDrawing.load(text.encode())

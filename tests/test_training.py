@@ -226,3 +226,15 @@ def test_cli_decode_bad_files(trained: Path, tmp_path: Path) -> None:
     ):
         result = runner.invoke(app, args)
         assert result.exit_code == 1 and message in result.stderr and result.stderr.count("\n") == 1
+
+
+def test_demo_runs_end_to_end_on_the_bundled_model(tmp_path: Path) -> None:
+    from deepmorph_core.api import BUNDLED_MODEL
+
+    assert BUNDLED_MODEL.is_file(), "the bundled demo model is missing"
+    result = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
+    assert result.exit_code == 0, result.output
+    for name in ("code.svg", "code.png", "overlay.png", "photo-easy.png", "photo-medium.png", "photo-hard.png"):
+        assert (tmp_path / "demo" / name).is_file(), name
+    assert result.stdout.count("decoded") + result.stdout.count("no drawing found") == 3
+    assert "WRONG" not in result.stdout  # a wrong payload must never pass the integrity check
