@@ -28,6 +28,96 @@ def safe_norm(v: Tensor, dim: int = -1) -> Tensor:
     return torch.sqrt((v * v).sum(dim) + _EPS)
 
 
+# -- elementwise kernels ----------------------------------------------------------------
+# Every argument broadcasts against the others. The outer-product functions below (every
+# point against every piece) and the rasterizer's flat path (one point per piece-pixel pair)
+# both call these, so there is one implementation of each formula.
+
+
+def segment_distance_xy(px: Tensor, py: Tensor, ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:
+    """Distance from points to segments, component-wise (zero-length segments are points)."""
+    bax, bay = bx - ax, by - ay
+    pax, pay = px - ax, py - ay
+    inv = 1.0 / (bax * bax + bay * bay).clamp_min(_EPS)
+    h = ((pax * bax + pay * bay) * inv).clamp(0.0, 1.0)
+    dx, dy = pax - bax * h, pay - bay * h
+    return torch.sqrt(dx * dx + dy * dy + _EPS)
+
+
+def segment_stroke_sdf_xy(
+    px: Tensor,
+    py: Tensor,
+    ax: Tensor,
+    ay: Tensor,
+    bx: Tensor,
+    by: Tensor,
+    hw: Tensor,
+    cap_start: Tensor,
+    cap_end: Tensor,
+) -> Tensor:
+    """Signed distance of stroked segments with per-end caps, component-wise (see
+    :func:`segment_stroke_sdf`)."""
+    capsule = hw - segment_distance_xy(px, py, ax, ay, bx, by)
+    if not bool(((cap_start != CAP_ROUND) | (cap_end != CAP_ROUND)).any()):
+        return capsule
+    bax, bay = bx - ax, by - ay
+    pax, pay = px - ax, py - ay
+    length = torch.sqrt(bax * bax + bay * bay + _EPS)
+    ux, uy = bax / length, bay / length
+    along = pax * ux + pay * uy  # distance along the segment from a
+    band = hw - (pax * uy - pay * ux).abs()
+    ext_start = (cap_start == CAP_SQUARE).to(px.dtype) * hw
+    ext_end = (cap_end == CAP_SQUARE).to(px.dtype) * hw
+    first_half = along < length / 2
+    out = torch.where((cap_start != CAP_ROUND) & first_half, torch.minimum(band, along + ext_start), capsule)
+    out = torch.where((cap_end != CAP_ROUND) & ~first_half, torch.minimum(band, length - along + ext_end), out)
+    # A zero-length segment with a butt cap draws nothing.
+    degenerate = (length < 1e-6) & (cap_start == CAP_BUTT)
+    return torch.where(degenerate, torch.full_like(out, -1e3), out)
+
+
+def arc_distance_xy(
+    px: Tensor,
+    py: Tensor,
+    cx: Tensor,
+    cy: Tensor,
+    inv: tuple[Tensor, Tensor, Tensor, Tensor],
+    theta0: Tensor,
+    dtheta: Tensor,
+    start: tuple[Tensor, Tensor],
+    end: tuple[Tensor, Tensor],
+) -> Tensor:
+    """Distance to centre-form arcs, component-wise (see :func:`arc_distance`); ``inv`` is the
+    inverse unit-circle map as its four entries ``(i00, i01, i10, i11)``."""
+    i00, i01, i10, i11 = inv
+    rx, ry = px - cx, py - cy
+    qx, qy = i00 * rx + i01 * ry, i10 * rx + i11 * ry
+    rq = torch.sqrt(qx * qx + qy * qy + _EPS)
+    gx, gy = (i00 * qx + i10 * qy) / rq, (i01 * qx + i11 * qy) / rq  # inv^T qhat
+    d_curve = (rq - 1.0).abs() / torch.sqrt(gx * gx + gy * gy + _EPS)
+    if bool((dtheta.abs() >= 2 * math.pi - 1e-9).all()):
+        return d_curve  # full circles and ellipses: every angle is on the curve
+    with torch.no_grad():
+        ang = torch.atan2(qy, qx)
+        sign = torch.where(dtheta >= 0, 1.0, -1.0).to(px.dtype)
+        offset = torch.remainder(sign * (ang - theta0), 2 * math.pi)
+        inside = offset <= dtheta.abs() + 1e-9
+    d_start = torch.sqrt((px - start[0]) ** 2 + (py - start[1]) ** 2 + _EPS)
+    d_end = torch.sqrt((px - end[0]) ** 2 + (py - end[1]) ** 2 + _EPS)
+    return torch.where(inside, d_curve, torch.minimum(d_start, d_end))
+
+
+# -- every grid point against every piece ------------------------------------------------
+
+
+def _grid_xy(grid: Tensor) -> tuple[Tensor, Tensor]:
+    return grid[:, 0][None, None], grid[:, 1][None, None]  # (1, 1, P)
+
+
+def _piece_xy(points: Tensor) -> tuple[Tensor, Tensor]:
+    return points[..., 0][..., None], points[..., 1][..., None]  # (B, K, 1)
+
+
 def segment_distance(grid: Tensor, a: Tensor, b: Tensor) -> Tensor:
     """Unsigned distance from every grid point to every segment ``[a, b]``.
 
@@ -36,15 +126,7 @@ def segment_distance(grid: Tensor, a: Tensor, b: Tensor) -> Tensor:
     Shape:
         grid ``(P, 2)``, a/b ``(B, K, 2)`` -> ``(B, K, P)``.
     """
-    # Component-wise: about half the work of stacked (..., 2) tensors and their reductions.
-    px, py = grid[:, 0][None, None], grid[:, 1][None, None]  # (1, 1, P)
-    ax, ay = a[..., 0][..., None], a[..., 1][..., None]  # (B, K, 1)
-    bax, bay = b[..., 0][..., None] - ax, b[..., 1][..., None] - ay
-    pax, pay = px - ax, py - ay  # (B, K, P)
-    inv = 1.0 / (bax * bax + bay * bay).clamp_min(_EPS)
-    h = ((pax * bax + pay * bay) * inv).clamp(0.0, 1.0)
-    dx, dy = pax - bax * h, pay - bay * h
-    return torch.sqrt(dx * dx + dy * dy + _EPS)
+    return segment_distance_xy(*_grid_xy(grid), *_piece_xy(a), *_piece_xy(b))
 
 
 def segment_stroke_sdf(
@@ -71,27 +153,14 @@ def segment_stroke_sdf(
     Returns:
         ``(B, K, P)`` signed distances.
     """
-    hw = half_width[:, None, None]
-    capsule = hw - segment_distance(grid, a, b)
-    if not bool(((cap_start != CAP_ROUND) | (cap_end != CAP_ROUND)).any()):
-        return capsule
-    pa = grid[None, None] - a[:, :, None]
-    ba = (b - a)[:, :, None]
-    length = safe_norm(ba)
-    u = ba / length[..., None]
-    along = (pa * u).sum(-1)  # (B, K, P) distance along the segment from a
-    perp = (pa[..., 0] * u[..., 1] - pa[..., 1] * u[..., 0]).abs()
-    band = hw - perp
-    ext_start = torch.where(cap_start == CAP_SQUARE, 1.0, 0.0).to(grid.dtype)[None, :, None] * hw
-    ext_end = torch.where(cap_end == CAP_SQUARE, 1.0, 0.0).to(grid.dtype)[None, :, None] * hw
-    start_cut = (cap_start != CAP_ROUND)[None, :, None]
-    end_cut = (cap_end != CAP_ROUND)[None, :, None]
-    first_half = along < length / 2
-    out = torch.where(start_cut & first_half, torch.minimum(band, along + ext_start), capsule)
-    out = torch.where(end_cut & ~first_half, torch.minimum(band, length - along + ext_end), out)
-    # A zero-length segment with a butt cap draws nothing.
-    degenerate = (length < 1e-6) & (cap_start == CAP_BUTT)[None, :, None]
-    return torch.where(degenerate, torch.full_like(out, -1e3), out)
+    return segment_stroke_sdf_xy(
+        *_grid_xy(grid),
+        *_piece_xy(a),
+        *_piece_xy(b),
+        half_width[:, None, None],
+        cap_start[None, :, None],
+        cap_end[None, :, None],
+    )
 
 
 def arc_distance(
@@ -115,25 +184,11 @@ def arc_distance(
         grid ``(P, 2)``; center/start/end ``(B, J, 2)``; inv_linear ``(B, J, 2, 2)``;
         theta0/dtheta ``(B, J)`` -> ``(B, J, P)``.
     """
-    # Component-wise (2x2 einsums become slow batched matmuls with an inner size of 2).
-    rx = grid[:, 0][None, None] - center[..., 0][..., None]  # (B, J, P)
-    ry = grid[:, 1][None, None] - center[..., 1][..., None]
-    i00, i01 = inv_linear[..., 0, 0][..., None], inv_linear[..., 0, 1][..., None]
-    i10, i11 = inv_linear[..., 1, 0][..., None], inv_linear[..., 1, 1][..., None]
-    qx, qy = i00 * rx + i01 * ry, i10 * rx + i11 * ry
-    rq = torch.sqrt(qx * qx + qy * qy + _EPS)
-    gx, gy = (i00 * qx + i10 * qy) / rq, (i01 * qx + i11 * qy) / rq  # inv_linear^T qhat
-    d_curve = (rq - 1.0).abs() / torch.sqrt(gx * gx + gy * gy + _EPS)
-    if bool((dtheta.abs() >= 2 * math.pi - 1e-9).all()):
-        return d_curve  # full circles and ellipses: every angle is on the curve
-    with torch.no_grad():
-        ang = torch.atan2(qy, qx)
-        sign = torch.where(dtheta >= 0, 1.0, -1.0).to(grid.dtype)[..., None]
-        offset = torch.remainder(sign * (ang - theta0[..., None]), 2 * math.pi)
-        inside = offset <= dtheta.abs()[..., None] + 1e-9
-    d_start = safe_norm(grid[None, None] - start[:, :, None])
-    d_end = safe_norm(grid[None, None] - end[:, :, None])
-    return torch.where(inside, d_curve, torch.minimum(d_start, d_end))
+    inv = tuple(inv_linear[..., i, j][..., None] for i in (0, 1) for j in (0, 1))
+    return arc_distance_xy(
+        *_grid_xy(grid), *_piece_xy(center), inv, theta0[..., None], dtheta[..., None],
+        _piece_xy(start), _piece_xy(end),
+    )
 
 
 def ring_winding(grid: Tensor, ring: Tensor) -> Tensor:

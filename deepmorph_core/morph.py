@@ -101,6 +101,7 @@ class MorphSpace:
             if self._prim_moves[p][k, 0] >= 0
         ]
         self._move_pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
+        self._points_cache: dict[tuple[int, torch.dtype, torch.device], Tensor] = {}
         self._fix_none(nv)
 
     # -- construction ---------------------------------------------------------------------
@@ -196,19 +197,39 @@ class MorphSpace:
             g = torch.as_tensor(group.ctm, dtype=dtype, device=device)
             m = _affine(ext[:, idx.to(device)], group.centre)
             group_world.append(g @ m @ torch.linalg.inv(g))
+        prims = self.drawing.primitives
+        if not prims:
+            return []
+        # All element-level affines in one batched call: (B, n_prims, 3, 3).
+        aff_idx = torch.stack(self._prim_affine_t).to(device)  # (n_prims, 4)
+        centres = torch.as_tensor(np.stack([p.centre for p in prims]), dtype=dtype, device=device)
+        element = _affine(ext[:, aff_idx], centres)
+        static = pix @ torch.as_tensor(np.stack([p.ctm for p in prims]), dtype=dtype, device=device)  # (n, 3, 3)
+        static = static.expand(B, -1, -1, -1)
+        if group_world:  # group morphs sit between the viewBox scale and each element's CTM
+            static = static.clone()
+            for i, prim in enumerate(prims):
+                if prim.groups:
+                    a = pix.expand(B, 3, 3)
+                    for gi in prim.groups:
+                        a = a @ group_world[gi]
+                    static[:, i] = a @ torch.as_tensor(prim.ctm, dtype=dtype, device=device)
+        stroke_scale = torch.sqrt(torch.linalg.det(static[..., :2, :2]).abs())  # (B, n)
+        full = static @ element
         out = []
-        for prim, moves, aff in zip(self.drawing.primitives, self._moves_t, self._prim_affine_t):
-            a = pix.expand(B, 3, 3)
-            for gi in prim.groups:
-                a = a @ group_world[gi]
-            ctm = torch.as_tensor(prim.ctm, dtype=dtype, device=device)
-            static = a @ ctm
-            stroke_scale = torch.sqrt(torch.linalg.det(static[:, :2, :2]).abs())
-            a = static @ _affine(ext[:, aff.to(device)], prim.centre)
-            base = prim.primitive.control_points().to(dtype=dtype, device=device)
-            local = base[None] + ext[:, moves.to(device)]
-            out.append(Frame(local, a, stroke_scale))
+        for i, (prim, moves) in enumerate(zip(prims, self._moves_t)):
+            local = self._base_points(i, dtype, device)[None] + ext[:, moves.to(device)]
+            out.append(Frame(local, full[:, i], stroke_scale[:, i]))
         return out
+
+    def _base_points(self, index: int, dtype: torch.dtype, device: torch.device) -> Tensor:
+        """A primitive's unmorphed control points, converted once per dtype and device."""
+        key = (index, dtype, device)
+        cached = self._points_cache.get(key)
+        if cached is None:
+            cached = self.drawing.primitives[index].primitive.control_points().to(dtype=dtype, device=device)
+            self._points_cache[key] = cached
+        return cached
 
     # -- writing back ---------------------------------------------------------------------
 
@@ -238,10 +259,14 @@ class MorphSpace:
         return etree.tostring(tree, encoding="unicode")
 
 
-def _affine(params: Tensor, centre: np.ndarray) -> Tensor:
-    """Batched ``T(c + shift) R(rot) S(1 + s) T(-c)`` from ``(B, 4)`` [shift-x, shift-y, s, rot°]."""
-    cx, cy = float(centre[0]), float(centre[1])
-    shx, shy, s, rot = params.unbind(1)
+def _affine(params: Tensor, centre: np.ndarray | Tensor) -> Tensor:
+    """Batched ``T(c + shift) R(rot) S(1 + s) T(-c)`` from ``(..., 4)`` [shift-x, shift-y, s, rot°]
+    about ``centre`` (``(2,)``, or ``(..., 2)`` matching ``params``): ``(..., 3, 3)``."""
+    if isinstance(centre, Tensor):
+        cx, cy = centre[..., 0], centre[..., 1]
+    else:
+        cx, cy = float(centre[0]), float(centre[1])
+    shx, shy, s, rot = params.unbind(-1)
     ang = torch.deg2rad(rot)
     c, sn = torch.cos(ang) * (1 + s), torch.sin(ang) * (1 + s)
     tx = cx + shx - (c * cx - sn * cy)

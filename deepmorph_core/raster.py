@@ -10,8 +10,10 @@ Three departures from a literal reading, all measured (``bench/``):
 
 * **Culling.** The paper names the rasterizer's memory as its bottleneck. A paint is evaluated
   only over the pixel rectangle its batch can reach (its outline's bounding box, padded by the
-  stroke half-width and the sigmoid's reach), and added into the canvas in place. Outside that
-  box ``sigmoid(s * sdf)`` is below ``1e-4``, so the result matches the dense reference.
+  stroke half-width and the sigmoid's reach). Strokes go further: every piece of every stroke in
+  a run is paired with just the pixels within reach of it and evaluated in one vectorised pass
+  (:mod:`deepmorph_core.flat`). Beyond the reach ``sigmoid(s * sdf)`` is below ``3.4e-4``, so the
+  result matches the dense reference to within ``2e-3`` (measured ``3.4e-4`` on the benchmark).
 * **Soft union within a run.** Same-coloured paints are combined as ``1 - prod(1 - c_i)``
   (accumulated additively as ``sum log(1 - c_i)``) instead of ``sum c_i``: where the soft edges
   of two strokes overlap, a plain sum reads as solid ink beyond both edges (visible bulges at
@@ -31,11 +33,12 @@ import torch
 from torch import Tensor, nn
 
 from deepmorph_core.morph import MorphSpace
-from deepmorph_core.outline import Frame, pixel_bbox, pixel_grid, stroke_sdf_tiled
+from deepmorph_core.flat import flat_stroke_sdf
+from deepmorph_core.outline import Frame, Outline, pixel_bbox, pixel_grid
 from deepmorph_core.primitive import outline_paint_sdf
 
-#: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-9.2) ~ 1e-4.
-_SIGMOID_REACH = 9.2
+#: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-8) ~ 3e-4.
+_SIGMOID_REACH = 8.0
 
 
 @dataclass(frozen=True)
@@ -103,12 +106,14 @@ class SoftRasterizer(nn.Module):
             raise ValueError(f"blend must be 'union' or 'sum', got {st.blend!r}")
         union = st.blend == "union"
         acc: Tensor | None = None
+        reach = _SIGMOID_REACH / st.sharpness
         for colour, paints in self._runs:
-            # Each paint's cover over its box is gathered with the canvas positions it lands on,
-            # and added with a single index_add: in-place slice additions would make autograd
-            # copy the whole canvas once per paint in the backward pass.
+            # Covers are gathered with the canvas positions they land on and added with a single
+            # index_add: in-place slice additions would make autograd copy the whole canvas once
+            # per paint in the backward pass.
             positions: list[Tensor] = []
-            covers: list[Tensor] = []
+            sdfs: list[Tensor] = []
+            strokes: list[tuple[Outline, Tensor]] = []
             for index, mode in paints:
                 prim = self.space.drawing.primitives[index]
                 frame = frames[index]
@@ -116,7 +121,9 @@ class SoftRasterizer(nn.Module):
                     outlines[index] = prim.primitive.outline(frame)
                 outline = outlines[index]
                 half_width = stroke_half_width(frame, prim.style.stroke_width, mode)
-                reach = _SIGMOID_REACH / st.sharpness
+                if st.cull and mode == "stroke":
+                    strokes.append((outline, half_width))  # evaluated together below
+                    continue
                 if st.cull:
                     box = pixel_bbox(outline, float(half_width.detach().max()) + reach)
                     x0 = max(0, int(math.floor(float(box[0]))))
@@ -127,23 +134,23 @@ class SoftRasterizer(nn.Module):
                         continue
                 else:
                     x0, y0, x1, y1 = 0, 0, W, H
-                n_pieces = outline.line_a.shape[1] + outline.arc_center.shape[1]
-                if st.cull and mode == "stroke" and n_pieces > 1:
-                    sdf = stroke_sdf_tiled(outline, (x0, y0, x1, y1), half_width, reach)
-                else:
-                    grid = pixel_grid(x0, y0, x1, y1, dtype, device)
-                    sdf = outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd)
-                if union:  # log(1 - sigmoid(z)) = logsigmoid(-z)
-                    cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf)
-                else:
-                    cover = torch.sigmoid(st.sharpness * sdf)
+                grid = pixel_grid(x0, y0, x1, y1, dtype, device)
+                sdfs.append(outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd).t())
                 rows = torch.arange(y0, y1, device=device)[:, None] * W
                 positions.append((rows + torch.arange(x0, x1, device=device)[None]).reshape(-1))
-                covers.append(cover.reshape(B, -1))
-            canvas = torch.zeros(B, H * W, dtype=dtype, device=device)
-            if covers:
-                canvas = canvas.index_add(1, torch.cat(positions), torch.cat(covers, 1))
-            canvas = canvas.reshape(B, H, W)
+            if strokes:
+                flat = flat_stroke_sdf(strokes, H, W, reach)
+                if flat is not None:
+                    positions.append(flat[0])
+                    sdfs.append(flat[1])
+            # pixels-first (H*W, B): index_add then moves contiguous rows of B values
+            canvas = torch.zeros(H * W, B, dtype=dtype, device=device)
+            if sdfs:
+                sdf = torch.cat(sdfs, 0)
+                # union: log(1 - sigmoid(z)) = logsigmoid(-z), summed; sum: the paper's sigmoids
+                cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf) if union else torch.sigmoid(st.sharpness * sdf)
+                canvas = canvas.index_add(0, torch.cat(positions), cover)
+            canvas = canvas.t().reshape(B, H, W)
             contribution = colour * (-torch.expm1(canvas) if union else canvas)
             acc = contribution if acc is None else normalised_squash(acc, st.squash) + contribution
         if acc is None:

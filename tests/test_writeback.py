@@ -45,11 +45,11 @@ def test_written_svg_reproduces_the_morph() -> None:
         "circle",
     ]
     values = md.values_from_unit(md.random_unit(3, seed=11).double())
-    soft = md.render_soft(values, 72)
+    soft = md.render_soft(values, 72, cull=False)  # dense: compare geometry, not culling
     for k in range(3):
         again = MorphableDrawing.load(md.to_svg(values[k]).encode())
         assert again.n_variables == md.n_variables
-        rerendered = again.render_soft(again.neutral_values().double(), 72)
+        rerendered = again.render_soft(again.neutral_values().double(), 72, cull=False)
         torch.testing.assert_close(rerendered[0], soft[k], atol=2e-3, rtol=0)
 
 
