@@ -27,6 +27,8 @@ payload is a misdecode and is counted separately. Finally each model decodes the
 from __future__ import annotations
 
 import argparse
+import hashlib
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -284,17 +286,26 @@ def bundle_path(models_dir: Path, cell: dict[str, Any], args: argparse.Namespace
 def run_cell(cell: dict[str, Any], args: argparse.Namespace, unrelated: list, models_dir: Path) -> dict[str, Any]:
     from deepmorph_core.api import train_model
     from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.errors import DeepMorphError
 
     path = bundle_path(models_dir, cell, args)
     label = f"{cell['drawing'].name} @ {cell['payload_bits']} bits"
     reused = False
     wall = None
     if args.reuse and path.is_file():
-        model = DeepMorphModel.load(path)
-        if model.meta.record.finished:
-            reused = True
-        else:
+        try:
+            model = DeepMorphModel.load(path)
+        except DeepMorphError as exc:
+            print(f"[{label}] cannot reuse {path} ({exc}): training again", flush=True)
+            model = None
+        if model is None:
+            pass
+        elif model.meta.drawing_svg != cell["drawing"].read_text():
+            print(f"[{label}] {path} was trained on another version of the drawing: training again", flush=True)
+        elif not model.meta.record.finished:
             print(f"[{label}] {path} is an unfinished checkpoint: training again", flush=True)
+        else:
+            reused = True
     if not reused:
         bounds = {"move": cell["move"]} if cell["move"] is not None else None
         train = {"steps": args.steps, "batch": args.batch, "seed": args.seed, "threads": args.threads}
@@ -325,6 +336,7 @@ def run_cell(cell: dict[str, Any], args: argparse.Namespace, unrelated: list, mo
     result = {
         "drawing": cell["drawing"].name,
         "drawing_path": str(cell["drawing"]),
+        "drawing_sha256": hashlib.sha256(model.meta.drawing_svg.encode()).hexdigest()[:16],
         "bounds": "own dm: bounds" if cell["own_bounds"] else {"move": cell["move"]},
         "payload_bits": spec.payload_bits,
         "crc_bits": spec.crc_bits,
@@ -444,7 +456,7 @@ def main() -> None:
         flush=True,
     )
     report: dict[str, Any] = {
-        "environment": environment(),
+        "environment": {**environment(), "git_commit": git_commit()},
         "target": TARGET,
         "settings": {
             "steps": args.steps,
@@ -473,6 +485,15 @@ def main() -> None:
     print()
     print(table(HEADERS, summary_rows(report["cells"])))
     print(f"\nwrote {args.out} (total {report['total_wall_s']:.0f} s)")
+
+
+def git_commit() -> str | None:
+    """The checkout's HEAD (the working tree may differ; bundles keep the drawing they were trained on)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
+    except OSError:
+        return None
+    return out.stdout.strip() or None
 
 
 def print_saved(path: Path) -> None:

@@ -216,7 +216,7 @@ def train_model(
     from deepmorph_core.codec import choose_codec
     from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_core.raster import RasterSettings
-    from deepmorph_core.train import Trainer, TrainConfig, build_augment
+    from deepmorph_core.train import TrainConfig, Trainer, build_augment
 
     out = Path(out)
     overrides = {k: v for k, v in (train or {}).items() if v is not None}
@@ -228,7 +228,9 @@ def train_model(
                 raise DeepMorphError(f"{out}: the checkpoint was trained on another drawing than {svg}")
             if model.meta.record.finished:
                 raise DeepMorphError(f"{out}: training already finished; nothing to resume")
-            config = TrainConfig(**{**model.meta.train, **{k: v for k, v in overrides.items() if k in ("steps", "threads")}})
+            config = TrainConfig(
+                **{**model.meta.train, **{k: v for k, v in overrides.items() if k in ("steps", "threads")}}
+            )
         else:
             if out.exists() and not overwrite:
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")

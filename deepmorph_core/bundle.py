@@ -12,8 +12,6 @@ truncated or foreign file) is one :class:`~deepmorph_core.errors.DeepMorphError`
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Literal
 
@@ -27,6 +25,7 @@ from torch import Tensor
 from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
 from deepmorph_core.model import DecoderConfig
 
 FORMAT = "deepmorph-model/1"
@@ -81,20 +80,7 @@ def save_bundle(path: str | Path, meta: BundleMeta, tensors: dict[str, Tensor]) 
         {k: v.detach().contiguous().cpu() for k, v in tensors.items()},
         metadata={_META_KEY: meta.model_dump_json()},
     )
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise DeepMorphError(f"{path}: cannot write model file: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, payload)
 
 
 def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:

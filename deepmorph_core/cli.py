@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import sys
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Optional, TypeVar
@@ -23,6 +21,7 @@ from rich.text import Text
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.render import overlay, render_svg_ink, save_gray, save_rgb
 
@@ -92,16 +91,8 @@ def _load(svg: Path, move: float | None, shift: str | None, scale: str | None, r
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
-    """Write a file so that a crash never leaves it half written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write a text file so that a crash never leaves it half written."""
+    atomic_write(path, text.encode("utf-8"))
 
 
 @app.command("list-primitives")
@@ -240,13 +231,19 @@ def train(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Model bundle to write (.dmm); also the checkpoint.")],
     payload_bits: Annotated[int, typer.Option("--payload-bits", min=1, max=256, help="Payload length in bits.")] = 24,
-    crc: Annotated[Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")] = None,
+    crc: Annotated[
+        Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
+    ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 3000,
     batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
     width: Annotated[int, typer.Option("--width", min=32, max=512, help="Decoder image width in pixels.")] = 96,
-    severity: Annotated[str, typer.Option("--severity", help="Capture corruption: none, easy, medium, hard.")] = "medium",
-    hard_fraction: Annotated[float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")] = 0.25,
+    severity: Annotated[
+        str, typer.Option("--severity", help="Capture corruption: none, easy, medium, hard.")
+    ] = "medium",
+    hard_fraction: Annotated[
+        float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
+    ] = 0.25,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
     device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
     threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
@@ -267,19 +264,49 @@ def train(
             description=f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}",
         )
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     with Progress(
-        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        TextColumn("ETA"), TimeRemainingColumn(), console=err, transient=False,
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err,
+        transient=False,
     ) as progress:
         task = progress.add_task("starting", total=steps)
         summary = train_model(
-            svg, out_path, payload_bits=payload_bits, crc_bits=crc, ecc_t=ecc_t, resume=resume,
-            bounds={"move": move, "shift": _pair(shift, "shift", single_ok=True), "scale": _pair(scale, "scale"),
-                    "rotate": _pair(rotate, "rotate")},
-            train={"steps": steps, "batch": batch, "width": width, "severity": severity, "seed": seed,
-                   "device": device, "threads": threads, "hard_fraction": hard_fraction},
+            svg,
+            out_path,
+            payload_bits=payload_bits,
+            crc_bits=crc,
+            ecc_t=ecc_t,
+            resume=resume,
+            bounds={
+                "move": move,
+                "shift": _pair(shift, "shift", single_ok=True),
+                "scale": _pair(scale, "scale"),
+                "rotate": _pair(rotate, "rotate"),
+            },
+            train={
+                "steps": steps,
+                "batch": batch,
+                "width": width,
+                "severity": severity,
+                "seed": seed,
+                "device": device,
+                "threads": threads,
+                "hard_fraction": hard_fraction,
+            },
             on_start=on_start,
         )
     out.print(
@@ -306,13 +333,19 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     rows = [
         ("drawing", data["drawing"]),
         ("payload bits", str(data["payload_bits"])),
-        ("code bits", f"{data['code_bits']} (CRC {codec['crc_bits']}, BCH t={codec['bch_t']}: {codec['ecc_bits']} ECC bits)"),
+        (
+            "code bits",
+            f"{data['code_bits']} (CRC {codec['crc_bits']}, BCH t={codec['bch_t']}: {codec['ecc_bits']} ECC bits)",
+        ),
         ("variables N_v", str(data["n_variables"])),
         ("image size", "x".join(map(str, data["image_size"][::-1]))),
         ("bounds defaults", json.dumps(data["bounds_defaults"]) or "-"),
-        ("training", f"{rec['step']}/{rec['total_steps']} steps, {rec['elapsed_s']:.0f} s on {rec['device']} "
-                     f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
-                     f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}"),
+        (
+            "training",
+            f"{rec['step']}/{rec['total_steps']} steps, {rec['elapsed_s']:.0f} s on {rec['device']} "
+            f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
+            f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}",
+        ),
         ("last metrics", json.dumps(rec["metrics"])),
         ("versions", json.dumps(data["versions"])),
     ]
@@ -325,7 +358,9 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
 @friendly
 def encode(
     model: ModelArg,
-    payload: Annotated[str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")],
+    payload: Annotated[
+        str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")
+    ],
     out_path: Annotated[Path, typer.Option("--out", help="Morphed SVG to write.")],
     png: Annotated[Optional[Path], typer.Option("--png", help="Also render a PNG for printing.")] = None,
     width_mm: Annotated[float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of the PNG.")] = 50.0,
@@ -385,7 +420,9 @@ def decode(
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo's files.")] = Path("deepmorph-demo"),
     seed: Annotated[int, typer.Option("--seed", help="Seed of the payload and the photo simulation.")] = 3,
-    retrain: Annotated[bool, typer.Option("--train", help="Train a fresh model instead of loading the bundled one.")] = False,
+    retrain: Annotated[
+        bool, typer.Option("--train", help="Train a fresh model instead of loading the bundled one.")
+    ] = False,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Steps when training (--train).")] = 600,
 ) -> None:
     """Bundled drawing end to end: model, encode a payload, simulate print-and-photo, decode."""

@@ -19,10 +19,10 @@ from deepmorph_core.api import MorphableDrawing
 from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, format_payload
 from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.imaging import align_to_frame, render_moments, to_gray
 from deepmorph_core.model import Decoder, DecoderConfig, Encoder
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg
-from deepmorph_core.imaging import align_to_frame, render_moments, to_gray
 
 
 @dataclass
@@ -80,8 +80,7 @@ class DeepMorphModel:
         md = MorphableDrawing.load(drawing_svg.encode(), **_bound_kwargs(bounds_defaults))
         if md.n_variables == 0:
             raise DeepMorphError(
-                f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; "
-                "add dm: bounds or pass --move"
+                f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
             )
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()
@@ -227,7 +226,11 @@ class DeepMorphModel:
 
 
 def _bound_kwargs(defaults: dict[str, Any]) -> dict[str, Any]:
-    return {k: (tuple(v) if isinstance(v, list) else v) for k, v in defaults.items() if k in ("move", "shift", "scale", "rotate")}
+    return {
+        k: (tuple(v) if isinstance(v, list) else v)
+        for k, v in defaults.items()
+        if k in ("move", "shift", "scale", "rotate")
+    }
 
 
 __all__ = ["DeepMorphModel", "Detection", "format_payload"]

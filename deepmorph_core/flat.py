@@ -13,7 +13,6 @@ geometry runs in torch with gradients to every control point.
 
 from __future__ import annotations
 
-
 import numpy as np
 import torch
 from torch import Tensor
@@ -38,7 +37,9 @@ def _pixels(rect: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return xs.reshape(-1), ys.reshape(-1)
 
 
-def flat_stroke_sdf(strokes: list[tuple[Outline, Tensor]], H: int, W: int, reach: float) -> tuple[Tensor, Tensor] | None:
+def flat_stroke_sdf(
+    strokes: list[tuple[Outline, Tensor]], H: int, W: int, reach: float
+) -> tuple[Tensor, Tensor] | None:
     """Signed distances of many strokes over the pixels they can reach.
 
     Args:
@@ -91,9 +92,16 @@ def flat_stroke_sdf(strokes: list[tuple[Outline, Tensor]], H: int, W: int, reach
     owners = np.concatenate([line_owner, arc_owner])
     piece_reach = np.concatenate(reaches)
     piece_paths = [pl for group in polylines for pl in group]  # (n_points, 2) per piece
-    piece_rects = np.concatenate(
-        [_rects(pl.min(0, keepdims=True), pl.max(0, keepdims=True), r, H, W) for pl, r in zip(piece_paths, piece_reach)]
-    ) if piece_paths else np.zeros((0, 4), np.int64)
+    piece_rects = (
+        np.concatenate(
+            [
+                _rects(pl.min(0, keepdims=True), pl.max(0, keepdims=True), r, H, W)
+                for pl, r in zip(piece_paths, piece_reach)
+            ]
+        )
+        if piece_paths
+        else np.zeros((0, 4), np.int64)
+    )
     # Pixels a piece can reach: within its reach of its mean polyline (not its whole box, which
     # for a diagonal stroke is mostly empty).
     pair_piece, pair_pixel = [], []
@@ -133,8 +141,15 @@ def flat_stroke_sdf(strokes: list[tuple[Outline, Tensor]], H: int, W: int, reach
         mask = torch.from_numpy(is_line).to(device)
         parts.append(
             G.segment_stroke_sdf_xy(
-                px[mask][:, None], py[mask][:, None], a[:, 0::2], a[:, 1::2], b[:, 0::2], b[:, 1::2],
-                hw_t.index_select(0, owner), cap_s[sel][:, None], cap_e[sel][:, None],
+                px[mask][:, None],
+                py[mask][:, None],
+                a[:, 0::2],
+                a[:, 1::2],
+                b[:, 0::2],
+                b[:, 1::2],
+                hw_t.index_select(0, owner),
+                cap_s[sel][:, None],
+                cap_e[sel][:, None],
             )
         )
         slots.append(slot[mask])
@@ -148,9 +163,15 @@ def flat_stroke_sdf(strokes: list[tuple[Outline, Tensor]], H: int, W: int, reach
         inv = rows(torch.linalg.inv(arc_lin), 4)  # per batch: i00 i01 i10 i11
         c, st, en = rows(arc_c, 2), rows(arc_s, 2), rows(arc_e, 2)
         d = G.arc_distance_xy(
-            px[mask][:, None], py[mask][:, None], c[:, 0::2], c[:, 1::2],
+            px[mask][:, None],
+            py[mask][:, None],
+            c[:, 0::2],
+            c[:, 1::2],
             (inv[:, 0::4], inv[:, 1::4], inv[:, 2::4], inv[:, 3::4]),
-            rows(arc_t0, 1), rows(arc_dt, 1), (st[:, 0::2], st[:, 1::2]), (en[:, 0::2], en[:, 1::2]),
+            rows(arc_t0, 1),
+            rows(arc_dt, 1),
+            (st[:, 0::2], st[:, 1::2]),
+            (en[:, 0::2], en[:, 1::2]),
         )
         parts.append(hw_t.index_select(0, owner) - d)
         slots.append(slot[mask])

@@ -186,8 +186,13 @@ def arc_distance(
     """
     inv = tuple(inv_linear[..., i, j][..., None] for i in (0, 1) for j in (0, 1))
     return arc_distance_xy(
-        *_grid_xy(grid), *_piece_xy(center), inv, theta0[..., None], dtheta[..., None],
-        _piece_xy(start), _piece_xy(end),
+        *_grid_xy(grid),
+        *_piece_xy(center),
+        inv,
+        theta0[..., None],
+        dtheta[..., None],
+        _piece_xy(start),
+        _piece_xy(end),
     )
 
 

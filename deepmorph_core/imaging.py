@@ -162,7 +162,9 @@ def render_moments(images: Tensor) -> Tensor:
         return mask_moments(images[:, 0] < 0.5)
 
 
-def align_to_frame(gray: np.ndarray, size: tuple[int, int], target: Tensor) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+def align_to_frame(
+    gray: np.ndarray, size: tuple[int, int], target: Tensor
+) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """Bring a photo or scan into the decoder's frame, as training frames its renders.
 
     Args:
@@ -189,5 +191,7 @@ def align_to_frame(gray: np.ndarray, size: tuple[int, int], target: Tensor) -> t
         src = cv2.resize(norm, (norm.shape[1] // factor, norm.shape[0] // factor), interpolation=cv2.INTER_AREA)
         scale = torch.tensor([src.shape[1] / norm.shape[1], src.shape[0] / norm.shape[0]] * 2, dtype=torch.float64)
         moments = moments * scale
-    frame = canonicalize(torch.from_numpy(np.ascontiguousarray(src, dtype=np.float32))[None, None], moments, target, size)
+    frame = canonicalize(
+        torch.from_numpy(np.ascontiguousarray(src, dtype=np.float32))[None, None], moments, target, size
+    )
     return frame[0, 0].numpy(), box

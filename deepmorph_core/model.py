@@ -89,6 +89,8 @@ class Decoder(nn.Module):
     def forward(self, images: Tensor) -> Tensor:
         """Shape: ``(B, 1, H, W)`` -> ``(B, N_b)`` logits."""
         if images.dim() != 4 or images.shape[1] != 1 or tuple(images.shape[2:]) != tuple(self.image_size):
-            raise ValueError(f"decoder expects (B, 1, {self.image_size[0]}, {self.image_size[1]}), got {tuple(images.shape)}")
+            raise ValueError(
+                f"decoder expects (B, 1, {self.image_size[0]}, {self.image_size[1]}), got {tuple(images.shape)}"
+            )
         # centre intensities so that white paper is +0.5 and black ink -0.5
         return self.head(self.features(images - 0.5))

@@ -194,9 +194,7 @@ def fill_sdf(outline: Outline, grid: Tensor, evenodd: bool = False) -> Tensor:
     return torch.where(inside, d, -d)
 
 
-def stroke_sdf_tiled(
-    outline: Outline, box: tuple[int, int, int, int], half_width: Tensor, reach: float
-) -> Tensor:
+def stroke_sdf_tiled(outline: Outline, box: tuple[int, int, int, int], half_width: Tensor, reach: float) -> Tensor:
     """:func:`stroke_sdf` over the pixel rectangle ``box`` = (x0, y0, x1, y1), evaluating each
     piece only inside its own padded bounding box.
 

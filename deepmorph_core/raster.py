@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from deepmorph_core.morph import MorphSpace
 from deepmorph_core.flat import flat_stroke_sdf
+from deepmorph_core.morph import MorphSpace
 from deepmorph_core.outline import Frame, Outline, pixel_bbox, pixel_grid
 from deepmorph_core.primitive import outline_paint_sdf
 
@@ -148,7 +148,9 @@ class SoftRasterizer(nn.Module):
             if sdfs:
                 sdf = torch.cat(sdfs, 0)
                 # union: log(1 - sigmoid(z)) = logsigmoid(-z), summed; sum: the paper's sigmoids
-                cover = torch.nn.functional.logsigmoid(-st.sharpness * sdf) if union else torch.sigmoid(st.sharpness * sdf)
+                cover = (
+                    torch.nn.functional.logsigmoid(-st.sharpness * sdf) if union else torch.sigmoid(st.sharpness * sdf)
+                )
                 canvas = canvas.index_add(0, torch.cat(positions), cover)
             canvas = canvas.t().reshape(B, H, W)
             contribution = colour * (-torch.expm1(canvas) if union else canvas)

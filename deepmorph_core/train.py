@@ -282,7 +282,9 @@ class Trainer:
                 acc["n"] += 1
                 if rec.step % cfg.log_every == 0 or rec.step == cfg.steps:
                     n = acc.pop("n")
-                    logged = StepMetrics(rec.step, rec.stage, acc["loss"] / n, acc["bit_acc"] / n, acc["word_acc"] / n, rec.elapsed_s)
+                    logged = StepMetrics(
+                        rec.step, rec.stage, acc["loss"] / n, acc["bit_acc"] / n, acc["word_acc"] / n, rec.elapsed_s
+                    )
                     acc = {"loss": 0.0, "bit_acc": 0.0, "word_acc": 0.0, "n": 0}
                     history.append(logged.to_json())
                     with self.log_path.open("a") as fh:
@@ -296,8 +298,7 @@ class Trainer:
             rec.elapsed_s = time.perf_counter() - start
             self.checkpoint()
             raise Interrupted(
-                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} "
-                f"(continue with --resume)"
+                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} (continue with --resume)"
             ) from None
         rec.finished = True
         self.model.encoder.eval()

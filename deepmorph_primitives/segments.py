@@ -71,8 +71,13 @@ class RestArc:
         t = torch.as_tensor(p, dtype=torch.float64)
         one = torch.ones((), dtype=torch.float64)
         centre, rx, ry, theta0, dtheta = G.endpoint_to_center(
-            t[0], t[1], one * arc.rx, one * arc.ry, one * math.radians(arc.rotation),
-            one * float(arc.large_arc), one * float(arc.sweep),
+            t[0],
+            t[1],
+            one * arc.rx,
+            one * arc.ry,
+            one * math.radians(arc.rotation),
+            one * float(arc.large_arc),
+            one * float(arc.sweep),
         )
         exact = abs(arc._radius_scale(p) - 1.0) < 1e-6 or float(rx) > arc.rx * (1 + 1e-9)
         return cls(p[0], p[1], centre.numpy(), float(rx), float(ry), float(theta0), float(dtheta), exact)
@@ -197,6 +202,5 @@ class ArcSegment:
             # puts the centre on it. Rounding up would leave it where SVG's formula is singular.
             rx, ry = math.floor(rx * 1e4) / 1e4, math.floor(ry * 1e4) / 1e4
         return (
-            f"A{f(rx)} {f(ry)} {f(angle)} "
-            f"{int(self.large_arc)} {int(self.sweep)} {f(points[1, 0])} {f(points[1, 1])}"
+            f"A{f(rx)} {f(ry)} {f(angle)} {int(self.large_arc)} {int(self.sweep)} {f(points[1, 0])} {f(points[1, 1])}"
         )

@@ -10,13 +10,13 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-# Property tests are deterministic (same examples every run) so that CI cannot flake.
-settings.register_profile("deepmorph", derandomize=True, deadline=None)
-settings.load_profile("deepmorph")
-
 import deepmorph_augment.plugin as builtin_augmentations
 import deepmorph_primitives.plugin as builtin_plugin
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
+
+# Property tests are deterministic (same examples every run) so that CI cannot flake.
+settings.register_profile("deepmorph", derandomize=True, deadline=None)
+settings.load_profile("deepmorph")
 
 DATA = Path(__file__).parent / "data"
 FEATHER = DATA / "feather"

@@ -121,7 +121,20 @@ def test_soft_render_matches_resvg(name: str, with_bezier) -> None:
 
 
 @pytest.mark.parametrize(
-    "icon", ["activity", "airplay", "film", "aperture", "cpu", "anchor", "loader", "x-circle", "umbrella", "unlock", "cloud-lightning"]
+    "icon",
+    [
+        "activity",
+        "airplay",
+        "film",
+        "aperture",
+        "cpu",
+        "anchor",
+        "loader",
+        "x-circle",
+        "umbrella",
+        "unlock",
+        "cloud-lightning",
+    ],
 )
 def test_feather_icons_match_resvg(icon: str) -> None:
     text = (FEATHER / f"{icon}.svg").read_text()

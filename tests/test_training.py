@@ -93,7 +93,7 @@ def test_interrupt_and_resume_equal_an_uninterrupted_run(tiny_svg: Path, tmp_pat
     train_model(tiny_svg, broken, resume=True)
     a, b = DeepMorphModel.load(straight), DeepMorphModel.load(broken)
     assert b.meta.record.finished and b.meta.record.step == 60
-    for (ka, va), (kb, vb) in zip(a.decoder.state_dict().items(), b.decoder.state_dict().items()):
+    for (ka, va), (_kb, vb) in zip(a.decoder.state_dict().items(), b.decoder.state_dict().items()):
         torch.testing.assert_close(va, vb, msg=ka)
     torch.testing.assert_close(a.encoder.linear.weight, b.encoder.linear.weight)
 
@@ -179,8 +179,23 @@ def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
     assert runner.invoke(app, ["info", str(trained)]).exit_code == 0
 
     svg, png = tmp_path / "code.svg", tmp_path / "code.png"
-    enc = runner.invoke(app, ["encode", str(trained), "--payload", "0xA5", "--out", str(svg), "--png", str(png),
-                              "--width-mm", "20", "--dpi", "200"])
+    enc = runner.invoke(
+        app,
+        [
+            "encode",
+            str(trained),
+            "--payload",
+            "0xA5",
+            "--out",
+            str(svg),
+            "--png",
+            str(png),
+            "--width-mm",
+            "20",
+            "--dpi",
+            "200",
+        ],
+    )
     assert enc.exit_code == 0, enc.output
     assert svg.is_file() and png.is_file()
     from PIL import Image
