@@ -105,7 +105,7 @@ def flat_stroke_sdf(
     # Pixels a piece can reach: within its reach of its mean polyline (not its whole box, which
     # for a diagonal stroke is mostly empty).
     pair_piece, pair_pixel = [], []
-    for k, (rect, owner) in enumerate(zip(piece_rects, owners)):
+    for k, rect in enumerate(piece_rects):
         if rect[2] <= rect[0] or rect[3] <= rect[1]:
             continue
         xs, ys = _pixels(rect)

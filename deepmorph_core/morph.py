@@ -217,7 +217,7 @@ class MorphSpace:
         stroke_scale = torch.sqrt(torch.linalg.det(static[..., :2, :2]).abs())  # (B, n)
         full = static @ element
         out = []
-        for i, (prim, moves) in enumerate(zip(prims, self._moves_t)):
+        for i, moves in enumerate(self._moves_t):
             local = self._base_points(i, dtype, device)[None] + ext[:, moves.to(device)]
             out.append(Frame(local, full[:, i], stroke_scale[:, i]))
         return out
