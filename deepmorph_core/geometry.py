@@ -44,6 +44,55 @@ def segment_distance_xy(px: Tensor, py: Tensor, ax: Tensor, ay: Tensor, bx: Tens
     return torch.sqrt(dx * dx + dy * dy + _EPS)
 
 
+class _SegmentDistance(torch.autograd.Function):
+    """Point-to-segment distance with a hand-written backward.
+
+    Autograd would keep about a dozen intermediates per (point, segment) pair and replay two
+    dozen elementwise ops; the gradient is simply ``-(1 - h) n`` for ``a`` and ``-h n`` for ``b``
+    (``n`` the unit vector from the closest point to the query point, ``h`` the clamped
+    projection), so three saved tensors suffice. Points get no gradient (they are pixel centres).
+    """
+
+    @staticmethod
+    def forward(ctx, px: Tensor, py: Tensor, ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:  # type: ignore[override]
+        bax, bay = bx - ax, by - ay
+        pax, pay = px - ax, py - ay
+        h = ((pax * bax + pay * bay) / (bax * bax + bay * bay).clamp_min(_EPS)).clamp_(0.0, 1.0)
+        dx = pax.sub_(bax * h)
+        dy = pay.sub_(bay * h)
+        d = torch.sqrt(dx * dx + dy * dy + _EPS)
+        ctx.save_for_backward(dx.div_(d), dy.div_(d), h)
+        ctx.shapes = (ax.shape, ay.shape, bx.shape, by.shape)
+        return d
+
+    @staticmethod
+    def backward(ctx, grad: Tensor):  # type: ignore[override]
+        nx, ny, h = ctx.saved_tensors
+        gb = grad * h
+        ga = grad - gb
+        out = []
+        for g, n, shape in (
+            (ga, nx, ctx.shapes[0]),
+            (ga, ny, ctx.shapes[1]),
+            (gb, nx, ctx.shapes[2]),
+            (gb, ny, ctx.shapes[3]),
+        ):
+            out.append(_sum_to(-(g * n), shape))
+        return (None, None, *out)
+
+
+def _sum_to(t: Tensor, shape: torch.Size) -> Tensor:
+    """Reduce a broadcast gradient back to an input's shape."""
+    if t.shape == shape:
+        return t
+    return t.sum_to_size(shape)
+
+
+def segment_distance_fused(px: Tensor, py: Tensor, ax: Tensor, ay: Tensor, bx: Tensor, by: Tensor) -> Tensor:
+    """:func:`segment_distance_xy` with the lean backward of :class:`_SegmentDistance` (same values)."""
+    return _SegmentDistance.apply(px, py, ax, ay, bx, by)
+
+
 def segment_stroke_sdf_xy(
     px: Tensor,
     py: Tensor,
@@ -57,7 +106,7 @@ def segment_stroke_sdf_xy(
 ) -> Tensor:
     """Signed distance of stroked segments with per-end caps, component-wise (see
     :func:`segment_stroke_sdf`)."""
-    capsule = hw - segment_distance_xy(px, py, ax, ay, bx, by)
+    capsule = hw - segment_distance_fused(px, py, ax, ay, bx, by)
     if not bool(((cap_start != CAP_ROUND) | (cap_end != CAP_ROUND)).any()):
         return capsule
     bax, bay = bx - ax, by - ay
