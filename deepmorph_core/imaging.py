@@ -28,6 +28,8 @@ def read_image(path: str | Path) -> np.ndarray:
         DeepMorphError: missing, unreadable, corrupt or non-image files.
     """
     path = Path(path)
+    if path.is_dir():
+        raise DeepMorphError(f"{path}: is a folder; pass image files (folders of frames are not supported yet)")
     if not path.is_file():
         raise DeepMorphError(f"{path}: no such image file")
     data = np.fromfile(path, dtype=np.uint8)
@@ -95,7 +97,12 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
         x, y = stats[i, cv2.CC_STAT_LEFT], stats[i, cv2.CC_STAT_TOP]
         return x == 0 or y == 0 or x + stats[i, cv2.CC_STAT_WIDTH] >= W or y + stats[i, cv2.CC_STAT_HEIGHT] >= H
 
-    keep = [i for i in keep if not touches_border(i)] or keep
+    inner = [i for i in keep if not touches_border(i)]
+    if inner:
+        # A border component is a desk or a shadow when it is clearly lighter than the ink
+        # inside; strokes of a drawing that runs to the edge of a render are kept.
+        ink_level = float(np.median(gray[np.isin(labels, inner)]))
+        keep = inner + [i for i in keep if touches_border(i) and float(np.median(gray[labels == i])) <= ink_level + 0.2]
     if not keep:
         return None
     x0 = min(stats[i, cv2.CC_STAT_LEFT] for i in keep)
@@ -105,7 +112,10 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
     selected = np.isin(labels, keep)
     if selected[y0:y1, x0:x1].mean() < 0.005 or (x1 - x0) < 4 or (y1 - y0) < 4:
         return None
-    return selected, (int(x0), int(y0), int(x1), int(y1))
+    # The moments must see what training sees: pixels darker than 0.5 (here within the kept
+    # components, grown by a pixel to undo the blur's shift of their edges).
+    grown = cv2.dilate(selected.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    return grown & (gray < 0.5), (int(x0), int(y0), int(x1), int(y1))
 
 
 def mask_moments(mask: Tensor) -> Tensor:

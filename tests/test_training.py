@@ -27,6 +27,8 @@ TINY = make_svg(
   <line x1="4" y1="12" x2="20" y2="12"/>
   <polyline points="4 18 12 20 20 18"/>
   <circle cx="12" cy="12" r="3" dm:move="1.5"/>
+  <polyline points="2 9 2 15" dm:move="1.5"/>
+  <polyline points="22 9 22 15" dm:move="1.5"/>
 </g>""",
     style='stroke-linejoin="round"',
 )
@@ -42,10 +44,12 @@ def tiny_svg(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def trained(tiny_svg: Path, tmp_path_factory) -> Path:
-    """An 8-bit model trained for a few hundred steps (shared by the tests below)."""
+    """A 4-bit model trained for a few hundred steps (shared by the tests below). It uses
+    CRC-16: with CRC-8 about 1 % of failed reads pass the check by chance (docs/codec.md),
+    which no "never a wrong payload" assertion could survive."""
     out = tmp_path_factory.mktemp("m") / "tiny.dmm"
-    train = {**FAST, "steps": 600, "severity": "easy", "hard_fraction": 0.25, "width": 48, "seed": 1}
-    train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=1, train=train)
+    train = {**FAST, "steps": 800, "severity": "none", "hard_fraction": 0.25, "width": 48, "seed": 1}
+    train_model(tiny_svg, out, payload_bits=4, crc_bits=16, ecc_t=0, train=train)
     return out
 
 
@@ -103,10 +107,10 @@ def test_bundle_round_trip(trained: Path, tmp_path: Path) -> None:
     copy = tmp_path / "copy.dmm"
     m.save(copy)
     again = DeepMorphModel.load(copy)
-    payload = random_payloads(1, 8, np.random.default_rng(0))[0]
+    payload = random_payloads(1, 4, np.random.default_rng(0))[0]
     assert m.encode(payload) == again.encode(payload)
     info = again.info()
-    assert info["payload_bits"] == 8 and info["code_bits"] == m.codec.spec.code_bits
+    assert info["payload_bits"] == 4 and info["code_bits"] == m.codec.spec.code_bits == 20
     assert info["record"]["finished"] and info["versions"]["torch"]
 
 
@@ -148,7 +152,7 @@ def test_truncated_and_foreign_bundles(trained: Path, tmp_path: Path) -> None:
 def test_encode_real_render_decode_round_trip(trained: Path, tmp_path: Path) -> None:
     m = DeepMorphModel.load(trained)
     rng = np.random.default_rng(7)
-    payloads = random_payloads(20, 8, rng)
+    payloads = random_payloads(20, 4, rng)
     ok = 0
     for i, payload in enumerate(payloads):
         render = render_svg(m.encode(payload), 160)  # a real renderer, larger than training
@@ -175,7 +179,7 @@ runner = CliRunner()
 def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
     info = runner.invoke(app, ["info", str(trained), "--json"])
     assert info.exit_code == 0, info.output
-    assert json.loads(info.stdout)["payload_bits"] == 8
+    assert json.loads(info.stdout)["payload_bits"] == 4
     assert runner.invoke(app, ["info", str(trained)]).exit_code == 0
 
     svg, png = tmp_path / "code.svg", tmp_path / "code.png"
@@ -185,7 +189,7 @@ def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
             "encode",
             str(trained),
             "--payload",
-            "0xA5",
+            "0xA",
             "--out",
             str(svg),
             "--png",
@@ -212,7 +216,7 @@ def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
     assert [r["image"] for r in results] == [str(png), str(blank)]
     (det,) = results[0]["detections"]
     assert set(det) >= {"payload", "ok", "corrected_bits", "confidence", "bit_probabilities"}
-    assert set(det["payload"]) == {"hex", "bits"} and len(det["payload"]["bits"]) == 8
+    assert set(det["payload"]) == {"hex", "bits"} and len(det["payload"]["bits"]) == 4
     assert len(det["bit_probabilities"]) == DeepMorphModel.load(trained).codec.spec.code_bits
     assert results[1]["detections"] == []
     text = runner.invoke(app, ["decode", str(trained), str(png)])
@@ -221,7 +225,7 @@ def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "payload, message",
-    [("0xA", "hex"), ("0x1FF", ""), ("0101", "8"), ("hello", ""), ("01010101010", "8")],
+    [("0xA5", "hex"), ("0x", ""), ("010", "4"), ("hello", ""), ("01010", "4")],
 )
 def test_cli_wrong_payload_is_an_error(trained: Path, tmp_path: Path, payload: str, message: str) -> None:
     result = runner.invoke(app, ["encode", str(trained), "--payload", payload, "--out", str(tmp_path / "x.svg")])
