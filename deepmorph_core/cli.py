@@ -254,16 +254,6 @@ def train(
     rotate: RotateOpt = None,
 ) -> None:
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
-    from deepmorph_core.api import train_model
-
-    def on_start(total: int, done: int) -> Callable[[Any], None]:
-        progress.update(task, total=total, completed=done)
-        return lambda m: progress.update(
-            task,
-            completed=m.step,
-            description=f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}",
-        )
-
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -273,7 +263,9 @@ def train(
         TimeRemainingColumn,
     )
 
-    with Progress(
+    from deepmorph_core.api import train_model
+
+    progress = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
@@ -281,9 +273,19 @@ def train(
         TextColumn("ETA"),
         TimeRemainingColumn(),
         console=err,
-        transient=False,
-    ) as progress:
-        task = progress.add_task("starting", total=steps)
+    )
+
+    def on_start(total: int, done: int) -> Callable[[Any], None]:
+        # started only once the drawing and settings are validated, so errors print alone
+        progress.start()
+        task = progress.add_task("training", total=total, completed=done)
+        return lambda m: progress.update(
+            task,
+            completed=m.step,
+            description=f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}",
+        )
+
+    try:
         summary = train_model(
             svg,
             out_path,
@@ -309,6 +311,8 @@ def train(
             },
             on_start=on_start,
         )
+    finally:
+        progress.stop()
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
