@@ -45,7 +45,8 @@ class TrainConfig(BaseModel):
         steps: total optimisation steps (both stages).
         batch: perturbations per step.
         width: image width in pixels (decoder input; the height follows the drawing).
-        lr, encoder_lr: Adam learning rates of the decoder and the encoder.
+        lr, encoder_lr: Adam learning rates of the decoder and the encoder (decayed by a cosine
+            to 10 % over stage 2).
         stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
         plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
             window) gains less than ``plateau_gain`` from one window to the next.
@@ -232,6 +233,7 @@ class Trainer:
         self.opt_dec.zero_grad(set_to_none=True)
         self.opt_enc.zero_grad(set_to_none=True)
         loss.backward()
+        self._set_learning_rates()
         self.opt_dec.step()
         if stage2:
             self.opt_enc.step()
@@ -242,6 +244,20 @@ class Trainer:
         rec.step += 1
         self._update_stage(bit_acc)
         return StepMetrics(rec.step, rec.stage, loss.item(), bit_acc, word_acc, rec.elapsed_s)
+
+    def _set_learning_rates(self) -> None:
+        """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step.
+
+        A function of the step alone, so a resumed run follows the same schedule.
+        """
+        rec, cfg = self.record, self.cfg
+        factor = 1.0
+        if rec.stage == 2 and rec.stage2_start is not None and cfg.steps > rec.stage2_start:
+            progress = min(1.0, (rec.step - rec.stage2_start) / (cfg.steps - rec.stage2_start))
+            factor = 0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress))
+        for opt, base in ((self.opt_dec, cfg.lr), (self.opt_enc, cfg.encoder_lr)):
+            for group in opt.param_groups:
+                group["lr"] = base * factor
 
     def _update_stage(self, bit_acc: float) -> None:
         rec, cfg = self.record, self.cfg
