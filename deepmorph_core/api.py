@@ -25,11 +25,12 @@ from torch import Tensor
 
 from deepmorph_core.bounds import BoundSpec
 from deepmorph_core.drawing import Drawing, load_drawing
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.errors import DeepMorphError, SvgError
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg_ink
+from deepmorph_core.svg.secure import read_svg_bytes
 
 BUNDLED_DRAWING = Path(__file__).parent / "data" / "ghost.svg"
 
@@ -73,10 +74,14 @@ class MorphableDrawing:
         scale: tuple[float, float] | None = None,
         rotate: tuple[float, float] | None = None,
         registry: Registry | None = None,
+        label: str | None = None,
     ) -> MorphableDrawing:
-        """Parse an SVG file or document; keyword bounds apply where the SVG says nothing."""
+        """Parse an SVG file or document; keyword bounds apply where the SVG says nothing.
+
+        ``label`` names a bytes source in error messages (a path names itself).
+        """
         defaults = bound_defaults(move, shift, scale, rotate)
-        drawing = load_drawing(source, defaults=defaults, registry=registry or default_registry())
+        drawing = load_drawing(source, defaults=defaults, registry=registry or default_registry(), label=label)
         return cls(drawing, MorphSpace(drawing))
 
     @property
@@ -220,7 +225,14 @@ def train_model(
 
     out = Path(out)
     overrides = {k: v for k, v in (train or {}).items() if v is not None}
-    svg_text = Path(svg).read_text() if not isinstance(svg, bytes) else svg.decode()
+    if isinstance(svg, bytes):
+        data, label = svg, "<drawing>"
+    else:
+        data, label = read_svg_bytes(svg), str(svg)
+    try:
+        svg_text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise SvgError("the drawing is not UTF-8 text", label) from None
     try:
         if resume:
             model = DeepMorphModel.load(out)
@@ -234,8 +246,6 @@ def train_model(
         else:
             if out.exists() and not overwrite:
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
-            load_drawing_check = MorphableDrawing.load(Path(svg) if not isinstance(svg, bytes) else svg)
-            del load_drawing_check  # validates the SVG (with a file-and-line error) before anything else
             config = TrainConfig(**overrides)
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
             augment = build_augment(config.severity, config.width)
@@ -243,13 +253,14 @@ def train_model(
             torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
             model = DeepMorphModel.create(
                 svg_text,
-                Path(svg).name if not isinstance(svg, bytes) else "<drawing>",
+                Path(label).name,
                 defaults.model_dump(exclude_none=True),
                 choose_codec(payload_bits, crc_bits, ecc_t),
                 config.width,
                 {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
                 augment.config.model_dump(),
                 config.model_dump(),
+                label=label,
             )
     except ValidationError as exc:
         raise DeepMorphError(f"training settings: {format_validation_error(exc).replace('dm:', '--')}") from None

@@ -312,7 +312,8 @@ def train(
             on_start=on_start,
         )
     finally:
-        progress.stop()
+        if progress.live.is_started:  # stopping a bar never shown would print a stray newline
+            progress.stop()
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")

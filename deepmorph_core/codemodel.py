@@ -17,7 +17,7 @@ from torch import Tensor
 
 from deepmorph_core.api import MorphableDrawing
 from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
-from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, format_payload
+from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, SvgError
 from deepmorph_core.imaging import align_to_frame, render_moments, to_gray
 from deepmorph_core.model import Decoder, DecoderConfig, Encoder
@@ -75,9 +75,10 @@ class DeepMorphModel:
         augment: dict[str, Any],
         train: dict[str, Any],
         decoder_config: DecoderConfig | None = None,
+        label: str | None = None,
     ) -> DeepMorphModel:
-        """A fresh (untrained) model for a drawing."""
-        md = MorphableDrawing.load(drawing_svg.encode(), **_bound_kwargs(bounds_defaults))
+        """A fresh (untrained) model for a drawing (``label`` names it in SVG errors)."""
+        md = MorphableDrawing.load(drawing_svg.encode(), label=label or drawing_name, **_bound_kwargs(bounds_defaults))
         if md.n_variables == 0:
             raise DeepMorphError(
                 f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
@@ -233,4 +234,4 @@ def _bound_kwargs(defaults: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-__all__ = ["DeepMorphModel", "Detection", "format_payload"]
+__all__ = ["DeepMorphModel", "Detection"]

@@ -249,6 +249,7 @@ class _Walker:
                 drawing.skipped.append((el.sourceline, f"<{name}> draws nothing"))
                 continue
             primitive.evenodd = style.fill_rule == "evenodd"
+            primitive.filled = any(mode == "fill" for mode, _ in style.paints)
             if el_fixed and groups:
                 raise self.error(el, "a dm:fixed element cannot sit inside a group with dm:shift/scale/rotate")
             inherited = BoundSpec(move=el_move) if el_move is not None else BoundSpec()

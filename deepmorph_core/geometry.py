@@ -23,11 +23,6 @@ CAP_ROUND, CAP_BUTT, CAP_SQUARE = 0, 1, 2
 CAP_CODES = {"round": CAP_ROUND, "butt": CAP_BUTT, "square": CAP_SQUARE}
 
 
-def safe_norm(v: Tensor, dim: int = -1) -> Tensor:
-    """Euclidean norm with a finite gradient at zero (``sqrt(|v|^2 + eps)``)."""
-    return torch.sqrt((v * v).sum(dim) + _EPS)
-
-
 # -- elementwise kernels ----------------------------------------------------------------
 # Every argument broadcasts against the others. The outer-product functions below (every
 # point against every piece) and the rasterizer's flat path (one point per piece-pixel pair)

@@ -7,7 +7,6 @@ its own geometry and gives culling a bounding box for free.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import torch
@@ -112,10 +111,6 @@ class OutlineBuilder:
         """Add a closed polygon ``(B, M, 2)`` used for fill inside tests."""
         self._rings.append(points)
 
-    def extent(self, points: Tensor) -> None:
-        """Add points ``(B, E, 2)`` that the bounding box must contain."""
-        self._extent.append(points)
-
     def build(self) -> Outline:
         B, dt, dev = self.batch, self.dtype, self.device
         if self._lines:
@@ -192,72 +187,6 @@ def fill_sdf(outline: Outline, grid: Tensor, evenodd: bool = False) -> Tensor:
     winding = sum(G.ring_winding(grid, ring) for ring in outline.rings)
     inside = (winding % 2 == 1) if evenodd else (winding != 0)
     return torch.where(inside, d, -d)
-
-
-def stroke_sdf_tiled(outline: Outline, box: tuple[int, int, int, int], half_width: Tensor, reach: float) -> Tensor:
-    """:func:`stroke_sdf` over the pixel rectangle ``box`` = (x0, y0, x1, y1), evaluating each
-    piece only inside its own padded bounding box.
-
-    A long path's pieces each cover a small part of the path's box; evaluating every piece
-    over the whole box is most of a dense rasterizer's waste. Pixels no piece reaches get a
-    large negative distance (no ink). The union is an exact ``max`` as in :func:`stroke_sdf`.
-
-    Returns:
-        ``(B, y1 - y0, x1 - x0)`` signed distances.
-    """
-    x0, y0, x1, y1 = box
-    B, dtype, device = half_width.shape[0], half_width.dtype, half_width.device
-    width = x1 - x0
-    pad = float(half_width.detach().max()) + reach
-    slots: list[Tensor] = []
-    values: list[Tensor] = []
-    with torch.no_grad():
-        line_lo = torch.minimum(outline.line_a, outline.line_b).amin(0)  # (K, 2)
-        line_hi = torch.maximum(outline.line_a, outline.line_b).amax(0)
-        if outline.arc_center.shape[1]:
-            pts = G.flatten_arc(outline.arc_center, outline.arc_linear, outline.arc_theta0, outline.arc_dtheta, 16)
-            arc_lo, arc_hi = pts.amin((0, 2)), pts.amax((0, 2))  # (J, 2)
-    pieces = [("line", k, line_lo[k], line_hi[k]) for k in range(outline.line_a.shape[1])]
-    pieces += [("arc", j, arc_lo[j], arc_hi[j]) for j in range(outline.arc_center.shape[1])]
-    for kind, k, lo, hi in pieces:
-        px0 = max(x0, int(math.floor(float(lo[0]) - pad)))
-        py0 = max(y0, int(math.floor(float(lo[1]) - pad)))
-        px1 = min(x1, int(math.ceil(float(hi[0]) + pad)) + 1)
-        py1 = min(y1, int(math.ceil(float(hi[1]) + pad)) + 1)
-        if px1 <= px0 or py1 <= py0:
-            continue
-        grid = pixel_grid(px0, py0, px1, py1, dtype, device)
-        if kind == "line":
-            sdf = G.segment_stroke_sdf(
-                grid,
-                outline.line_a[:, k : k + 1],
-                outline.line_b[:, k : k + 1],
-                half_width,
-                outline.cap_start[k : k + 1],
-                outline.cap_end[k : k + 1],
-            )[:, 0]
-        else:
-            inv = torch.linalg.inv(outline.arc_linear[:, k : k + 1])
-            d = G.arc_distance(
-                grid,
-                outline.arc_center[:, k : k + 1],
-                inv,
-                outline.arc_theta0[:, k : k + 1],
-                outline.arc_dtheta[:, k : k + 1],
-                outline.arc_start[:, k : k + 1],
-                outline.arc_end[:, k : k + 1],
-            )[:, 0]
-            sdf = half_width[:, None] - d
-        rows = torch.arange(py0 - y0, py1 - y0, device=device)[:, None] * width
-        slots.append((rows + torch.arange(px0 - x0, px1 - x0, device=device)[None]).reshape(-1))
-        values.append(sdf)
-    out = torch.full((B, (y1 - y0) * width), -1e3, dtype=dtype, device=device)
-    if slots:
-        # One scatter for all pieces: in-place slice writes would make autograd copy the whole
-        # buffer once per piece in the backward pass.
-        index = torch.cat(slots)[None].expand(B, -1)
-        out = out.scatter_reduce(1, index, torch.cat(values, 1), reduce="amax", include_self=True)
-    return out.reshape(B, y1 - y0, width)
 
 
 def pixel_grid(x0: int, y0: int, x1: int, y1: int, dtype: torch.dtype, device: torch.device) -> Tensor:

@@ -27,6 +27,8 @@ class BasePrimitive:
 
     Attributes:
         evenodd: fill rule of the element (set by the drawing parser from the style).
+        filled: whether the element paints a fill (set by the parser). Outlines of unfilled
+            elements may leave out their rings, which only fills use.
     """
 
     kind: ClassVar[str]
@@ -34,6 +36,7 @@ class BasePrimitive:
     priority: ClassVar[int] = 0
     morphable: ClassVar[str] = ""
     evenodd: bool = False
+    filled: bool = True
 
     def outline(self, frame: Frame) -> Outline:  # pragma: no cover - abstract
         raise NotImplementedError

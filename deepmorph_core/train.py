@@ -170,7 +170,7 @@ class Trainer:
             for pid, st in opt.state_dict()["state"].items():
                 for key, val in st.items():
                     out[f"{name}.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
-        out["window"] = torch.tensor(self._window + [float("nan")] * 0, dtype=torch.float64)
+        out["window"] = torch.tensor(self._window, dtype=torch.float64)
         if self._prev_window is not None:
             out["prev_window"] = torch.tensor([self._prev_window], dtype=torch.float64)
         return out

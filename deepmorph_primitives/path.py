@@ -118,7 +118,8 @@ class Path(BasePrimitive):
         b = builder_for(frame)
         for sub in self.subpaths:
             n = len(sub.segments)
-            ring = [frame.to_pixels(frame.local[:, sub.start : sub.start + 1])]
+            # rings (a second evaluation of every curve) only matter to fills
+            ring = [frame.to_pixels(frame.local[:, sub.start : sub.start + 1])] if self.filled else None
             for k, (seg, idx) in enumerate(sub.segments):
                 open_end = not sub.closed
                 caps = (
@@ -127,8 +128,10 @@ class Path(BasePrimitive):
                 )
                 pts = frame.local[:, idx]
                 seg.add_pieces(b, frame, pts, caps)
-                ring.append(seg.flatten(frame, pts))
-            b.ring(torch.cat(ring, 1))
+                if ring is not None:
+                    ring.append(seg.flatten(frame, pts))
+            if ring is not None:
+                b.ring(torch.cat(ring, 1))
         return b.build()
 
     def write(self, element: etree._Element, points: np.ndarray, morph: ElementMorph) -> None:

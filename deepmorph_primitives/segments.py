@@ -117,11 +117,6 @@ class ArcSegment:
             arc.rest = RestArc.of(arc, p)
         return arc, [segment.end]
 
-    @property
-    def follow_chord(self) -> bool:
-        """Whether this arc moves as a similarity of its chord (see the class docstring)."""
-        return self.rest is not None
-
     def _radius_scale(self, points: np.ndarray) -> float:
         """sqrt(lambda) of SVG F.6.6: how much the radii must grow to span the end points."""
         half = (points[0] - points[1]) / 2

@@ -257,3 +257,16 @@ def test_demo_runs_end_to_end_on_the_bundled_model(tmp_path: Path) -> None:
         assert (tmp_path / "demo" / name).is_file(), name
     assert result.stdout.count("decoded") + result.stdout.count("no drawing found") == 3
     assert "WRONG" not in result.stdout  # a wrong payload must never pass the integrity check
+
+
+def test_train_refuses_missing_or_broken_drawings(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.svg"
+    bad.write_bytes(b'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 9 9">\n<text>x</text></svg>')
+    for svg, message in (
+        (tmp_path / "missing.svg", "cannot read file"),
+        (bad, f"{bad}:2: unsupported: element <text>"),
+    ):
+        result = runner.invoke(app, ["train", str(svg), "--out", str(tmp_path / "m.dmm"), "--steps", "2"])
+        assert result.exit_code == 1 and message in result.stderr, result.output
+        assert result.stderr.count("\n") == 1
+    assert not (tmp_path / "m.dmm").exists()
