@@ -49,6 +49,15 @@ class TrainingRecord(BaseModel):
     metrics: dict[str, float] = Field(default_factory=dict)
 
 
+class DetectorMeta(BaseModel):
+    """The detector stored beside the codec networks (``deepmorph train-detector``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    config: dict[str, Any]
+    record: TrainingRecord
+
+
 class BundleMeta(BaseModel):
     """The JSON part of a bundle (everything but tensors)."""
 
@@ -67,6 +76,7 @@ class BundleMeta(BaseModel):
     augment: dict[str, Any]
     train: dict[str, Any]
     record: TrainingRecord
+    detector: DetectorMeta | None = None
 
 
 def _bad(path: Path | str, why: str) -> DeepMorphError:

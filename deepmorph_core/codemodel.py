@@ -60,6 +60,7 @@ class DeepMorphModel:
     width: int
     meta: BundleMeta
     extra_tensors: dict[str, Tensor] = field(default_factory=dict)
+    detector_state: dict[str, Tensor] = field(default_factory=dict)
 
     # -- construction and files -----------------------------------------------------------
 
@@ -131,7 +132,10 @@ class DeepMorphModel:
             meta,
         )
         nets = {k: v for k, v in tensors.items() if k.startswith(("encoder.", "decoder."))}
-        model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets}
+        model.detector_state = {k: v for k, v in tensors.items() if k.startswith("detector.")}
+        model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets and k not in model.detector_state}
+        if meta.detector is not None and not model.detector_state:
+            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (detector weights are missing)")
         try:
             model.encoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("encoder.")})
             model.decoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("decoder.")})
@@ -145,6 +149,7 @@ class DeepMorphModel:
         """Write the bundle atomically (``extra``: optimiser/RNG state in checkpoints)."""
         tensors = {f"encoder.{k}": v for k, v in self.encoder.state_dict().items()}
         tensors.update({f"decoder.{k}": v for k, v in self.decoder.state_dict().items()})
+        tensors.update(self.detector_state)
         tensors.update(extra or {})
         save_bundle(path, self.meta, tensors)
 

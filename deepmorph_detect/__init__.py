@@ -1,6 +1,14 @@
-"""Detectors, keypoints, pose and rectification (the next stage).
+"""Finding drawings in photos: detection, alignment, rectification, pose, fusion, scenes.
+
+* :mod:`~deepmorph_detect.network` and :mod:`~deepmorph_detect.training`: the detector CNN
+  and its training on synthetic scenes (``deepmorph train-detector``).
+* :mod:`~deepmorph_detect.locate`: the chain from a photo to decoded drawings with keypoints,
+  homography and pose; :mod:`~deepmorph_detect.refine`: sub-pixel alignment and verification.
+* :mod:`~deepmorph_detect.camera`: intrinsics, calibration files and PnP.
+* :mod:`~deepmorph_detect.fusion`: fusing a drawing's bits over the frames of a video.
+* :mod:`~deepmorph_detect.scenes` and :mod:`~deepmorph_detect.benchmark`: the capture
+  simulator (``deepmorph synth``) and the scene benchmark (``deepmorph bench-scenes``).
 
 Detectors implement :class:`deepmorph_core.protocols.Detector` and register through the
-``deepmorph_register_detectors`` hook like every other plugin. No detector ships yet: until one
-does, ``deepmorph decode`` reads images in which the drawing roughly fills the frame.
+``deepmorph_register_detectors`` hook like every other plugin.
 """

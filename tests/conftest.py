@@ -11,6 +11,7 @@ import pytest
 from hypothesis import settings
 
 import deepmorph_augment.plugin as builtin_augmentations
+import deepmorph_detect.plugin as builtin_detectors
 import deepmorph_primitives.plugin as builtin_plugin
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
 
@@ -31,14 +32,14 @@ def make_svg(body: str, root: str = 'viewBox="0 0 24 24"', style: str = "") -> b
 
 @pytest.fixture
 def builtin_registry() -> Registry:
-    """What the deepmorph distribution itself provides: built-in primitives and augmentations."""
-    return load_registry([builtin_plugin, builtin_augmentations], entry_points=False)
+    """What the deepmorph distribution itself provides: built-in primitives, augmentations, detectors."""
+    return load_registry([builtin_plugin, builtin_augmentations, builtin_detectors], entry_points=False)
 
 
 @pytest.fixture
 def bezier_registry() -> Registry:
     bez = pytest.importorskip("deepmorph_bezier.plugin", reason="the example Bézier plugin is not installed")
-    return load_registry([builtin_plugin, builtin_augmentations, bez], entry_points=False)
+    return load_registry([builtin_plugin, builtin_augmentations, builtin_detectors, bez], entry_points=False)
 
 
 @pytest.fixture(autouse=True)

@@ -28,6 +28,8 @@ def test_builtins_are_an_ordinary_entry_point() -> None:
     reg = load_registry()  # from the installed entry points only
     assert reg.primitives["circle"].plugin == "builtin_primitives"
     assert reg.primitives["circle"].distribution.startswith("deepmorph ")
+    assert eps.get("builtin_detectors") == "deepmorph_detect.plugin"
+    assert reg.detectors["centrenet"].plugin == "builtin_detectors"
 
 
 def test_registry_contents(builtin_registry) -> None:

@@ -1,0 +1,114 @@
+"""Scenes: the whole photo chain on synthetic scenes, side by side with ArUco and QR codes.
+
+For each severity, ``--n`` labelled scenes (640x480, one payload morph, one ArUco marker of the
+same printed size, and ``--distractors`` other drawings) are made by ``deepmorph synth``'s
+generator and scored by ``deepmorph bench-scenes``'s code: detection recall and precision,
+whole-payload success, pose error against the truth next to ArUco's on the same images,
+and time per frame on ``--threads`` (default 1) next to ArUco detection and OpenCV's QR
+detect-and-decode on same-size frames. Then ``--negatives`` scenes holding no drawing of the
+model (other drawings, an ArUco marker, photos and clutter) count wrong payloads reported ok.
+
+    .venv/bin/python bench/scenes.py --n 200 --negatives 1000
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", type=Path, default=None, help="bundle (default: the bundled ghost)")
+    ap.add_argument("--n", type=int, default=200, help="scenes per severity")
+    ap.add_argument("--severities", default="easy,medium,hard")
+    ap.add_argument("--distractors", type=int, default=1)
+    ap.add_argument("--negatives", type=int, default=1000, help="scenes without the drawing")
+    ap.add_argument("--sequences", type=int, default=50, help="hard 5-frame sequences for frame fusion")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / "scenes.json")
+    args = ap.parse_args()
+    set_threads(args.threads)
+    import cv2
+
+    cv2.setNumThreads(args.threads)
+    from deepmorph_core.api import BUNDLED_MODEL
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_detect.benchmark import bench_scenes, write_scenes
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.scenes import SceneMaker
+
+    model_path = args.model or BUNDLED_MODEL
+    model = DeepMorphModel.load(model_path)
+    reports = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for sev in args.severities.split(","):
+            folder = Path(tmp) / sev
+            t0 = time.perf_counter()
+            write_scenes(model, folder, args.n, sev, args.seed, distractors=args.distractors, aruco=True)
+            reports[sev] = bench_scenes(model, folder)
+            print(f"{sev}: {args.n} scenes in {time.perf_counter() - t0:.0f} s", flush=True)
+    # negatives: no drawing of the model, only other drawings, markers, photos and clutter
+    locator = Locator(model)
+    maker = SceneMaker(model, (640, 480), "medium", seed=args.seed + 1000)
+    neg = {"images": args.negatives, "detections": 0, "wrong_ok": 0}
+    for i in range(args.negatives):
+        scene = maker.make(drawings=0, distractors=1 + i % 3, aruco=i % 2 == 0)
+        dets = locator.locate(scene.image)
+        neg["detections"] += len(dets)
+        neg["wrong_ok"] += sum(bool(d.result.ok) for d in dets)
+
+    # frame fusion: the same print filmed over 5 frames (fresh light, blur, noise, JPEG each)
+    from deepmorph_detect.fusion import FrameFuser
+
+    fmaker = SceneMaker(model, (640, 480), "hard", seed=args.seed + 2000)
+    fusion = {"sequences": args.sequences, "frames": 0, "single_ok": 0, "fused_ok": 0, "fused_wrong_ok": 0}
+    for _ in range(args.sequences):
+        scene = fmaker.make(drawings=1, frames=5)
+        truth = scene.placements[0].payload
+        fuser = FrameFuser(model.codec)
+        for k, frame in enumerate(scene.frames):
+            dets = locator.locate(frame, camera=scene.camera)
+            fusion["frames"] += 1
+            fusion["single_ok"] += any(d.result.ok and (d.result.payload == truth).all() for d in dets)
+            fuser.add(str(k), dets)
+        fused = fuser.results()
+        right = "".join(map(str, truth))
+        fusion["fused_ok"] += any(e["ok"] and e["payload"]["bits"] == right for e in fused)
+        fusion["fused_wrong_ok"] += sum(e["ok"] and e["payload"]["bits"] != right for e in fused)
+
+    rows = []
+    for sev, r in reports.items():
+        d, a = r["pose"]["deepmorph"], r["pose"]["aruco"]
+        rows.append(
+            [sev, r["scenes"], f"{r['recall']:.1%}", f"{r['precision']:.1%}", f"{r['payload_success']:.1%}",
+             r["wrong_ok"], d["rotation_deg_median"], a["rotation_deg_median"], d["translation_rel_median"],
+             a["translation_rel_median"], d["corner_px_median"], a["corner_px_median"], f"{r['aruco_recall']:.1%}"]
+        )  # fmt: skip
+    print(table(["severity", "scenes", "recall", "precision", "payload ok", "wrong ok", "rot° ours", "rot° ArUco",
+                 "trans ours", "trans ArUco", "corner px ours", "corner px ArUco", "ArUco found"], rows))  # fmt: skip
+    speed = [[sev, r["speed_ms"]["deepmorph_locate_decode_median"], r["speed_ms"]["aruco_detect_median"],
+              r["speed_ms"]["qr_detect_and_decode_median"],
+              round(r["speed_ms"]["deepmorph_locate_decode_median"] / r["speed_ms"]["qr_detect_and_decode_median"], 2)]
+             for sev, r in reports.items()]  # fmt: skip
+    print()
+    print(
+        table(["severity", f"ours ms ({args.threads} thread)", "ArUco ms", "QR detect+decode ms", "ours / QR"], speed)
+    )
+    print(f"\nnegatives: {neg['images']} scenes without the drawing -> {neg['detections']} detections, "
+          f"{neg['wrong_ok']} wrong payloads reported ok")  # fmt: skip
+    write_json(
+        args.out, {"environment": environment(), "model": str(model_path), "severities": reports, "negatives": neg}
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

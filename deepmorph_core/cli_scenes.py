@@ -1,0 +1,243 @@
+"""Commands that work on photos and scenes: ``decode``, ``synth``, ``bench-scenes`` and
+``train-detector`` (registered on :data:`deepmorph_core.cli.app`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from deepmorph_core.cli import JsonOpt, ModelArg, app, err, friendly, out
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
+
+
+def _progress(description: str):  # noqa: ANN202 - a rich Progress
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn(description if "{" in description else description + " {task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err,
+        transient=False,
+    )
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise DeepMorphError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
+    if not (64 <= w <= 8192 and 64 <= h <= 8192):
+        raise DeepMorphError(f"--size {text!r}: width and height must be 64..8192 pixels")
+    return w, h
+
+
+@app.command()
+@friendly
+def decode(
+    model: ModelArg,
+    inputs: Annotated[
+        list[Path],
+        typer.Argument(help="Images (each decoded on its own), folders of frames or videos (frames fused)."),
+    ],
+    as_json: JsonOpt = False,
+    camera: Annotated[
+        Optional[str],
+        typer.Option("--camera", help="Intrinsics fx,fy,cx,cy in pixels, or an OpenCV calibration file (YAML/XML)."),
+    ] = None,
+    overlay: Annotated[
+        Optional[Path],
+        typer.Option("--overlay", help="Write an annotated image (a folder when there are several inputs)."),
+    ] = None,
+    every: Annotated[int, typer.Option("--every", min=1, help="Use every N-th frame of a video.")] = 1,
+    hard_only: Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")] = False,
+) -> None:
+    """Find every drawing in photos, read its payload, and give its keypoints and camera pose."""
+    import cv2
+
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_detect.camera import parse_camera
+    from deepmorph_detect.fusion import FrameFuser
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.media import check_video, folder_frames, is_video, read_color, video_frames
+    from deepmorph_detect.overlay import draw_overlay
+
+    m = DeepMorphModel.load(model)
+    cam = parse_camera(camera) if camera else None
+    jobs: list[tuple[str, Path, Any]] = []
+    for path in inputs:  # every input is checked before any work
+        if path.is_dir():
+            jobs.append(("folder", path, folder_frames(path)))
+        elif is_video(path):
+            check_video(path)
+            jobs.append(("video", path, None))
+        else:
+            jobs.append(("image", path, read_color(path)))
+    if overlay is not None and len(jobs) > 1 and overlay.suffix:
+        raise DeepMorphError(f"--overlay {overlay}: with several inputs, give a folder for the annotated images")
+    locator = Locator(m)
+    soft = not hard_only
+    results: list[dict[str, Any]] = []
+
+    def save_overlay(path: Path, image: Any, dets: list[Any]) -> None:
+        if overlay is None:
+            return
+        target = overlay if len(jobs) == 1 and overlay.suffix else overlay / f"{path.stem}.overlay.png"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        ok, buf = cv2.imencode(target.suffix or ".png", draw_overlay(image, dets))
+        if not ok:
+            raise DeepMorphError(f"--overlay {target}: cannot write this image format")
+        atomic_write(target, buf.tobytes())
+
+    for kind, path, payload in jobs:
+        if kind == "image":
+            dets = locator.locate(payload, camera=cam, soft=soft)
+            results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
+            save_overlay(path, payload, dets)
+            continue
+        fuser = FrameFuser(m.codec)
+        frames = ((p.name, read_color(p)) for p in payload) if kind == "folder" else video_frames(path, every)
+        last = None
+        for label, frame in frames:
+            dets = locator.locate(frame, camera=cam, soft=soft)
+            fuser.add(label, dets)
+            last = (frame, dets)
+        results.append({"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)})
+        if last is not None:
+            save_overlay(path, *last)
+    if as_json:
+        out.print_json(json.dumps(results))
+        return
+    for r in results:
+        name = r.get("image") or f"{r['sequence']} ({r['frames']} frames)"
+        if not r["detections"]:
+            out.print(f"{name}: no drawing found")
+        for d in r["detections"]:
+            status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
+            where = ""
+            if "pose" in d:
+                t = d["pose"]["tvec"]
+                where = f", at {t[2]:.2f} drawing widths" + (
+                    " (assumed camera)" if d["pose"]["camera"]["assumed"] else ""
+                )
+            frames = f", fused over {d['frames']} frames" if "frames" in d else ""
+            out.print(
+                f"{name}: {d['payload']['hex']} {status}, corrected {d['corrected_bits']} bits, "
+                f"confidence {d['confidence']:.3f}{where}{frames}"
+            )
+
+
+@app.command()
+@friendly
+def synth(
+    model: ModelArg,
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each).")],
+    n: Annotated[int, typer.Option("--n", min=1, max=1_000_000, help="Number of scenes.")] = 200,
+    severity: Annotated[str, typer.Option("--severity", help="easy, medium or hard.")] = "medium",
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same scenes).")] = 0,
+    size: Annotated[str, typer.Option("--size", help="Photo size WIDTHxHEIGHT.")] = "640x480",
+    drawings: Annotated[int, typer.Option("--drawings", min=0, max=8, help="Drawings of the model per scene.")] = 1,
+    distractors: Annotated[int, typer.Option("--distractors", min=0, max=8, help="Other drawings per scene.")] = 0,
+    aruco: Annotated[bool, typer.Option("--aruco/--no-aruco", help="Add an ArUco marker of the same size.")] = True,
+    empty_share: Annotated[
+        float, typer.Option("--empty-share", min=0, max=1, help="Share of scenes without the model's drawing.")
+    ] = 0.0,
+) -> None:
+    """Make labelled synthetic photos of printed drawings (the capture simulator)."""
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_detect.benchmark import write_scenes
+    from deepmorph_detect.scenes import SCENE_SEVERITIES
+
+    if severity not in SCENE_SEVERITIES:
+        raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(SCENE_SEVERITIES)}")
+    m = DeepMorphModel.load(model)
+    dims = _size(size)
+    progress = _progress("synth")
+    with progress:
+        task = progress.add_task("", total=n)
+        write_scenes(m, out_dir, n, severity, seed, dims, drawings, distractors, aruco, empty_share,
+                     on_scene=lambda i: progress.update(task, completed=i))  # fmt: skip
+    out.print(f"wrote {n} scenes ({severity}, {dims[0]}x{dims[1]}) to {out_dir}")
+
+
+@app.command("bench-scenes")
+@friendly
+def bench_scenes_cmd(
+    model: ModelArg,
+    scenes: Annotated[Path, typer.Argument(help="A folder written by `deepmorph synth`.")],
+    as_json: JsonOpt = False,
+    report_path: Annotated[Optional[Path], typer.Option("--out", help="Also write the report as JSON here.")] = None,
+    threads: Annotated[int, typer.Option("--threads", min=1, help="CPU threads (speed is per this many).")] = 1,
+) -> None:
+    """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
+    import cv2
+    import torch
+
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_detect.benchmark import bench_scenes, format_report, read_scenes
+
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(threads)
+    m = DeepMorphModel.load(model)
+    _, listed = read_scenes(scenes)  # validates the folder before any work
+    progress = _progress("bench")
+    with progress:
+        task = progress.add_task("", total=len(listed))
+        report = bench_scenes(m, scenes, on_scene=lambda i: progress.update(task, completed=i))
+    report["threads"] = threads
+    if report_path is not None:
+        atomic_write(report_path, json.dumps(report, indent=1).encode())
+    if as_json:
+        out.print_json(json.dumps(report))
+    else:
+        out.print(format_report(report))
+
+
+@app.command("train-detector")
+@friendly
+def train_detector_cmd(
+    model: ModelArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps.")] = 2000,
+    batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    threads: Annotated[int, typer.Option("--threads", min=1, help="torch threads of the training process.")] = 1,
+    workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+) -> None:
+    """Train the detector of a model on synthetic scenes and store it in the bundle."""
+    from deepmorph_detect.training import DetectorConfig, train_detector
+
+    config = None if resume else DetectorConfig(steps=steps, batch=batch, seed=seed, threads=threads, workers=workers)
+    progress = _progress("detector")
+    with progress:
+        task = progress.add_task("", total=steps)
+
+        def on_log(m: dict[str, Any]) -> None:
+            progress.update(
+                task,
+                completed=m["step"],
+                description=f"loss {m['loss']:.3f} centre recall {m['recall']:.3f} corner err {m['corner']:.1f}px",
+            )
+
+        summary = train_detector(out_path if resume else model, out_path, config, resume=resume, on_log=on_log)
+    out.print(
+        f"wrote {summary.bundle} ({summary.steps} detector steps in {summary.elapsed_s:.0f} s); log {summary.log}"
+    )
+
+
+__all__: list[str] = []

@@ -1,0 +1,247 @@
+"""Scoring the whole chain on synthetic scenes, side by side with ArUco and QR codes.
+
+:func:`write_scenes` stores scenes (PNG + JSON truth) as ``deepmorph synth`` does;
+:func:`bench_scenes` reads such a folder back and measures, on the same images:
+
+* detection recall and precision, whole-payload success, and wrong payloads reported as ok;
+* pose: rotation and translation error and corner reprojection error, for our drawings and for
+  the ArUco markers printed at the same size in the same scenes (found by ``cv2.aruco``);
+* time per frame on the current thread count: our locate+decode, ArUco detection on the same
+  frames, and ``cv2.QRCodeDetector().detectAndDecode`` on same-size frames holding a QR code.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
+from deepmorph_detect.camera import Camera, rotation_error_deg, solve_pose, translation_error
+from deepmorph_detect.locate import Located, Locator
+from deepmorph_detect.media import read_color
+from deepmorph_detect.scenes import ARUCO_DICT, Placement, SceneMaker
+
+
+def write_scenes(
+    model: DeepMorphModel,
+    out: Path,
+    n: int,
+    severity: str = "medium",
+    seed: int = 0,
+    size: tuple[int, int] = (640, 480),
+    drawings: int = 1,
+    distractors: int = 0,
+    aruco: bool = True,
+    empty_fraction: float = 0.0,
+    on_scene: Any = None,
+) -> Path:
+    """Write ``n`` labelled scenes into ``out`` (``scene_00000.png`` + ``.json``, ``index.json``).
+
+    ``empty_fraction`` of the scenes hold no drawing of the model (only distractors and
+    markers): the negatives for false-accept counts.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    maker = SceneMaker(model, size, severity, seed=seed)
+    rng = np.random.default_rng([seed, 7])
+    names = []
+    for i in range(n):
+        empty = rng.random() < empty_fraction
+        scene = maker.make(
+            drawings=0 if empty else drawings,
+            distractors=max(distractors, 1) if empty else distractors,
+            aruco=aruco,
+        )
+        name = f"scene_{i:05d}"
+        ok, buf = cv2.imencode(".png", scene.image)
+        if not ok:  # pragma: no cover
+            raise DeepMorphError("PNG encoding failed")
+        atomic_write(out / f"{name}.png", buf.tobytes())
+        atomic_write(out / f"{name}.json", json.dumps(scene.truth_json(), indent=1).encode())
+        names.append(name)
+        if on_scene:
+            on_scene(i + 1)
+    index = {"format": "deepmorph-scenes/1", "model": model.meta.drawing_name, "severity": severity,
+             "seed": seed, "size": list(size), "scenes": names}  # fmt: skip
+    atomic_write(out / "index.json", json.dumps(index, indent=1).encode())
+    return out
+
+
+def read_scenes(folder: Path) -> tuple[dict[str, Any], list[tuple[Path, dict[str, Any]]]]:
+    """The index and ``(image path, truth)`` pairs of a scene folder; clear errors otherwise."""
+    index_path = folder / "index.json"
+    if not index_path.is_file():
+        raise DeepMorphError(f"{folder}: not a scene folder (no index.json; make one with `deepmorph synth`)")
+    try:
+        index = json.loads(index_path.read_text())
+        names = list(index["scenes"])
+    except (ValueError, KeyError, TypeError):
+        raise DeepMorphError(f"{index_path}: not a scene index written by `deepmorph synth`") from None
+    scenes = []
+    for name in names:
+        truth_path = folder / f"{name}.json"
+        try:
+            truth = json.loads(truth_path.read_text())
+            truth["placements"] = [Placement.from_json(p) for p in truth["placements"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            raise DeepMorphError(f"{truth_path}: missing or malformed scene truth") from None
+        scenes.append((folder / f"{name}.png", truth))
+    return index, scenes
+
+
+def _corner_error(found: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.linalg.norm(np.asarray(found) - truth, axis=1).mean())
+
+
+def _match(det_corners: np.ndarray, truths: list[Placement]) -> Placement | None:
+    centre = det_corners.mean(0)
+    for p in truths:
+        size = float(np.linalg.norm(p.corners[2] - p.corners[0]))
+        if np.linalg.norm(centre - p.corners.mean(0)) < 0.25 * size:
+            return p
+    return None
+
+
+def aruco_detector() -> cv2.aruco.ArucoDetector:
+    """OpenCV's ArUco detector for DICT_6X6_250 with sub-pixel corner refinement."""
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(ARUCO_DICT), params)
+
+
+def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> dict[str, Any]:
+    """Run the chain and the baselines over a scene folder; the report as a dict."""
+    index, scenes = read_scenes(folder)
+    locator = Locator(model)
+    aruco = aruco_detector()
+    square = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], dtype=np.float64)
+    stats: dict[str, Any] = {"drawings": 0, "found": 0, "decoded": 0, "false_detections": 0, "wrong_ok": 0,
+                             "detections": 0, "negative_images": 0, "aruco_markers": 0, "aruco_found": 0}  # fmt: skip
+    rot, trans, corner, a_rot, a_trans, a_corner = [], [], [], [], [], []
+    t_ours, t_aruco = [], []
+    for i, (path, truth) in enumerate(scenes):
+        image = read_color(path)
+        c = truth["camera"]
+        cam = Camera(c["fx"], c["fy"], c["cx"], c["cy"])
+        drawings = [p for p in truth["placements"] if p.kind == "drawing"]
+        markers = [p for p in truth["placements"] if p.kind == "aruco"]
+        stats["drawings"] += len(drawings)
+        stats["negative_images"] += not drawings
+        t0 = time.perf_counter()
+        dets: list[Located] = locator.locate(image, camera=cam)
+        t_ours.append(time.perf_counter() - t0)
+        stats["detections"] += len(dets)
+        matched: set[int] = set()
+        for det in dets:
+            p = _match(det.corners, drawings)
+            if p is None or id(p) in matched:
+                stats["false_detections"] += 1
+                stats["wrong_ok"] += bool(det.result.ok)
+                continue
+            matched.add(id(p))
+            stats["found"] += 1
+            right = p.payload is not None and np.array_equal(det.result.payload, p.payload)
+            stats["decoded"] += bool(det.result.ok and right)
+            stats["wrong_ok"] += bool(det.result.ok and not right)
+            rot.append(rotation_error_deg(det.rvec, p.rvec))
+            trans.append(translation_error(det.tvec, p.tvec))
+            corner.append(_corner_error(det.corners, p.corners))
+        gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        t0 = time.perf_counter()
+        m_corners, ids, _ = aruco.detectMarkers(gray)
+        t_aruco.append(time.perf_counter() - t0)
+        stats["aruco_markers"] += len(markers)
+        found_ids = {} if ids is None else {int(k): cc.reshape(4, 2) for k, cc in zip(ids.ravel(), m_corners)}
+        for p in markers:
+            if int(p.label) not in found_ids:
+                continue
+            cc = found_ids[int(p.label)]
+            stats["aruco_found"] += 1
+            rvec, tvec = solve_pose(cam, square, cc)
+            a_rot.append(rotation_error_deg(rvec, p.rvec))
+            a_trans.append(translation_error(tvec, p.tvec))
+            a_corner.append(_corner_error(cc, p.corners))
+        if on_scene:
+            on_scene(i + 1)
+    qr_ms = _qr_timing(model, tuple(index.get("size", (640, 480))), n=min(30, max(5, len(scenes))))
+
+    def med(v: list[float]) -> float | None:
+        return round(float(np.median(v)), 4) if v else None
+
+    n_dr = max(stats["drawings"], 1)
+    report = {
+        "scenes": len(scenes),
+        "severity": index.get("severity"),
+        **stats,
+        "recall": round(stats["found"] / n_dr, 4),
+        "precision": round(stats["found"] / max(stats["detections"], 1), 4),
+        "payload_success": round(stats["decoded"] / n_dr, 4),
+        "pose": {
+            "deepmorph": {
+                "rotation_deg_median": med(rot),
+                "translation_rel_median": med(trans),
+                "corner_px_median": med(corner),
+                "n": len(rot),
+            },
+            "aruco": {
+                "rotation_deg_median": med(a_rot),
+                "translation_rel_median": med(a_trans),
+                "corner_px_median": med(a_corner),
+                "n": len(a_rot),
+            },
+        },  # fmt: skip
+        "speed_ms": {
+            "deepmorph_locate_decode_median": round(1000 * float(np.median(t_ours)), 2),
+            "aruco_detect_median": round(1000 * float(np.median(t_aruco)), 2),
+            "qr_detect_and_decode_median": qr_ms,
+        },
+        "aruco_recall": round(stats["aruco_found"] / max(stats["aruco_markers"], 1), 4),
+    }
+    return report
+
+
+def _qr_timing(model: DeepMorphModel, size: tuple[int, int], n: int) -> float:
+    """Median ms of ``cv2.QRCodeDetector().detectAndDecode`` on scenes holding one QR code."""
+    maker = SceneMaker(model, size, "medium", seed=99)
+    qr = cv2.QRCodeDetector()
+    times = []
+    for _ in range(n):
+        scene = maker.make(drawings=0, qr="https://deepmorph.example/0xA1B2C3")
+        t0 = time.perf_counter()
+        qr.detectAndDecode(scene.image)
+        times.append(time.perf_counter() - t0)
+    return round(1000 * float(np.median(times)), 2)
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """The report as a plain-text table."""
+    p, s = report["pose"], report["speed_ms"]
+    rows = [
+        ("scenes", report["scenes"], ""),
+        ("drawings / found (recall)", f"{report['drawings']} / {report['found']} ({report['recall']:.1%})", ""),
+        ("precision", f"{report['precision']:.1%}", ""),
+        ("whole-payload success", f"{report['payload_success']:.1%}", ""),
+        ("wrong payloads reported ok", report["wrong_ok"], f"over {report['scenes']} images"),
+        ("", "DeepMorph", "ArUco 6x6"),
+        ("found", report["found"], f"{report['aruco_found']}/{report['aruco_markers']}"),
+        ("rotation error, median (deg)", p["deepmorph"]["rotation_deg_median"], p["aruco"]["rotation_deg_median"]),
+        (
+            "translation error, median (rel)",
+            p["deepmorph"]["translation_rel_median"],
+            p["aruco"]["translation_rel_median"],
+        ),
+        ("corner error, median (px)", p["deepmorph"]["corner_px_median"], p["aruco"]["corner_px_median"]),
+        ("time per frame (ms)", s["deepmorph_locate_decode_median"], s["aruco_detect_median"]),
+        ("QR detectAndDecode (ms)", s["qr_detect_and_decode_median"], ""),
+    ]
+    width = max(len(r[0]) for r in rows)
+    return "\n".join(f"{a:<{width}}  {b!s:>20}  {c!s:>16}" for a, b, c in rows)
+
+
+__all__ = ["aruco_detector", "bench_scenes", "format_report", "read_scenes", "write_scenes"]

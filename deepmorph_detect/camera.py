@@ -1,0 +1,186 @@
+"""Camera intrinsics and planar pose (PnP).
+
+Pose is expressed in the drawing's own frame: origin at the centre of the drawing's viewBox,
+x to the right, y down (as in the SVG), z into the paper, in units of the drawing's printed
+width. So ``tvec`` of ``(0, 0, 4)`` means the drawing is straight ahead at four drawing-widths.
+
+Without a calibration, :meth:`Camera.default` assumes a horizontal field of view of
+:data:`DEFAULT_HFOV_DEG` (a typical phone main camera) with the principal point at the image
+centre; every pose computed that way says so (``camera.assumed``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from deepmorph_core.errors import DeepMorphError
+
+DEFAULT_HFOV_DEG = 65.0
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole intrinsics (pixels) and optional OpenCV distortion coefficients."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, ...] = ()
+    assumed: bool = False
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The ``(3, 3)`` camera matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        return np.asarray(self.dist, dtype=np.float64) if self.dist else np.zeros(5)
+
+    @classmethod
+    def default(cls, width: int, height: int, hfov_deg: float = DEFAULT_HFOV_DEG) -> Camera:
+        """The assumed camera for an image without calibration."""
+        f = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
+        return cls(f, f, width / 2, height / 2, assumed=True)
+
+    def scaled(self, sx: float, sy: float) -> Camera:
+        """The same camera for an image resized by ``(sx, sy)``."""
+        return Camera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.dist, self.assumed)
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy, "assumed": self.assumed}
+        if self.assumed:
+            out["note"] = f"no calibration given: assumed {DEFAULT_HFOV_DEG:g} deg horizontal field of view"
+        if self.dist:
+            out["dist"] = list(self.dist)
+        return out
+
+
+def parse_camera(spec: str) -> Camera:
+    """``fx,fy,cx,cy`` (pixels), or the path of an OpenCV calibration file (YAML/XML/JSON).
+
+    A calibration file holds ``camera_matrix`` (or ``K``) and optionally
+    ``distortion_coefficients`` (or ``dist_coeffs``/``D``), as ``cv2.FileStorage`` writes them.
+
+    Raises:
+        DeepMorphError: anything else, naming what is wrong.
+    """
+    text = spec.strip()
+    path = Path(text)
+    if path.suffix.lower() in (".yml", ".yaml", ".xml", ".json") or path.is_file():
+        return load_calibration(path)
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != 4:
+        raise DeepMorphError(f"--camera {spec!r}: expected fx,fy,cx,cy (four numbers in pixels) or a calibration file")
+    try:
+        fx, fy, cx, cy = (float(p) for p in parts)
+    except ValueError:
+        raise DeepMorphError(f"--camera {spec!r}: fx,fy,cx,cy must be numbers") from None
+    if not all(math.isfinite(v) for v in (fx, fy, cx, cy)) or fx <= 0 or fy <= 0:
+        raise DeepMorphError(f"--camera {spec!r}: focal lengths must be positive and all values finite")
+    return Camera(fx, fy, cx, cy)
+
+
+def load_calibration(path: str | Path) -> Camera:
+    """Read an OpenCV calibration file (see :func:`parse_camera`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DeepMorphError(f"{path}: no such calibration file")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error:
+        raise DeepMorphError(f"{path}: not a calibration file OpenCV can read") from None
+    try:
+        if not fs.isOpened():
+            raise DeepMorphError(f"{path}: not a calibration file OpenCV can read")
+        matrix = None
+        for key in ("camera_matrix", "K", "cameraMatrix"):
+            node = fs.getNode(key)
+            if not node.empty():
+                matrix = node.mat()
+                break
+        if matrix is None or matrix.shape != (3, 3):
+            raise DeepMorphError(f"{path}: no 3x3 camera_matrix in the calibration file")
+        dist: tuple[float, ...] = ()
+        for key in ("distortion_coefficients", "dist_coeffs", "D", "distCoeffs"):
+            node = fs.getNode(key)
+            if not node.empty():
+                d = node.mat()
+                if d is not None:
+                    dist = tuple(float(v) for v in np.asarray(d).ravel())
+                break
+    finally:
+        fs.release()
+    m = np.asarray(matrix, dtype=np.float64)
+    if not np.isfinite(m).all() or m[0, 0] <= 0 or m[1, 1] <= 0 or not all(math.isfinite(v) for v in dist):
+        raise DeepMorphError(f"{path}: camera_matrix must have positive focal lengths and finite values")
+    if dist and len(dist) not in (4, 5, 8, 12, 14):
+        raise DeepMorphError(f"{path}: {len(dist)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
+    return Camera(float(m[0, 0]), float(m[1, 1]), float(m[0, 2]), float(m[1, 2]), dist)
+
+
+def solve_pose(camera: Camera, object_points: np.ndarray, image_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Iterative PnP (Levenberg-Marquardt from a planar initialisation).
+
+    Args:
+        object_points: ``(N, 3)`` points in the drawing frame (drawing-width units, z = 0).
+        image_points: ``(N, 2)`` their pixel positions.
+
+    Returns:
+        ``rvec`` and ``tvec``, each ``(3,)``.
+    """
+    obj = np.ascontiguousarray(object_points, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(image_points, dtype=np.float64).reshape(-1, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, camera.matrix, camera.dist_coeffs, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.matrix, camera.dist_coeffs, flags=cv2.SOLVEPNP_ITERATIVE)
+    else:
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, camera.matrix, camera.dist_coeffs, rvec, tvec)
+    return rvec.reshape(3), tvec.reshape(3)
+
+
+def homography_from_pose(camera: Camera, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` map from drawing-frame plane coordinates ``(X, Y, 1)`` to pixels (no distortion)."""
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    return camera.matrix @ np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=np.float64).reshape(3)])
+
+
+def rotation_error_deg(rvec_a: np.ndarray, rvec_b: np.ndarray) -> float:
+    """Angle (degrees) of the rotation taking pose a to pose b."""
+    Ra, _ = cv2.Rodrigues(np.asarray(rvec_a, dtype=np.float64).reshape(3, 1))
+    Rb, _ = cv2.Rodrigues(np.asarray(rvec_b, dtype=np.float64).reshape(3, 1))
+    cos = (np.trace(Ra.T @ Rb) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def translation_error(tvec_a: np.ndarray, tvec_b: np.ndarray) -> float:
+    """Relative translation error ``|a - b| / |b|``."""
+    b = np.asarray(tvec_b, dtype=np.float64)
+    return float(np.linalg.norm(np.asarray(tvec_a, dtype=np.float64) - b) / max(np.linalg.norm(b), 1e-9))
+
+
+def project(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a ``(3, 3)`` homography to ``(N, 2)`` points."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    h = np.column_stack([pts, np.ones(len(pts))]) @ np.asarray(homography, dtype=np.float64).T
+    return h[:, :2] / h[:, 2:3]
+
+
+__all__ = [
+    "DEFAULT_HFOV_DEG",
+    "Camera",
+    "homography_from_pose",
+    "load_calibration",
+    "parse_camera",
+    "project",
+    "rotation_error_deg",
+    "solve_pose",
+    "translation_error",
+]

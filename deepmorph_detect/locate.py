@@ -1,0 +1,283 @@
+"""From a photo to decoded drawings: detect, refine, verify, rectify, decode, pose.
+
+:class:`Locator` runs the whole chain for one model:
+
+1. the model's detector (:class:`CentreNetDetector`) proposes a quadrilateral per drawing;
+   when it proposes none, the whole frame is tried as one candidate framed by its ink (a scan
+   or a cropped photo in which the drawing fills the frame);
+2. :func:`~deepmorph_detect.refine.refine` aligns each candidate to the unmorphed drawing to
+   sub-pixel accuracy; candidates that do not correlate with the drawing are dropped, so a
+   photo without the drawing gives an empty list, not a guess;
+3. the drawing is rectified (perspective removed) and decoded by the model's decoder;
+4. the homography gives keypoints and, through PnP, the camera pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from deepmorph_core.codec import DecodeResult
+from deepmorph_core.codemodel import DeepMorphModel, Detection
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.imaging import align_to_frame, ink_mask, normalise_contrast, to_gray
+from deepmorph_detect.camera import Camera, project, solve_pose
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, normalise_input
+from deepmorph_detect.refine import ImagePyramid, Template, refine, warp_to_template
+
+MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
+RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
+
+
+class CentreNetDetector:
+    """The built-in detector: :class:`~deepmorph_detect.network.DetectorNet` peaks.
+
+    Args:
+        net: trained network (eval mode).
+        threshold: minimum centre probability of a peak.
+        max_detections: peaks kept per image (highest first).
+    """
+
+    name: ClassVar[str] = "centrenet"
+
+    def __init__(self, net: DetectorNet, threshold: float = 0.3, max_detections: int = 12) -> None:
+        self.net = net.eval()
+        self.threshold = threshold
+        self.max_detections = max_detections
+
+    @classmethod
+    def from_model(cls, model: DeepMorphModel) -> CentreNetDetector | None:
+        """The detector stored in a bundle, or ``None`` when it has none."""
+        if model.meta.detector is None:
+            return None
+        net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
+        net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+        return cls(net)
+
+    def detect(self, image: np.ndarray) -> list[dict[str, Any]]:
+        """Quadrilaterals (corners TL, TR, BR, BL in pixels) and scores, best first."""
+        gray = to_gray(image)
+        h, w = gray.shape
+        W, H = INPUT_SIZE
+        scale = min(W / w, H / h)
+        rw, rh = max(1, round(w * scale)), max(1, round(h * scale))
+        small = cv2.resize(gray, (rw, rh), interpolation=cv2.INTER_AREA)
+        small = cv2.copyMakeBorder(small, 0, H - rh, 0, W - rw, cv2.BORDER_REPLICATE)
+        with torch.no_grad():
+            heat, corners = self.net(normalise_input(torch.from_numpy(small)[None, None]))
+            p = torch.sigmoid(heat)
+            peaks = (p == F.max_pool2d(p, 3, 1, 1)) & (p > self.threshold)
+        p_np, c_np = p[0, 0].numpy(), corners[0].numpy()
+        ys, xs = np.nonzero(peaks[0, 0].numpy())
+        order = np.argsort(-p_np[ys, xs])[: self.max_detections]
+        out = []
+        gh, gw = p_np.shape
+        for i in order:
+            y, x = int(ys[i]), int(xs[i])
+            y0, y1, x0, x1 = max(0, y - 1), min(gh, y + 2), max(0, x - 1), min(gw, x + 2)
+            wts = p_np[y0:y1, x0:x1]
+            cells = np.stack(np.mgrid[y0:y1, x0:x1][::-1], -1).astype(np.float64) + 0.5  # (h, w, 2) x, y
+            quads = c_np[:, y0:y1, x0:x1].transpose(1, 2, 0).reshape(-1, 4, 2) + cells.reshape(-1, 1, 2)
+            ref = c_np[:, y, x].reshape(4, 2) + np.array([x + 0.5, y + 0.5])
+            # neighbours may list the corners in another cyclic order: bring each to the peak's
+            quads = np.stack([_same_order(q, ref) for q in quads])
+            quad = (quads * wts.reshape(-1, 1, 1)).sum(0) / wts.sum()
+            quad = quad * STRIDE / scale
+            out.append({"score": float(p_np[y, x]), "corners": quad, "bbox": _bbox(quad, w, h)})
+        return out
+
+
+def _same_order(quad: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """``quad`` cyclically rolled to match ``ref`` corner by corner."""
+    rolls = [np.roll(quad, k, axis=0) for k in range(4)]
+    return min(rolls, key=lambda q: float(np.abs(q - ref).sum()))
+
+
+def _bbox(quad: np.ndarray, w: int, h: int) -> tuple[int, int, int, int]:
+    x0, y0 = np.floor(quad.min(0)).astype(int)
+    x1, y1 = np.ceil(quad.max(0)).astype(int)
+    return int(max(0, x0)), int(max(0, y0)), int(min(w, x1)), int(min(h, y1))
+
+
+@dataclass
+class Located(Detection):
+    """A decoded drawing with where it is: corners, homography, keypoints and pose."""
+
+    corners: np.ndarray | None = None
+    homography: np.ndarray | None = None  # SVG units -> image pixels
+    correlation: float = 0.0
+    score: float = 0.0
+    rvec: np.ndarray | None = None
+    tvec: np.ndarray | None = None
+    camera: Camera | None = None
+    keypoints: dict[str, list[float]] = field(default_factory=dict)
+    source: str = "detector"
+
+    def to_json(self) -> dict[str, Any]:
+        out = super().to_json()
+        out["score"] = round(self.score, 4)
+        out["alignment"] = round(self.correlation, 4)
+        out["found_by"] = self.source
+        if self.corners is not None:
+            out["corners"] = np.round(self.corners, 2).tolist()
+        if self.homography is not None:
+            inv = np.linalg.inv(self.homography)
+            out["homography"] = (inv / inv[2, 2]).round(8).tolist()  # image -> drawing (SVG units)
+        out["keypoints"] = self.keypoints
+        if self.rvec is not None and self.tvec is not None and self.camera is not None:
+            out["pose"] = {
+                "rvec": [round(float(v), 6) for v in self.rvec],
+                "tvec": [round(float(v), 6) for v in self.tvec],
+                "units": "drawing widths",
+                "camera": self.camera.to_json(),
+            }
+        return out
+
+
+class Locator:
+    """Finds and decodes every instance of one model's drawing in photos."""
+
+    def __init__(self, model: DeepMorphModel, detector: Any | None = None, min_correlation: float = MIN_CORRELATION):
+        self.model = model
+        self.detector = detector if detector is not None else CentreNetDetector.from_model(model)
+        self.min_correlation = min_correlation
+        md = model.drawing
+        self.viewbox = md.drawing.viewbox
+        self.template = Template.from_svg(md.to_svg(md.neutral_values()[0]), self.viewbox)
+        x, y, vw, vh = self.viewbox
+        # SVG units -> pose frame (centre origin, drawing-width units)
+        self.to_frame = np.array([[1 / vw, 0, -x / vw - 0.5], [0, 1 / vw, -(y + vh / 2) / vw], [0, 0, 1]])
+        self.frame_corners = np.array([[x, y], [x + vw, y], [x + vw, y + vh], [x, y + vh]], dtype=np.float64)
+
+    # -- candidates -----------------------------------------------------------------------
+
+    def _whole_frame(self, gray: np.ndarray) -> list[dict[str, Any]]:
+        """The ink of the whole image as one candidate, framed by its moments (no rotation)."""
+        norm = normalise_contrast(gray)
+        found = None if norm is None else ink_mask(norm)
+        if found is None:
+            return []
+        mask, box = found
+        ys, xs = np.nonzero(mask)
+        if len(xs) < 10:
+            return []
+        t = self.template.images[max(self.template.images)]
+        tmask = t < 0.5
+        tys, txs = np.nonzero(tmask)
+        s = float(np.sqrt((xs.var() + ys.var()) / max(txs.var() + tys.var(), 1e-9)))
+        # template px -> image px: scale s about the centroids
+        T = np.array([[s, 0, xs.mean() - s * txs.mean()], [0, s, ys.mean() - s * tys.mean()], [0, 0, 1]])
+        tw = t.shape[1]
+        H = T @ np.linalg.inv(self.template.to_svg_units(tw))
+        corners = project(H, self.frame_corners)
+        return [{"score": 0.0, "corners": corners, "bbox": box, "homography": H}]
+
+    def _homography(self, corners: np.ndarray) -> np.ndarray:
+        return cv2.getPerspectiveTransform(
+            self.frame_corners.astype(np.float32), np.asarray(corners, np.float32)
+        ).astype(np.float64)
+
+    # -- the chain ------------------------------------------------------------------------
+
+    def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
+        """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.
+
+        Args:
+            camera: intrinsics for the pose; ``None`` assumes the default field of view.
+        """
+        gray = to_gray(image)
+        h, w = gray.shape
+        if h < 16 or w < 16:
+            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
+        cam = camera or Camera.default(w, h)
+        pyramid = ImagePyramid(gray)
+        candidates = self.detector.detect(gray) if self.detector is not None else []
+        source = "detector"
+        found = self._verify(pyramid, candidates)
+        if not found:
+            found = self._verify(pyramid, self._whole_frame(gray))
+            source = "whole-frame"
+        results = []
+        for cand, alignment in found:
+            results.append(
+                self._decode(gray, pyramid, cand, alignment.homography, alignment.correlation, cam, source, soft)
+            )
+        return results
+
+    def _verify(self, pyramid: ImagePyramid, candidates: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Any]]:
+        """Refined, verified candidates, duplicates (same drawing twice) removed."""
+        kept: list[tuple[dict[str, Any], Any]] = []
+        for cand in candidates:
+            H0 = cand.get("homography")
+            if H0 is None:
+                H0 = self._homography(cand["corners"])
+            alignment = refine(pyramid, H0, self.template, orders=4 if "homography" not in cand else 1)
+            if alignment is None or alignment.correlation < self.min_correlation:
+                continue
+            centre = self._centre(alignment.homography)
+            diagonal = project(alignment.homography, self.frame_corners[[0, 2]])
+            size = float(np.linalg.norm(diagonal[1] - diagonal[0]))
+            if any(np.linalg.norm(centre - self._centre(a.homography)) < 0.3 * size for _, a in kept):
+                continue
+            kept.append((cand, alignment))
+        return kept
+
+    def _centre(self, H: np.ndarray) -> np.ndarray:
+        return project(H, self.frame_corners.mean(0, keepdims=True))[0]
+
+    def rectify(self, pyramid: ImagePyramid, H: np.ndarray) -> np.ndarray:
+        """The drawing's viewBox seen head-on, ``RECTIFY_WIDTH_FACTOR`` decoder widths wide."""
+        return warp_to_template(pyramid, H, self.template, self.model.width * RECTIFY_WIDTH_FACTOR)
+
+    def _decode(
+        self,
+        gray: np.ndarray,
+        pyramid: ImagePyramid,
+        cand: dict[str, Any],
+        H: np.ndarray,
+        rho: float,
+        cam: Camera,
+        source: str,
+        soft: bool,
+    ) -> Located:
+        h, w = gray.shape
+        model = self.model
+        flat = self.rectify(pyramid, H)
+        aligned = align_to_frame(flat, model.image_size, model.canonical_moments())
+        if aligned is None:
+            probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
+        else:
+            probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
+        result: DecodeResult = model.codec.decode(probs, soft=soft)
+        corners = project(H, self.frame_corners)
+        grid = np.array([[fx, fy] for fy in (0.0, 0.5, 1.0) for fx in (0.0, 0.5, 1.0)])
+        x, y, vw, vh = self.viewbox
+        svg_pts = np.column_stack([x + grid[:, 0] * vw, y + grid[:, 1] * vh])
+        img_pts = project(H, svg_pts)
+        obj = project(self.to_frame, svg_pts)
+        rvec, tvec = solve_pose(cam, np.column_stack([obj, np.zeros(len(obj))]), img_pts)
+        names = ("top_left", "top_right", "bottom_right", "bottom_left")
+        keypoints = {n: [round(float(v), 2) for v in c] for n, c in zip(names, corners)}
+        keypoints["centre"] = [round(float(v), 2) for v in project(H, np.array([[x + vw / 2, y + vh / 2]]))[0]]
+        return Located(
+            result,
+            probs,
+            _bbox(corners, w, h),
+            corners=corners,
+            homography=H,
+            correlation=rho,
+            score=float(cand.get("score", 0.0)),
+            rvec=rvec,
+            tvec=tvec,
+            camera=cam,
+            keypoints=keypoints,
+            source=source,
+        )
+
+
+__all__ = ["MIN_CORRELATION", "CentreNetDetector", "Located", "Locator"]

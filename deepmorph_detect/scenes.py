@@ -1,0 +1,386 @@
+"""Synthetic scenes with exact ground truth: DeepMorph's own capture simulator.
+
+A scene is a photo of one or more printed drawings. Each drawing is a payload morph rendered by
+the real renderer (resvg), printed on paper with a margin, placed in 3-D in front of a pinhole
+camera (tilt up to 60 degrees, any in-plane rotation, 10-70 % of the frame width), composited
+over a real photo or procedural clutter, then lit, shadowed, blurred, noised and
+JPEG-compressed. Because the pose is sampled in 3-D, the truth holds the homography, the
+corners and the camera pose of every drawing exactly.
+
+Scenes can also hold other drawings (bundled Feather icons, printed the same way), an ArUco
+marker and a QR code at the same printed size: the negatives and baselines of
+``deepmorph bench-scenes``. The same generator, at a smaller size, feeds detector training.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.render import render_svg
+from deepmorph_detect.backgrounds import random_background
+from deepmorph_detect.camera import Camera, homography_from_pose
+
+if TYPE_CHECKING:
+    from deepmorph_core.codemodel import DeepMorphModel
+
+DISTRACTOR_DIR = Path(__file__).parent / "data" / "distractors"
+ARUCO_DICT = cv2.aruco.DICT_6X6_250
+
+
+@dataclass(frozen=True)
+class SceneSeverity:
+    """Ranges of one severity level (angles in degrees, sizes as shares of the frame width)."""
+
+    tilt_deg: float
+    size: tuple[float, float]
+    blur: tuple[float, float]
+    noise: tuple[float, float]
+    light: float
+    shadow_p: float
+    contrast: tuple[float, float]
+    jpeg: tuple[int, int]
+    motion_p: float
+
+
+SCENE_SEVERITIES = {
+    "easy": SceneSeverity(30, (0.25, 0.7), (0.2, 0.7), (0.003, 0.012), 0.15, 0.15, (0.8, 1.0), (80, 95), 0.0),
+    "medium": SceneSeverity(45, (0.15, 0.7), (0.3, 1.1), (0.008, 0.025), 0.3, 0.35, (0.6, 0.95), (55, 90), 0.15),
+    "hard": SceneSeverity(60, (0.10, 0.7), (0.4, 1.6), (0.015, 0.045), 0.45, 0.5, (0.45, 0.9), (35, 75), 0.35),
+}
+
+
+@dataclass
+class Placement:
+    """One printed thing in a scene and its exact truth.
+
+    Attributes:
+        kind: ``drawing`` (the model's), ``distractor`` (another drawing), ``aruco`` or ``qr``.
+        rvec, tvec: camera pose of its frame (centre origin, units of its printed width).
+        homography: ``(3, 3)`` map from its own coordinates (SVG user units for drawings; the
+            unit square ``[0, 1]^2`` for markers) to image pixels.
+        corners: ``(4, 2)`` image positions of its frame's corners (TL, TR, BR, BL).
+        payload: the payload bits of a ``drawing``.
+        label: the icon name, the ArUco id or the QR text.
+    """
+
+    kind: str
+    rvec: np.ndarray
+    tvec: np.ndarray
+    homography: np.ndarray
+    corners: np.ndarray
+    payload: np.ndarray | None = None
+    label: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "kind": self.kind,
+            "rvec": [float(v) for v in self.rvec],
+            "tvec": [float(v) for v in self.tvec],
+            "homography": np.asarray(self.homography).tolist(),
+            "corners": np.round(self.corners, 3).tolist(),
+        }
+        if self.payload is not None:
+            out["payload"] = "".join(str(int(b)) for b in self.payload)
+        if self.label:
+            out["label"] = self.label
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Placement:
+        payload = data.get("payload")
+        return cls(
+            data["kind"],
+            np.asarray(data["rvec"], dtype=np.float64),
+            np.asarray(data["tvec"], dtype=np.float64),
+            np.asarray(data["homography"], dtype=np.float64),
+            np.asarray(data["corners"], dtype=np.float64),
+            None if payload is None else np.array([int(c) for c in payload], dtype=np.uint8),
+            str(data.get("label", "")),
+        )
+
+
+@dataclass
+class Scene:
+    """A synthetic photo (``(H, W, 3)`` uint8 BGR) with its camera and placements."""
+
+    image: np.ndarray
+    camera: Camera
+    placements: list[Placement] = field(default_factory=list)
+    frames: list[np.ndarray] = field(default_factory=list)  # more photos of the same layout
+
+    def truth_json(self) -> dict[str, Any]:
+        h, w = self.image.shape[:2]
+        return {
+            "width": w,
+            "height": h,
+            "camera": {"fx": self.camera.fx, "fy": self.camera.fy, "cx": self.camera.cx, "cy": self.camera.cy},
+            "placements": [p.to_json() for p in self.placements],
+        }
+
+
+@functools.lru_cache(maxsize=1)
+def distractor_svgs() -> tuple[tuple[str, str], ...]:
+    """The bundled Feather icons used as other drawings: ``(name, svg text)``."""
+    return tuple((p.stem, p.read_text()) for p in sorted(DISTRACTOR_DIR.glob("*.svg")))
+
+
+class SceneMaker:
+    """Makes scenes of one model's drawing.
+
+    Args:
+        model: the trained model whose drawing is printed (payloads through its encoder).
+        size: ``(width, height)`` of the photos.
+        severity: ``easy``, ``medium`` or ``hard`` (see :data:`SCENE_SEVERITIES`).
+        seed: the random stream (same seed, same scenes).
+        payload_pool: when set, payloads come from a fixed pool of this many random payloads
+            whose renders are cached (detector training: fast); otherwise each is fresh.
+    """
+
+    def __init__(
+        self,
+        model: DeepMorphModel,
+        size: tuple[int, int] = (640, 480),
+        severity: str = "medium",
+        seed: int = 0,
+        payload_pool: int | None = None,
+    ) -> None:
+        if severity not in SCENE_SEVERITIES:
+            raise DeepMorphError(f"severity must be one of {', '.join(SCENE_SEVERITIES)}, got {severity!r}")
+        self.model = model
+        self.size = size
+        self.severity = SCENE_SEVERITIES[severity]
+        self.rng = np.random.default_rng(seed)
+        self.viewbox = model.drawing.drawing.viewbox
+        self._pool: list[np.ndarray] | None = None
+        if payload_pool:
+            bits = model.codec.spec.payload_bits
+            self._pool = [self.rng.integers(0, 2, bits).astype(np.uint8) for _ in range(payload_pool)]
+        self._svg_cache: dict[int, str] = {}
+        self._render_cache: dict[tuple[str, int], np.ndarray] = {}
+
+    # -- sampling ------------------------------------------------------------------------
+
+    def camera(self) -> Camera:
+        """A random phone-like camera for this scene (60-75 degrees horizontal FOV)."""
+        W, H = self.size
+        f = (W / 2) / math.tan(math.radians(self.rng.uniform(60, 75)) / 2)
+        return Camera(f, f, W / 2 + self.rng.uniform(-0.01, 0.01) * W, H / 2 + self.rng.uniform(-0.01, 0.01) * H)
+
+    def _pose(
+        self, cam: Camera, half_extent: np.ndarray, taken: list[np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """A pose whose printed sheet (``half_extent`` in width units) lies inside the frame and
+        clear of the sheets already placed; ``None`` when none is found."""
+        W, H = self.size
+        sv = self.severity
+        hx, hy = half_extent
+        sheet = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+        for _ in range(60):
+            frac = self.rng.uniform(*sv.size)
+            dist = cam.fx / (frac * W)
+            tilt = math.radians(self.rng.uniform(0, sv.tilt_deg))
+            axis = self.rng.uniform(0, 2 * math.pi)
+            spin = self.rng.uniform(0, 2 * math.pi)
+            R_tilt, _ = cv2.Rodrigues(np.array([math.cos(axis), math.sin(axis), 0.0]) * tilt)
+            R_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, spin]))
+            R = R_tilt @ R_spin
+            px, py = self.rng.uniform(0.1, 0.9) * W, self.rng.uniform(0.1, 0.9) * H
+            ray = np.linalg.solve(cam.matrix, np.array([px, py, 1.0]))
+            tvec = ray / ray[2] * dist
+            rvec, _ = cv2.Rodrigues(R)
+            Hm = homography_from_pose(cam, rvec.reshape(3), tvec)
+            pts = np.column_stack([sheet, np.ones(4)]) @ Hm.T
+            if (pts[:, 2] <= 0).any():
+                continue
+            quad = pts[:, :2] / pts[:, 2:3]
+            if quad[:, 0].min() < 1 or quad[:, 1].min() < 1 or quad[:, 0].max() > W - 2 or quad[:, 1].max() > H - 2:
+                continue
+            box = np.array([quad[:, 0].min(), quad[:, 1].min(), quad[:, 0].max(), quad[:, 1].max()])
+            if any(_overlap(box, other) for other in taken):
+                continue
+            taken.append(box)
+            return rvec.reshape(3), tvec
+        return None
+
+    def _payload(self) -> tuple[int, np.ndarray]:
+        if self._pool is not None:
+            i = int(self.rng.integers(len(self._pool)))
+            return i, self._pool[i]
+        bits = self.model.codec.spec.payload_bits
+        return -1, self.rng.integers(0, 2, bits).astype(np.uint8)
+
+    def _render(self, key: str, svg: str, width: int, cache: bool) -> np.ndarray:
+        if cache and (key, width) in self._render_cache:
+            return self._render_cache[(key, width)]
+        img = render_svg(svg, width)
+        if cache:
+            self._render_cache[(key, width)] = img
+        return img
+
+    # -- making ---------------------------------------------------------------------------
+
+    def make(
+        self, drawings: int = 1, distractors: int = 0, aruco: bool = False, qr: str | None = None, frames: int = 1
+    ) -> Scene:
+        """One scene holding ``drawings`` payload morphs, ``distractors`` other icons, and
+        optionally an ArUco marker and a QR code (each at the drawing's printed size).
+
+        With ``frames`` > 1, ``Scene.frames`` holds that many photos of the same layout, each
+        with its own light, blur, noise and compression (a held phone filming a still scene).
+        """
+        W, H = self.size
+        sv = self.severity
+        rng = self.rng
+        cam = self.camera()
+        img = random_background(rng, self.size)
+        taken: list[np.ndarray] = []
+        placements: list[Placement] = []
+        vx, vy, vw, vh = self.viewbox
+        # drawing frame (SVG units) -> pose frame (centre origin, width units)
+        to_frame = np.array([[1 / vw, 0, -vx / vw - 0.5], [0, 1 / vw, -(vy + vh / 2) / vw], [0, 0, 1]])
+        jobs: list[str] = ["drawing"] * drawings + ["distractor"] * distractors
+        if aruco:
+            jobs.append("aruco")
+        if qr is not None:
+            jobs.append("qr")
+        for kind in jobs:
+            margin = rng.uniform(0.08, 0.3)
+            aspect = vh / vw if kind in ("drawing", "distractor") else 1.0
+            pose = self._pose(cam, np.array([0.5 + margin, aspect / 2 + margin]), taken)
+            if pose is None:
+                continue
+            rvec, tvec = pose
+            plane = homography_from_pose(cam, rvec, tvec)  # frame units -> pixels
+            width_px = _projected_width(plane)
+            rw = int(np.clip(2 ** math.ceil(math.log2(max(width_px * 1.2, 32))), 32, 1024))
+            payload, label = None, ""
+            if kind == "drawing":
+                idx, payload = self._payload()
+                if idx >= 0 and idx not in self._svg_cache:
+                    self._svg_cache[idx] = self.model.encode(payload)
+                svg = self._svg_cache[idx] if idx >= 0 else self.model.encode(payload)
+                art = self._render(f"p{idx}", svg, rw, idx >= 0)
+                src_to_frame = to_frame
+                truth = plane @ to_frame
+            elif kind == "distractor":
+                icons = distractor_svgs()
+                label, svg = icons[int(rng.integers(len(icons)))]
+                svg = svg.replace("currentColor", "#000")
+                art = self._render(label, svg, rw, True)
+                ah, aw = art.shape
+                src_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
+                truth = plane @ src_to_frame
+                src_to_frame = None  # art is in pixels already
+            else:
+                art, label = _marker_art(kind, rw, rng, qr)
+                src_to_frame = None
+                truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])  # unit square -> pixels
+            ah, aw = art.shape
+            # art pixels -> frame units -> image pixels
+            art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
+            _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng)
+            del src_to_frame
+            corners_src = _frame_corners(kind, self.viewbox, art.shape)
+            pts = np.column_stack([corners_src, np.ones(4)]) @ truth.T
+            placements.append(Placement(kind, rvec, tvec, truth, pts[:, :2] / pts[:, 2:3], payload, label))
+        shots = [_photograph(img, sv, rng) for _ in range(max(1, frames))]
+        return Scene(shots[0], cam, placements, shots)
+
+
+def _frame_corners(kind: str, viewbox: tuple[float, float, float, float], art_shape: tuple[int, int]) -> np.ndarray:
+    if kind == "drawing":
+        x, y, w, h = viewbox
+        return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], dtype=np.float64)
+    if kind == "distractor":
+        h, w = art_shape
+        return np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64)
+    return np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+
+
+def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    return not (a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1])
+
+
+def _projected_width(plane: np.ndarray) -> float:
+    pts = np.array([[-0.5, 0, 1], [0.5, 0, 1], [0, -0.5, 1], [0, 0.5, 1]]) @ plane.T
+    xy = pts[:, :2] / pts[:, 2:3]
+    return float(max(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[3] - xy[2])))
+
+
+def _marker_art(kind: str, width: int, rng: np.random.Generator, qr: str | None) -> tuple[np.ndarray, str]:
+    """An ArUco marker (DICT_6X6_250) or a QR code filling a ``width`` square, 1 = white."""
+    if kind == "aruco":
+        marker_id = int(rng.integers(250))
+        dictionary = cv2.aruco.getPredefinedDictionary(ARUCO_DICT)
+        img = cv2.aruco.generateImageMarker(dictionary, marker_id, 8 * 16)
+        return cv2.resize(img, (width, width), interpolation=cv2.INTER_NEAREST).astype(np.float32) / 255, str(marker_id)
+    code = cv2.QRCodeEncoder.create().encode(qr or "DEEPMORPH")
+    # the encoder adds a quiet zone of modules; the frame is the code's own square
+    ys, xs = np.nonzero(code < 128)
+    code = code[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
+    return cv2.resize(code, (width, width), interpolation=cv2.INTER_NEAREST).astype(np.float32) / 255, qr or "DEEPMORPH"
+
+
+def _print_and_place(
+    img: np.ndarray, art: np.ndarray, art_to_image: np.ndarray, margin: float, art_width: int, rng: np.random.Generator
+) -> None:
+    """Print ``art`` (1 = white) on a sheet with ``margin`` (share of the art width) and
+    composite the sheet into ``img`` through ``art_to_image``."""
+    H, W = img.shape[:2]
+    m = int(round(margin * art_width))
+    ah, aw = art.shape
+    paper_tone = rng.uniform(0.85, 1.0) * rng.uniform(0.94, 1.0, 3).astype(np.float32)
+    ink_tone = rng.uniform(0.0, 0.15)
+    sheet = np.ones((ah + 2 * m, aw + 2 * m), np.float32)
+    sheet[m : m + ah, m : m + aw] = art
+    sheet_rgb = (ink_tone + (1 - ink_tone) * sheet)[..., None] * paper_tone[None, None, :]
+    shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
+    M = art_to_image @ shift
+    warped = cv2.warpPerspective(sheet_rgb, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    mask = cv2.warpPerspective(np.ones(sheet.shape, np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
+    img *= 1 - mask[..., None]
+    img += warped * mask[..., None]
+
+
+def _photograph(img: np.ndarray, sv: SceneSeverity, rng: np.random.Generator) -> np.ndarray:
+    """Light, shadow, contrast, blur, motion, noise and JPEG: float BGR -> uint8 BGR."""
+    H, W = img.shape[:2]
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    xx, yy = xx / W - 0.5, yy / H - 0.5
+    gx, gy = rng.uniform(-1, 1, 2)
+    light = 1.0 + sv.light * (gx * xx + gy * yy) - rng.uniform(0, sv.light) * (xx**2 + yy**2)
+    img = img * light[..., None]
+    if rng.random() < sv.shadow_p:  # a soft shadow: a dark polygon, blurred
+        poly = (rng.uniform(-0.2, 1.2, (int(rng.integers(3, 6)), 2)) * [W, H]).astype(np.int32)
+        shade = np.zeros((H, W), np.float32)
+        cv2.fillPoly(shade, [poly], 1.0)
+        shade = cv2.GaussianBlur(shade, (0, 0), rng.uniform(2, 12) * W / 640)
+        img = img * (1 - rng.uniform(0.2, 0.5) * shade)[..., None]
+    k = rng.uniform(*sv.contrast)
+    img = 0.5 + (img - 0.5) * k + rng.uniform(-0.06, 0.06)
+    sigma = rng.uniform(*sv.blur) * W / 640
+    img = cv2.GaussianBlur(img, (0, 0), max(sigma, 0.1))
+    if rng.random() < sv.motion_p:
+        length = int(rng.integers(3, 9) * W / 640) | 1
+        kernel = np.zeros((length, length), np.float32)
+        kernel[length // 2, :] = 1.0 / length
+        rot = cv2.getRotationMatrix2D((length / 2 - 0.5, length / 2 - 0.5), rng.uniform(0, 180), 1.0)
+        kernel = cv2.warpAffine(kernel, rot, (length, length))
+        img = cv2.filter2D(img, -1, kernel / max(kernel.sum(), 1e-6))
+    img = img + rng.normal(0, rng.uniform(*sv.noise), img.shape).astype(np.float32)
+    u8 = np.clip(img * 255, 0, 255).astype(np.uint8)
+    ok, buf = cv2.imencode(".jpg", u8, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(sv.jpeg[0], sv.jpeg[1] + 1))])
+    if not ok:  # pragma: no cover - OpenCV always encodes a valid uint8 image
+        raise DeepMorphError("JPEG encoding failed")
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR)
+
+
+__all__ = ["SCENE_SEVERITIES", "Placement", "Scene", "SceneMaker", "SceneSeverity", "distractor_svgs"]

@@ -1,0 +1,339 @@
+"""Training the detector on synthetic scenes (``deepmorph train-detector``).
+
+Every step draws a fresh batch of scenes from :class:`~deepmorph_detect.scenes.SceneMaker` at
+the network's input size: zero to three payload morphs of the model's drawing, other drawings
+(bundled Feather icons) and ArUco markers as negatives, over photos and clutter, at medium and
+hard severity. Batches are seeded by ``(seed, step)`` and made in a worker process (the other
+core), so a run is reproducible and ``--resume`` continues exactly where a checkpoint stopped.
+
+Checkpoints are the bundle itself plus optimiser state, written atomically; Ctrl-C writes one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from deepmorph_core.bundle import DetectorMeta, TrainingRecord
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.train import Interrupted
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input
+from deepmorph_detect.scenes import Placement, SceneMaker
+
+
+class DetectorConfig(BaseModel):
+    """Detector training settings (stored in the bundle).
+
+    Attributes:
+        steps, batch, lr: optimisation (Adam, cosine decay to 5 %).
+        width: channel width of the network.
+        seed: scenes and initialisation.
+        threads: torch threads of the training process (scenes are made in one worker).
+        workers: scene-making processes (0: in the training process).
+        checkpoint_every, log_every: in steps.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    steps: int = Field(default=2000, ge=1, le=10_000_000)
+    batch: int = Field(default=16, ge=1, le=1024)
+    lr: float = Field(default=2e-3, gt=0, le=1)
+    width: int = Field(default=32, ge=8, le=256)
+    seed: int = 0
+    threads: int | None = Field(default=1, ge=1, le=256)
+    workers: int = Field(default=1, ge=0, le=16)
+    checkpoint_every: int = Field(default=200, ge=1)
+    log_every: int = Field(default=25, ge=1)
+
+
+def targets_for(placements: list[Placement], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Training targets on the stride-8 grid for the model's drawings in a scene.
+
+    Returns:
+        heat ``(1, h, w)`` (Gaussian splats, 1 at each centre cell), corner offsets
+        ``(8, h, w)`` in cells from each cell centre, and their weight mask ``(1, h, w)``
+        (the 3x3 cells around each centre).
+    """
+    W, H = size
+    w, h = W // STRIDE, H // STRIDE
+    heat = np.zeros((1, h, w), np.float32)
+    corners = np.zeros((8, h, w), np.float32)
+    mask = np.zeros((1, h, w), np.float32)
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    for p in placements:
+        if p.kind != "drawing":
+            continue
+        c = _centre(p) / STRIDE
+        size_cells = float(np.linalg.norm(p.corners[2] - p.corners[0])) / STRIDE / math.sqrt(2)
+        sigma = max(0.6, size_cells / 8)
+        cx, cy = int(np.clip(np.floor(c[0]), 0, w - 1)), int(np.clip(np.floor(c[1]), 0, h - 1))
+        g = np.exp(-((xs + 0.5 - c[0]) ** 2 + (ys + 0.5 - c[1]) ** 2) / (2 * sigma**2))
+        heat[0] = np.maximum(heat[0], g)
+        heat[0, cy, cx] = 1.0
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                x, y = cx + dx, cy + dy
+                if 0 <= x < w and 0 <= y < h:
+                    corners[:, y, x] = (p.corners / STRIDE - np.array([x + 0.5, y + 0.5])).ravel()
+                    mask[0, y, x] = 1.0
+    return heat, corners, mask
+
+
+def _centre(p: Placement) -> np.ndarray:
+    """Image position of the centre of a placement's frame (projective, not the corner mean)."""
+    a, b, c, d = p.corners
+    # intersection of the diagonals a-c and b-d
+    x1, y1, x2, y2, x3, y3, x4, y4 = *a, *c, *b, *d
+    den = (x1 - x2) * (y3 - y4) - (y1 - y2) * (x3 - x4)
+    if abs(den) < 1e-9:
+        return p.corners.mean(0)
+    t = ((x1 - x3) * (y3 - y4) - (y1 - y3) * (x3 - x4)) / den
+    return np.array([x1 + t * (x2 - x1), y1 + t * (y2 - y1)])
+
+
+class SceneBatches(torch.utils.data.IterableDataset):
+    """Batches of ``(image, heat, corners, mask)`` for steps ``[start, stop)``, each seeded by
+    ``(seed, step)``: the same step always gets the same scenes."""
+
+    def __init__(self, model: DeepMorphModel, config: DetectorConfig, start: int, stop: int) -> None:
+        super().__init__()
+        self.model, self.cfg, self.start, self.stop = model, config, start, stop
+
+    def __iter__(self) -> Iterator[tuple[Tensor, Tensor, Tensor, Tensor]]:
+        torch.set_num_threads(1)
+        makers = {
+            sev: SceneMaker(self.model, INPUT_SIZE, sev, seed=self.cfg.seed, payload_pool=96)
+            for sev in ("medium", "hard")
+        }
+        for step in range(self.start, self.stop):
+            rng = np.random.default_rng([self.cfg.seed, step])
+            imgs, heats, corners, masks = [], [], [], []
+            for _ in range(self.cfg.batch):
+                maker = makers["hard" if rng.random() < 0.5 else "medium"]
+                maker.rng = np.random.default_rng(rng.integers(2**63))
+                n = int(rng.choice([0, 1, 1, 1, 1, 2, 2, 3]))
+                scene = maker.make(drawings=n, distractors=int(rng.integers(0, 3)), aruco=bool(rng.random() < 0.2))
+                gray = scene.image.astype(np.float32).mean(-1) / 255.0
+                h, c, m = targets_for(scene.placements, INPUT_SIZE)
+                imgs.append(gray[None])
+                heats.append(h)
+                corners.append(c)
+                masks.append(m)
+            yield (
+                torch.from_numpy(np.stack(imgs)),
+                torch.from_numpy(np.stack(heats)),
+                torch.from_numpy(np.stack(corners)),
+                torch.from_numpy(np.stack(masks)),
+            )
+
+
+@dataclass
+class DetectorSummary:
+    bundle: Path
+    log: Path
+    plot: Path | None
+    steps: int
+    elapsed_s: float
+
+
+class DetectorTrainer:
+    """Trains (or resumes training of) the detector of a bundle and writes it into ``out``."""
+
+    def __init__(self, model: DeepMorphModel, config: DetectorConfig, out: Path, log_path: Path | None = None):
+        self.model, self.cfg, self.out = model, config, Path(out)
+        self.log_path = Path(log_path) if log_path else self.out.with_suffix(".detector.log.jsonl")
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        torch.manual_seed(config.seed)
+        self.net = DetectorNet(config.width)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        meta = model.meta.detector
+        resuming = meta is not None and not meta.record.finished and "dtrain.step" in model.extra_tensors
+        self.record = meta.record if resuming and meta else TrainingRecord(total_steps=config.steps)
+        self.record.total_steps = config.steps
+        self.record.threads = torch.get_num_threads()
+        if resuming:
+            self.net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+            sd = self.opt.state_dict()
+            state: dict[int, dict[str, Any]] = {}
+            for key, val in model.extra_tensors.items():
+                if key.startswith("dtrain.opt."):
+                    _, _, pid, name = key.split(".", 3)
+                    state.setdefault(int(pid), {})[name] = val
+            sd["state"] = state
+            self.opt.load_state_dict(sd)
+            torch.set_rng_state(model.extra_tensors["dtrain.rng"])
+
+    def checkpoint(self) -> None:
+        """Write the bundle with the detector (and optimiser state until finished)."""
+        self.model.detector_state = {f"detector.{k}": v for k, v in self.net.state_dict().items()}
+        self.model.meta.detector = DetectorMeta(config=self.cfg.model_dump(), record=self.record)
+        extra: dict[str, Tensor] = {}
+        if not self.record.finished:
+            extra["dtrain.step"] = torch.tensor([self.record.step])
+            extra["dtrain.rng"] = torch.get_rng_state()
+            for pid, st in self.opt.state_dict()["state"].items():
+                for key, val in st.items():
+                    extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+        self.model.extra_tensors = {}
+        self.model.save(self.out, extra=extra)
+
+    def _lr(self) -> float:
+        progress = min(1.0, self.record.step / max(1, self.cfg.steps))
+        return self.cfg.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * progress)))
+
+    def run(self, on_log: Callable[[dict[str, Any]], None] | None = None) -> DetectorSummary:
+        """Train to ``steps``; checkpoint on schedule and on Ctrl-C (then raise Interrupted)."""
+        cfg, rec = self.cfg, self.record
+        if not rec.step:
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
+            self.log_path.write_text("")
+        history = []
+        if rec.step:
+            history = [json.loads(line) for line in self.log_path.read_text().splitlines() if line.strip()]
+        data = SceneBatches(self.model, cfg, rec.step, cfg.steps)
+        loader = torch.utils.data.DataLoader(
+            data,
+            batch_size=None,
+            num_workers=cfg.workers,
+            multiprocessing_context="fork" if cfg.workers else None,
+            prefetch_factor=4 if cfg.workers else None,
+        )
+        start = time.perf_counter() - rec.elapsed_s
+        acc = {"loss": 0.0, "heat": 0.0, "corner": 0.0, "recall": 0.0, "n": 0}
+        self.net.train()
+        try:
+            for img, heat, corners, mask in loader:
+                hl, cl = self.net(normalise_input(img))
+                lh = focal_loss(hl, heat)
+                lc = quad_loss(cl, corners, mask)
+                loss = lh + 0.5 * lc
+                for group in self.opt.param_groups:
+                    group["lr"] = self._lr()
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                self.opt.step()
+                rec.step += 1
+                rec.elapsed_s = time.perf_counter() - start
+                acc["loss"] += loss.item()
+                acc["heat"] += lh.item()
+                acc["corner"] += lc.item() * STRIDE
+                acc["recall"] += _peak_recall(hl.detach(), heat)
+                acc["n"] += 1
+                if rec.step % cfg.log_every == 0 or rec.step == cfg.steps:
+                    n = acc.pop("n")
+                    logged = {"step": rec.step, "stage": 1, **{k: round(v / n, 5) for k, v in acc.items()}}
+                    logged["elapsed_s"] = round(rec.elapsed_s, 2)
+                    acc = {"loss": 0.0, "heat": 0.0, "corner": 0.0, "recall": 0.0, "n": 0}
+                    history.append(logged)
+                    with self.log_path.open("a") as fh:
+                        fh.write(json.dumps(logged) + "\n")
+                    rec.metrics = {k: logged[k] for k in ("loss", "recall", "corner")}
+                    if on_log:
+                        on_log(logged)
+                if rec.step % cfg.checkpoint_every == 0 and rec.step < cfg.steps:
+                    self.checkpoint()
+        except KeyboardInterrupt:
+            rec.elapsed_s = time.perf_counter() - start
+            self.checkpoint()
+            raise Interrupted(
+                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} (continue with --resume)"
+            ) from None
+        rec.finished = True
+        self.net.eval()
+        self.checkpoint()
+        plot = _plot(history, self.log_path.with_suffix(".png"))
+        return DetectorSummary(self.out, self.log_path, plot, rec.step, rec.elapsed_s)
+
+
+def quad_loss(pred: Tensor, target: Tensor, mask: Tensor) -> Tensor:
+    """L1 between predicted and true corner offsets, under the best cyclic order of the corners.
+
+    Which corner is "top left" depends on the drawing's in-plane rotation, which a small
+    network at low resolution reads poorly; the outline of the frame is what it can learn well.
+    The order is settled afterwards by alignment (:mod:`deepmorph_detect.refine`), which tries
+    the four cyclic orders, so the loss does not ask the network for it.
+    """
+    B, _, h, w = pred.shape
+    t = target.view(B, 4, 2, h, w)
+    errs = torch.stack(
+        [torch.abs(pred - torch.roll(t, k, dims=1).reshape(B, 8, h, w)).sum(1) for k in range(4)], 0
+    )  # (4, B, h, w)
+    best = errs.min(0).values
+    return (best * mask[:, 0]).sum() / (mask.sum() * 8).clamp_min(1.0)
+
+
+def _peak_recall(logits: Tensor, heat: Tensor) -> float:
+    """Share of true centres with a predicted peak (p > 0.3) within one cell (training batch)."""
+    p = torch.sigmoid(logits)
+    peaks = (p == torch.nn.functional.max_pool2d(p, 3, 1, 1)) & (p > 0.3)
+    near = torch.nn.functional.max_pool2d(peaks.float(), 3, 1, 1) > 0
+    truth = heat >= 0.999
+    n = truth.sum().item()
+    return 1.0 if n == 0 else float((near & truth).sum().item() / n)
+
+
+def _plot(history: list[dict[str, Any]], path: Path) -> Path | None:
+    """Loss, centre recall and corner error against steps (PNG)."""
+    if not history:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [h["step"] for h in history]
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.2))
+    axes[0].plot(steps, [h["loss"] for h in history])
+    axes[0].set(xlabel="step", ylabel="loss", yscale="log", title="loss")
+    axes[1].plot(steps, [h["recall"] for h in history])
+    axes[1].set(xlabel="step", ylim=(0, 1.01), title="centre recall (training batches)")
+    axes[2].plot(steps, [h["corner"] for h in history])
+    axes[2].set(xlabel="step", ylabel="px at 256x192", title="corner error")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def train_detector(
+    model_path: str | Path,
+    out: str | Path,
+    config: DetectorConfig | None = None,
+    resume: bool = False,
+    on_log: Callable[[dict[str, Any]], None] | None = None,
+) -> DetectorSummary:
+    """Add a trained detector to the bundle at ``model_path``, writing ``out``.
+
+    With ``resume``, ``model_path`` is an interrupted checkpoint and its stored configuration
+    is used (``config`` must then be ``None`` or equal).
+    """
+    model = DeepMorphModel.load(model_path)
+    if resume:
+        meta = model.meta.detector
+        if meta is None or meta.record.finished or "dtrain.step" not in model.extra_tensors:
+            raise DeepMorphError(f"{model_path}: no interrupted detector training to resume")
+        config = DetectorConfig(**meta.config)
+    return DetectorTrainer(model, config or DetectorConfig(), Path(out)).run(on_log)
+
+
+__all__ = [
+    "DetectorConfig",
+    "DetectorSummary",
+    "DetectorTrainer",
+    "SceneBatches",
+    "quad_loss",
+    "targets_for",
+    "train_detector",
+]

@@ -1,0 +1,253 @@
+"""Issue 4: detection, alignment, pose, fusion and scenes, on the bundled model and real scenes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from deepmorph_core.api import BUNDLED_MODEL
+from deepmorph_core.cli import app
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_detect.camera import (
+    Camera,
+    homography_from_pose,
+    parse_camera,
+    project,
+    rotation_error_deg,
+    solve_pose,
+    translation_error,
+)
+from deepmorph_detect.locate import Locator
+from deepmorph_detect.scenes import SceneMaker
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def model() -> DeepMorphModel:
+    return DeepMorphModel.load(BUNDLED_MODEL)
+
+
+@pytest.fixture(scope="module")
+def locator(model: DeepMorphModel) -> Locator:
+    return Locator(model)
+
+
+def _matches(det, placement) -> bool:
+    size = np.linalg.norm(placement.corners[2] - placement.corners[0])
+    return bool(np.linalg.norm(det.corners.mean(0) - placement.corners.mean(0)) < 0.25 * size)
+
+
+# -- camera ---------------------------------------------------------------------------------
+
+
+def test_camera_parsing_numbers_and_errors() -> None:
+    cam = parse_camera("500, 510, 320, 240")
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == (500, 510, 320, 240) and not cam.assumed
+    for bad in ("500,510,320", "a,b,c,d", "-5,5,1,1", "nan,1,1,1"):
+        with pytest.raises(DeepMorphError, match="--camera"):
+            parse_camera(bad)
+    default = Camera.default(640, 480)
+    assert default.assumed and default.cx == 320 and "assumed" in default.to_json()["note"]
+
+
+def test_camera_calibration_file(tmp_path: Path) -> None:
+    path = tmp_path / "calib.yaml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("camera_matrix", np.array([[600.0, 0, 330], [0, 605, 250], [0, 0, 1]]))
+    fs.write("distortion_coefficients", np.array([[0.1, -0.05, 0, 0, 0]]))
+    fs.release()
+    cam = parse_camera(str(path))
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == (600, 605, 330, 250) and len(cam.dist) == 5
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("%YAML:1.0\nnot: [a calibration")
+    with pytest.raises(DeepMorphError, match="broken.yaml"):
+        parse_camera(str(broken))
+    with pytest.raises(DeepMorphError, match="no such calibration file"):
+        parse_camera(str(tmp_path / "missing.yml"))
+
+
+def test_pnp_recovers_a_known_pose() -> None:
+    cam = Camera(700, 700, 320, 240)
+    rvec, tvec = np.array([0.4, -0.3, 1.2]), np.array([0.2, -0.1, 3.0])
+    grid = np.array([[x, y, 0.0] for y in (-0.5, 0, 0.5) for x in (-0.5, 0, 0.5)])
+    pixels = project(homography_from_pose(cam, rvec, tvec), grid[:, :2])
+    r, t = solve_pose(cam, grid, pixels)
+    assert rotation_error_deg(r, rvec) < 1e-3 and translation_error(t, tvec) < 1e-5
+
+
+# -- scenes ---------------------------------------------------------------------------------
+
+
+def test_scene_truth_is_exact_and_seeded(model: DeepMorphModel) -> None:
+    a = SceneMaker(model, seed=11).make(drawings=2, distractors=1, aruco=True)
+    b = SceneMaker(model, seed=11).make(drawings=2, distractors=1, aruco=True)
+    assert np.array_equal(a.image, b.image)
+    assert a.image.shape == (480, 640, 3)
+    kinds = [p.kind for p in a.placements]
+    assert kinds.count("drawing") == 2 and "aruco" in kinds
+    x, y, w, h = model.drawing.drawing.viewbox
+    for p in a.placements:
+        if p.kind == "drawing":
+            # the homography, the pose and the corners all tell the same story
+            corners = project(p.homography, np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]]))
+            assert np.allclose(corners, p.corners, atol=1e-6)
+            plane = homography_from_pose(a.camera, p.rvec, p.tvec)
+            assert np.allclose(project(plane, np.array([[-0.5, -h / w / 2]])), corners[:1], atol=1e-6)
+            assert p.payload is not None and p.payload.shape == (model.codec.spec.payload_bits,)
+        assert (p.corners >= 0).all() and (p.corners[:, 0] < 640).all() and (p.corners[:, 1] < 480).all()
+
+
+# -- the chain on scenes -------------------------------------------------------------------
+
+
+def test_detects_decodes_and_poses_drawings_in_scenes(model: DeepMorphModel, locator: Locator) -> None:
+    maker = SceneMaker(model, severity="easy", seed=21)
+    found = decoded = total = 0
+    corner_err, rot_err = [], []
+    for _ in range(12):
+        scene = maker.make(drawings=1, distractors=1, aruco=True)
+        truth = scene.placements[0]
+        assert truth.kind == "drawing"
+        total += 1
+        dets = locator.locate(scene.image, camera=scene.camera)
+        hits = [d for d in dets if _matches(d, truth)]
+        assert len(dets) == len(hits), "a detection on something that is not the drawing"
+        if hits:
+            d = hits[0]
+            found += 1
+            decoded += bool(d.result.ok and np.array_equal(d.result.payload, truth.payload))
+            corner_err.append(np.linalg.norm(d.corners - truth.corners, axis=1).mean())
+            rot_err.append(rotation_error_deg(d.rvec, truth.rvec))
+    assert found >= 10, f"recall {found}/{total}"
+    assert decoded >= 9, f"decoded {decoded}/{found}"
+    assert np.median(corner_err) < 2.0, corner_err
+    assert np.median(rot_err) < 3.0, rot_err
+
+
+def test_several_drawings_in_one_photo(model: DeepMorphModel, locator: Locator) -> None:
+    maker = SceneMaker(model, severity="easy", seed=5)
+    best = 0
+    for _ in range(4):
+        scene = maker.make(drawings=3)
+        truths = [p for p in scene.placements if p.kind == "drawing"]
+        dets = locator.locate(scene.image, camera=scene.camera)
+        right = sum(
+            any(_matches(d, t) and d.result.ok and np.array_equal(d.result.payload, t.payload) for d in dets)
+            for t in truths
+        )
+        best = max(best, right)
+        assert all(any(_matches(d, t) for t in truths) for d in dets)
+    assert best >= 2
+
+
+def test_photos_without_the_drawing_give_nothing(model: DeepMorphModel, locator: Locator) -> None:
+    maker = SceneMaker(model, severity="medium", seed=8)
+    for _ in range(8):
+        scene = maker.make(drawings=0, distractors=2, aruco=True)
+        assert locator.locate(scene.image) == []
+    assert locator.locate(np.full((300, 400), 255, np.uint8)) == []
+    noise = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    assert locator.locate(noise) == []
+
+
+# -- CLI --------------------------------------------------------------------------------------
+
+
+def _scene_file(model: DeepMorphModel, path: Path, seed: int = 3, **kw) -> object:
+    scene = SceneMaker(model, severity="easy", seed=seed).make(**kw)
+    cv2.imwrite(str(path), scene.image)
+    return scene
+
+
+def test_cli_decode_json_pose_and_overlay(model: DeepMorphModel, tmp_path: Path) -> None:
+    scene = _scene_file(model, tmp_path / "street.png", drawings=1)
+    truth = scene.placements[0]
+    cam = scene.camera
+    res = runner.invoke(
+        app,
+        ["decode", str(BUNDLED_MODEL), str(tmp_path / "street.png"), "--json",
+         "--camera", f"{cam.fx},{cam.fy},{cam.cx},{cam.cy}", "--overlay", str(tmp_path / "out.png")],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    (det,) = data[0]["detections"]
+    assert det["ok"] and det["payload"]["bits"] == "".join(map(str, truth.payload))
+    for key in ("bbox", "corners", "keypoints", "homography", "pose", "confidence", "bit_probabilities"):
+        assert key in det
+    assert det["pose"]["camera"]["assumed"] is False
+    assert rotation_error_deg(np.array(det["pose"]["rvec"]), truth.rvec) < 3
+    # image -> drawing homography takes the detected corners to the viewBox corners
+    H = np.array(det["homography"])
+    x, y, w, h = model.drawing.drawing.viewbox
+    assert np.allclose(
+        project(H, np.array(det["corners"])), [[x, y], [x + w, y], [x + w, y + h], [x, y + h]], atol=0.05
+    )
+    assert cv2.imread(str(tmp_path / "out.png")).shape == scene.image.shape
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "street.png"), "--json"])
+    assert json.loads(res.output)[0]["detections"][0]["pose"]["camera"]["assumed"] is True
+
+
+def test_cli_decode_video_and_folder_fuse_frames(model: DeepMorphModel, tmp_path: Path) -> None:
+    maker = SceneMaker(model, severity="medium", seed=14)
+    scene = maker.make(drawings=1)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    writer = cv2.VideoWriter(str(tmp_path / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 10, (640, 480))
+    assert writer.isOpened()
+    rng = np.random.default_rng(1)
+    for i in range(5):  # the same print, shaken a little and with fresh sensor noise
+        shift = np.float32([[1, 0, rng.uniform(-3, 3)], [0, 1, rng.uniform(-3, 3)]])
+        frame = cv2.warpAffine(scene.image, shift, (640, 480), borderMode=cv2.BORDER_REPLICATE)
+        frame = np.clip(frame + rng.normal(0, 6, frame.shape), 0, 255).astype(np.uint8)
+        cv2.imwrite(str(frames / f"f{i:02d}.png"), frame)
+        writer.write(frame)
+    writer.release()
+    truth = "".join(map(str, scene.placements[0].payload))
+    for target in (frames, tmp_path / "clip.mp4"):
+        res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(target), "--json"])
+        assert res.exit_code == 0, res.output
+        (entry,) = json.loads(res.output)
+        assert entry["frames"] == 5
+        (det,) = entry["detections"]
+        assert det["frames"] >= 4 and det["ok"] and det["payload"]["bits"] == truth
+
+
+def test_cli_bad_inputs_are_one_clear_error(tmp_path: Path) -> None:
+    (tmp_path / "notes.png").write_text("not an image")
+    (tmp_path / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"\x00" * 64)
+    (tmp_path / "empty").mkdir()
+    cases = [
+        ([str(tmp_path / "notes.png")], "not an image"),
+        ([str(tmp_path / "clip.mp4")], "not a video"),
+        ([str(tmp_path / "empty")], "no image files"),
+        ([str(tmp_path / "missing.jpg")], "no such image file"),
+        ([str(tmp_path / "notes.png"), "--camera", "1,2,3"], "--camera"),
+    ]
+    for args, message in cases:
+        res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), *args])
+        assert res.exit_code == 1, res.output
+        assert message in res.output and "Traceback" not in res.output
+
+
+def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
+    res = runner.invoke(
+        app, ["synth", str(BUNDLED_MODEL), "--n", "3", "--severity", "easy", "--out", str(tmp_path / "s")]
+    )
+    assert res.exit_code == 0, res.output
+    index = json.loads((tmp_path / "s" / "index.json").read_text())
+    assert len(index["scenes"]) == 3 and (tmp_path / "s" / "scene_00002.png").is_file()
+    res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path / "s"), "--json"])
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output[res.output.index("{") :])
+    assert report["scenes"] == 3 and report["drawings"] == 3
+    assert report["recall"] >= 2 / 3 and report["wrong_ok"] == 0
+    assert {"deepmorph", "aruco"} <= set(report["pose"]) and report["speed_ms"]["qr_detect_and_decode_median"] > 0
+    res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path)])
+    assert res.exit_code == 1 and "not a scene folder" in res.output

@@ -1,0 +1,78 @@
+"""``deepmorph train-detector``: targets, a short run that learns, checkpoints and exact resume."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from deepmorph_core.api import BUNDLED_MODEL
+from deepmorph_core.cli import app
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.train import Interrupted
+from deepmorph_detect.network import INPUT_SIZE, STRIDE
+from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.training import DetectorConfig, DetectorTrainer, quad_loss, targets_for
+
+runner = CliRunner()
+
+
+def test_targets_mark_each_drawing_centre_and_corners() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    scene = SceneMaker(model, INPUT_SIZE, "easy", seed=2).make(drawings=2, distractors=1)
+    heat, corners, mask = targets_for(scene.placements, INPUT_SIZE)
+    drawings = [p for p in scene.placements if p.kind == "drawing"]
+    assert heat.shape == (1, INPUT_SIZE[1] // STRIDE, INPUT_SIZE[0] // STRIDE)
+    assert int((heat >= 0.999).sum()) == len(drawings)
+    for y, x in zip(*np.nonzero(heat[0] >= 0.999)):
+        quad = corners[:, y, x].reshape(4, 2) * STRIDE + (np.array([x, y]) + 0.5) * STRIDE
+        assert any(np.allclose(quad, p.corners, atol=1e-3) for p in drawings)
+    assert mask.sum() <= 9 * len(drawings)
+
+
+def test_quad_loss_ignores_the_cyclic_order_of_corners() -> None:
+    target = torch.randn(1, 8, 3, 3)
+    mask = torch.ones(1, 1, 3, 3)
+    rolled = torch.roll(target.view(1, 4, 2, 3, 3), 1, dims=1).reshape(1, 8, 3, 3)
+    assert quad_loss(rolled, target, mask).item() < 1e-6
+    assert quad_loss(target + 1, target, mask).item() == pytest.approx(1.0)
+
+
+def _config(steps: int) -> DetectorConfig:
+    return DetectorConfig(
+        steps=steps, batch=2, width=8, workers=0, threads=1, checkpoint_every=100, log_every=1, seed=4
+    )
+
+
+def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
+    straight = tmp_path / "straight.dmm"
+    DetectorTrainer(DeepMorphModel.load(BUNDLED_MODEL), _config(4), straight).run()
+
+    cut = tmp_path / "cut.dmm"
+
+    def stop_at_2(m: dict) -> None:
+        if m["step"] == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match="--resume"):
+        DetectorTrainer(DeepMorphModel.load(BUNDLED_MODEL), _config(4), cut).run(stop_at_2)
+    half = DeepMorphModel.load(cut)
+    assert half.meta.detector is not None and half.meta.detector.record.step == 2
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(cut), "--resume"])
+    assert res.exit_code == 0, res.output
+    a, b = DeepMorphModel.load(straight), DeepMorphModel.load(cut)
+    assert a.meta.detector.record.finished and b.meta.detector.record.step == 4
+    for key, val in a.detector_state.items():
+        assert torch.equal(val, b.detector_state[key]), key
+    # the codec networks are carried over untouched
+    base = DeepMorphModel.load(BUNDLED_MODEL)
+    for key, val in base.decoder.state_dict().items():
+        assert torch.equal(val, b.decoder.state_dict()[key])
+
+
+def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(BUNDLED_MODEL), "--resume"])
+    assert res.exit_code == 1 and "no interrupted detector training" in res.output
