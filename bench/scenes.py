@@ -104,9 +104,13 @@ def main() -> None:
     )
     print(f"\nnegatives: {neg['images']} scenes without the drawing -> {neg['detections']} detections, "
           f"{neg['wrong_ok']} wrong payloads reported ok")  # fmt: skip
-    write_json(
-        args.out, {"environment": environment(), "model": str(model_path), "severities": reports, "negatives": neg}
-    )
+    if args.sequences:
+        print(
+            f"frame fusion (hard, 5 frames): single frames {fusion['single_ok'] / max(fusion['frames'], 1):.1%}, "
+            f"fused sequences {fusion['fused_ok'] / args.sequences:.1%} ({fusion['fused_wrong_ok']} wrong ok)"
+        )
+    out = {"environment": environment(), "model": str(model_path), "severities": reports, "negatives": neg}
+    write_json(args.out, {**out, "fusion": fusion})
     print(f"wrote {args.out}")
 
 

@@ -354,6 +354,18 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         ("last metrics", json.dumps(rec["metrics"])),
         ("versions", json.dumps(data["versions"])),
     ]
+    det = data["detector"]
+    if det is None:
+        rows.append(("detector", "none (decode frames whole images; add one with `deepmorph train-detector`)"))
+    else:
+        drec = det["record"]
+        rows.append(
+            (
+                "detector",
+                f"{drec['step']}/{drec['total_steps']} steps, {drec['elapsed_s']:.0f} s "
+                f"({'finished' if drec['finished'] else 'checkpoint (resume to finish)'}), {json.dumps(drec['metrics'])}",
+            )
+        )
     for k, v in rows:
         table.add_row(k, v)
     out.print(table)

@@ -196,15 +196,29 @@ class DeepMorphModel:
         with torch.no_grad():
             return torch.sigmoid(self.decoder(images))
 
-    def decode_image(self, image: np.ndarray, soft: bool = True) -> list[Detection]:
-        """Decode one image in which the drawing roughly fills the frame.
+    def decode_image(self, image: np.ndarray, soft: bool = True, camera: Any = None) -> list[Detection]:
+        """Find and decode every instance of the drawing in an image.
+
+        Runs :class:`deepmorph_detect.locate.Locator`: the bundle's detector when it has one,
+        else (or when it finds nothing) the whole image framed by its ink; every candidate is
+        aligned to the unmorphed drawing and dropped unless it matches.
 
         Args:
             image: ``(H, W)`` or ``(H, W, 3|4)`` array (uint8 or float in [0, 1]).
+            camera: a :class:`deepmorph_detect.camera.Camera` for the pose (default: assumed).
 
         Returns:
-            One detection, or an empty list when the image holds no drawing.
+            One detection per drawing found (with corners, homography and pose), or ``[]``.
         """
+        if getattr(self, "_locator", None) is None:
+            from deepmorph_detect.locate import Locator
+
+            self._locator = Locator(self)
+        return self._locator.locate(image, camera=camera, soft=soft)
+
+    def decode_framed(self, image: np.ndarray, soft: bool = True) -> list[Detection]:
+        """Decode an image in which the drawing fills the frame, framed by its ink alone
+        (no detection, no alignment check): the issue-3 path, kept for comparison."""
         gray = to_gray(image)
         aligned = align_to_frame(gray, self.image_size, self.canonical_moments())
         if aligned is None:
@@ -228,6 +242,7 @@ class DeepMorphModel:
             "train": m.train,
             "record": m.record.model_dump(),
             "versions": m.versions,
+            "detector": None if m.detector is None else m.detector.model_dump(),
         }
 
 

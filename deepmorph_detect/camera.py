@@ -95,7 +95,7 @@ def load_calibration(path: str | Path) -> Camera:
         raise DeepMorphError(f"{path}: no such calibration file")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error:
+    except (cv2.error, SystemError):  # a parse error surfaces as either, by OpenCV version
         raise DeepMorphError(f"{path}: not a calibration file OpenCV can read") from None
     try:
         if not fs.isOpened():

@@ -247,13 +247,23 @@ class Locator:
     ) -> Located:
         h, w = gray.shape
         model = self.model
-        flat = self.rectify(pyramid, H)
-        aligned = align_to_frame(flat, model.image_size, model.canonical_moments())
-        if aligned is None:
-            probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
-        else:
+        views = [self.rectify(pyramid, H)]
+        if source == "whole-frame":
+            # A drawing that fills the frame is also read as it is, framed by its ink: a full
+            # homography fitted to the unmorphed drawing can absorb part of a morph whose every
+            # point moves (no fixed elements); the better-verified reading wins.
+            views.append(gray)
+        readings: list[tuple[DecodeResult, np.ndarray]] = []
+        for view in views:
+            aligned = align_to_frame(view, model.image_size, model.canonical_moments())
+            if aligned is None:
+                continue
             probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
-        result: DecodeResult = model.codec.decode(probs, soft=soft)
+            readings.append((model.codec.decode(probs, soft=soft), probs))
+        if not readings:
+            probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
+            readings.append((model.codec.decode(probs, soft=soft), probs))
+        result, probs = max(readings, key=lambda r: (r[0].ok, r[0].confidence))
         corners = project(H, self.frame_corners)
         grid = np.array([[fx, fy] for fy in (0.0, 0.5, 1.0) for fx in (0.0, 0.5, 1.0)])
         x, y, vw, vh = self.viewbox

@@ -183,8 +183,9 @@ class SceneMaker:
         sv = self.severity
         hx, hy = half_extent
         sheet = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-        for _ in range(60):
-            frac = self.rng.uniform(*sv.size)
+        for attempt in range(80):
+            # crowded scenes: after every 20 failed tries, prints get smaller
+            frac = self.rng.uniform(*sv.size) * 0.75 ** (attempt // 20)
             dist = cam.fx / (frac * W)
             tilt = math.radians(self.rng.uniform(0, sv.tilt_deg))
             axis = self.rng.uniform(0, 2 * math.pi)
