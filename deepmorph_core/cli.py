@@ -90,6 +90,28 @@ def _load(svg: Path, move: float | None, shift: str | None, scale: str | None, r
     )
 
 
+def progress_bar(description: str = "{task.description}"):  # noqa: ANN201 - a rich Progress
+    """The progress bar of long commands (on stderr): description, bar, count, elapsed, ETA."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn(description),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err,
+    )
+
+
 def _write_text_atomic(path: Path, text: str) -> None:
     """Write a text file so that a crash never leaves it half written."""
     atomic_write(path, text.encode("utf-8"))
@@ -254,26 +276,9 @@ def train(
     rotate: RotateOpt = None,
 ) -> None:
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     from deepmorph_core.api import train_model
 
-    progress = Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=err,
-    )
+    progress = progress_bar()
 
     def on_start(total: int, done: int) -> Callable[[Any], None]:
         # started only once the drawing and settings are validated, so errors print alone
@@ -363,7 +368,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
             (
                 "detector",
                 f"{drec['step']}/{drec['total_steps']} steps, {drec['elapsed_s']:.0f} s "
-                f"({'finished' if drec['finished'] else 'checkpoint (resume to finish)'}), {json.dumps(drec['metrics'])}",
+                f"({'finished' if drec['finished'] else 'checkpoint (resume to finish)'}), "
+                f"{json.dumps(drec['metrics'])}",
             )
         )
     for k, v in rows:

@@ -9,31 +9,13 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli import JsonOpt, ModelArg, app, err, friendly, out
+from deepmorph_core.cli import JsonOpt, ModelArg, app, friendly, out, progress_bar
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 
 
-def _progress(description: str):  # noqa: ANN202 - a rich Progress
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    return Progress(
-        TextColumn(description if "{" in description else description + " {task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=err,
-        transient=False,
-    )
+def _progress(name: str):  # noqa: ANN202 - a rich Progress
+    return progress_bar(name + " {task.description}")
 
 
 def _size(text: str) -> tuple[int, int]:

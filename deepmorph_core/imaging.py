@@ -29,7 +29,17 @@ def read_image(path: str | Path) -> np.ndarray:
     """
     path = Path(path)
     if path.is_dir():
-        raise DeepMorphError(f"{path}: is a folder; pass image files (folders of frames are not supported yet)")
+        raise DeepMorphError(f"{path}: is a folder; pass image files (the CLI reads folders as frame sequences)")
+    return to_gray(read_image_bgr(path))
+
+
+def read_image_bgr(path: str | Path) -> np.ndarray:
+    """Read an image file as ``(H, W, 3)`` uint8 BGR (gray expanded, transparency on white).
+
+    Raises:
+        DeepMorphError: missing, empty, corrupt, too large or non-image files.
+    """
+    path = Path(path)
     if not path.is_file():
         raise DeepMorphError(f"{path}: no such image file")
     data = np.fromfile(path, dtype=np.uint8)
@@ -40,10 +50,16 @@ def read_image(path: str | Path) -> np.ndarray:
         raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
         raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
-    if img.ndim == 3 and img.shape[2] == 4:  # composite transparency onto white paper
+    if img.dtype == np.uint16:
+        img = (img // 257).astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise DeepMorphError(f"{path}: {img.dtype} pixels are not supported (8 or 16 bits per channel)")
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.shape[2] == 4:  # composite transparency onto white paper
         alpha = img[..., 3:4].astype(np.float32) / 255.0
-        img = (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
-    return to_gray(img)
+        return (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
+    return np.ascontiguousarray(img[..., :3])
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:

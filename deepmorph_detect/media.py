@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import MAX_IMAGE_PIXELS
+from deepmorph_core.imaging import read_image_bgr
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm"}
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv"}
@@ -21,30 +21,8 @@ MAX_FRAMES = 100_000
 
 
 def read_color(path: str | Path) -> np.ndarray:
-    """An image file as ``(H, W, 3)`` uint8 BGR (transparency composited onto white).
-
-    Raises:
-        DeepMorphError: missing, empty, corrupt, too large or non-image files.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise DeepMorphError(f"{path}: no such image file")
-    data = np.fromfile(path, dtype=np.uint8)
-    if data.size == 0:
-        raise DeepMorphError(f"{path}: empty file, not an image")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
-    if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
-        raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
-    if img.dtype == np.uint16:
-        img = (img // 257).astype(np.uint8)
-    if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    if img.shape[2] == 4:
-        alpha = img[..., 3:4].astype(np.float32) / 255.0
-        return (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
-    return img[..., :3]
+    """An image file as ``(H, W, 3)`` uint8 BGR (see :func:`deepmorph_core.imaging.read_image_bgr`)."""
+    return read_image_bgr(path)
 
 
 def is_video(path: Path) -> bool:
