@@ -52,10 +52,11 @@ def decode(
     import cv2
 
     from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.imaging import read_image_bgr
     from deepmorph_detect.camera import parse_camera
     from deepmorph_detect.fusion import FrameFuser
     from deepmorph_detect.locate import Locator
-    from deepmorph_detect.media import check_video, folder_frames, is_video, read_color, video_frames
+    from deepmorph_detect.media import check_video, folder_frames, is_video, video_frames
     from deepmorph_detect.overlay import draw_overlay
 
     m = DeepMorphModel.load(model)
@@ -68,7 +69,7 @@ def decode(
             check_video(path)
             jobs.append(("video", path, None))
         else:
-            jobs.append(("image", path, read_color(path)))
+            jobs.append(("image", path, read_image_bgr(path)))
     if overlay is not None and len(jobs) > 1 and overlay.suffix:
         raise DeepMorphError(f"--overlay {overlay}: with several inputs, give a folder for the annotated images")
     locator = Locator(m)
@@ -92,7 +93,7 @@ def decode(
             save_overlay(path, payload, dets)
             continue
         fuser = FrameFuser(m.codec)
-        frames = ((p.name, read_color(p)) for p in payload) if kind == "folder" else video_frames(path, every)
+        frames = ((p.name, read_image_bgr(p)) for p in payload) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:
             dets = locator.locate(frame, camera=cam, soft=soft)

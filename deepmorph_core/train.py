@@ -104,6 +104,18 @@ class Interrupted(DeepMorphError):
     """Training stopped by Ctrl-C after writing a checkpoint."""
 
 
+def interrupted(
+    record: Any, started: float, checkpoint: Callable[[], None], out: Path, total_steps: int
+) -> Interrupted:
+    """After Ctrl-C: record the time, write the checkpoint, and return the error saying how to
+    go on (shared by every trainer, so they all stop the same way)."""
+    record.elapsed_s = time.perf_counter() - started
+    checkpoint()
+    return Interrupted(
+        f"interrupted at step {record.step}/{total_steps}; checkpoint written to {out} (continue with --resume)"
+    )
+
+
 def build_augment(severity: str, width: int, config: dict[str, Any] | None = None) -> nn.Module:
     """The capture-corruption pipeline for a preset at an image width (or a stored config)."""
     from deepmorph_augment.pipeline import AugmentConfig, AugmentPipeline
@@ -311,11 +323,7 @@ class Trainer:
                 if rec.step % cfg.checkpoint_every == 0 and rec.step < cfg.steps:
                     self.checkpoint()
         except KeyboardInterrupt:
-            rec.elapsed_s = time.perf_counter() - start
-            self.checkpoint()
-            raise Interrupted(
-                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} (continue with --resume)"
-            ) from None
+            raise interrupted(rec, start, self.checkpoint, self.out, cfg.steps) from None
         rec.finished = True
         self.model.encoder.eval()
         self.model.decoder.eval()

@@ -23,9 +23,9 @@ import numpy as np
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
+from deepmorph_core.imaging import read_image_bgr
 from deepmorph_detect.camera import Camera, rotation_error_deg, solve_pose, translation_error
 from deepmorph_detect.locate import Located, Locator
-from deepmorph_detect.media import read_color
 from deepmorph_detect.scenes import ARUCO_DICT, Placement, SceneMaker
 
 
@@ -126,7 +126,7 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
     rot, trans, corner, a_rot, a_trans, a_corner = [], [], [], [], [], []
     t_ours, t_aruco = [], []
     for i, (path, truth) in enumerate(scenes):
-        image = read_color(path)
+        image = read_image_bgr(path)
         c = truth["camera"]
         cam = Camera(c["fx"], c["fy"], c["cx"], c["cy"])
         drawings = [p for p in truth["placements"] if p.kind == "drawing"]

@@ -50,10 +50,6 @@ class Camera:
         f = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
         return cls(f, f, width / 2, height / 2, assumed=True)
 
-    def scaled(self, sx: float, sy: float) -> Camera:
-        """The same camera for an image resized by ``(sx, sy)``."""
-        return Camera(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.dist, self.assumed)
-
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy, "assumed": self.assumed}
         if self.assumed:
@@ -61,6 +57,18 @@ class Camera:
         if self.dist:
             out["dist"] = list(self.dist)
         return out
+
+
+def viewbox_corners(viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """``(4, 2)`` corners of a viewBox in SVG units: top-left, top-right, bottom-right, bottom-left."""
+    x, y, w, h = viewbox
+    return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], dtype=np.float64)
+
+
+def viewbox_to_frame(viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """``(3, 3)`` map from SVG units to the pose frame (viewBox centre origin, width units)."""
+    x, y, w, h = viewbox
+    return np.array([[1 / w, 0, -x / w - 0.5], [0, 1 / w, -(y + h / 2) / w], [0, 0, 1]])
 
 
 def parse_camera(spec: str) -> Camera:
@@ -183,4 +191,6 @@ __all__ = [
     "rotation_error_deg",
     "solve_pose",
     "translation_error",
+    "viewbox_corners",
+    "viewbox_to_frame",
 ]

@@ -26,7 +26,7 @@ from deepmorph_core.codec import DecodeResult
 from deepmorph_core.codemodel import DeepMorphModel, Detection
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import align_to_frame, ink_mask, normalise_contrast, to_gray
-from deepmorph_detect.camera import Camera, project, solve_pose
+from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, normalise_input
 from deepmorph_detect.refine import ImagePyramid, Template, refine, warp_to_template
 
@@ -149,10 +149,14 @@ class Locator:
         md = model.drawing
         self.viewbox = md.drawing.viewbox
         self.template = Template.from_svg(md.to_svg(md.neutral_values()[0]), self.viewbox)
-        x, y, vw, vh = self.viewbox
-        # SVG units -> pose frame (centre origin, drawing-width units)
-        self.to_frame = np.array([[1 / vw, 0, -x / vw - 0.5], [0, 1 / vw, -(y + vh / 2) / vw], [0, 0, 1]])
-        self.frame_corners = np.array([[x, y], [x + vw, y], [x + vw, y + vh], [x, y + vh]], dtype=np.float64)
+        self.to_frame = viewbox_to_frame(self.viewbox)  # SVG units -> pose frame
+        self.frame_corners = viewbox_corners(self.viewbox)
+        # where the unmorphed drawing's ink lies in the finest template (whole-frame framing)
+        finest = max(self.template.images)
+        tys, txs = np.nonzero(self.template.images[finest] < 0.5)
+        self._ink_centre = np.array([txs.mean(), tys.mean()])
+        self._ink_spread = float(txs.var() + tys.var())
+        self._ink_level = finest
 
     # -- candidates -----------------------------------------------------------------------
 
@@ -166,14 +170,11 @@ class Locator:
         ys, xs = np.nonzero(mask)
         if len(xs) < 10:
             return []
-        t = self.template.images[max(self.template.images)]
-        tmask = t < 0.5
-        tys, txs = np.nonzero(tmask)
-        s = float(np.sqrt((xs.var() + ys.var()) / max(txs.var() + tys.var(), 1e-9)))
+        s = float(np.sqrt((xs.var() + ys.var()) / max(self._ink_spread, 1e-9)))
+        cx, cy = self._ink_centre
         # template px -> image px: scale s about the centroids
-        T = np.array([[s, 0, xs.mean() - s * txs.mean()], [0, s, ys.mean() - s * tys.mean()], [0, 0, 1]])
-        tw = t.shape[1]
-        H = T @ np.linalg.inv(self.template.to_svg_units(tw))
+        T = np.array([[s, 0, xs.mean() - s * cx], [0, s, ys.mean() - s * cy], [0, 0, 1]])
+        H = T @ np.linalg.inv(self.template.to_svg_units(self._ink_level))
         corners = project(H, self.frame_corners)
         return [{"score": 0.0, "corners": corners, "bbox": box, "homography": H}]
 

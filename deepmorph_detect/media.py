@@ -13,16 +13,10 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import read_image_bgr
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm"}
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv"}
 MAX_FRAMES = 100_000
-
-
-def read_color(path: str | Path) -> np.ndarray:
-    """An image file as ``(H, W, 3)`` uint8 BGR (see :func:`deepmorph_core.imaging.read_image_bgr`)."""
-    return read_image_bgr(path)
 
 
 def is_video(path: Path) -> bool:
@@ -65,7 +59,7 @@ def video_frames(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray]]
         cap.release()
 
 
-__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "check_video", "folder_frames", "is_video", "read_color", "video_frames"]
+__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "check_video", "folder_frames", "is_video", "video_frames"]
 
 
 def check_video(path: Path) -> None:

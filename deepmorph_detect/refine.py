@@ -10,12 +10,14 @@ A morph moves points by at most a few percent, so the unmorphed drawing is a fai
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from deepmorph_core.render import render_svg
+from deepmorph_detect.camera import viewbox_corners
 
 LEVELS = (48, 96, 160)  # template widths, coarse to fine
 
@@ -35,6 +37,11 @@ class Template:
     @classmethod
     def from_svg(cls, svg: str, viewbox: tuple[float, float, float, float]) -> Template:
         return cls(viewbox, {w: render_svg(svg, w) for w in LEVELS})
+
+    @functools.cached_property
+    def coarse_blurred(self) -> np.ndarray:
+        """The coarsest level, blurred as candidates are before their corner order is scored."""
+        return cv2.GaussianBlur(self.images[LEVELS[0]], (5, 5), 0)
 
     def shape(self, width: int) -> tuple[int, int]:
         """``(h, w)`` of the drawing's viewBox at ``width`` pixels."""
@@ -87,10 +94,18 @@ def warp_to_template(pyramid: ImagePyramid, homography: np.ndarray, template: Te
 
 
 def _ecc_step(
-    pyramid: ImagePyramid, H: np.ndarray, template: Template, width: int, iterations: int, smooth: int
+    pyramid: ImagePyramid,
+    H: np.ndarray,
+    template: Template,
+    width: int,
+    iterations: int,
+    smooth: int,
+    crop: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float] | None:
-    """One ECC solve at one template width: the improved homography and its correlation."""
-    crop = warp_to_template(pyramid, H, template, width)
+    """One ECC solve at one template width: the improved homography and its correlation
+    (``crop``: the photo already warped through ``H`` at ``width``, when the caller has it)."""
+    if crop is None:
+        crop = warp_to_template(pyramid, H, template, width)
     W = np.eye(3, dtype=np.float32)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-5)
     try:
@@ -105,8 +120,7 @@ def _ecc_step(
 def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray]:
     """The homography with the frame's corners taken in each of the four cyclic orders
     (the drawing turned by 0, 90, 180 and 270 degrees within the same outline)."""
-    x, y, w, h = template.viewbox
-    frame = np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], dtype=np.float32)
+    frame = viewbox_corners(template.viewbox).astype(np.float32)
     pts = np.column_stack([frame, np.ones(4)]) @ np.asarray(homography, dtype=np.float64).T
     quad = (pts[:, :2] / pts[:, 2:3]).astype(np.float32)
     return [cv2.getPerspectiveTransform(frame, np.roll(quad, k, axis=0)).astype(np.float64) for k in range(4)]
@@ -143,16 +157,15 @@ def refine(
         coarsest level.
     """
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
-    blurred = cv2.GaussianBlur(template.images[LEVELS[0]], (5, 5), 0)
     scored = []
     for H in starts:
-        view = cv2.GaussianBlur(warp_to_template(pyramid, H, template, LEVELS[0]), (5, 5), 0)
-        scored.append((correlation(blurred, view), H))
+        crop = warp_to_template(pyramid, H, template, LEVELS[0])
+        scored.append((correlation(template.coarse_blurred, cv2.GaussianBlur(crop, (5, 5), 0)), H, crop))
     scored.sort(key=lambda r: -r[0])
     if scored[0][0] < min_start:
         return None
     # the best two orders by plain correlation hold the right one almost always; ECC decides
-    tries = [_ecc_step(pyramid, H, template, LEVELS[0], iterations[0], 5) for _, H in scored[:2]]
+    tries = [_ecc_step(pyramid, H, template, LEVELS[0], iterations[0], 5, crop) for _, H, crop in scored[:2]]
     found = [t for t in tries if t is not None]
     if not found:
         return None

@@ -26,7 +26,7 @@ import numpy as np
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.render import render_svg
 from deepmorph_detect.backgrounds import random_background
-from deepmorph_detect.camera import Camera, homography_from_pose
+from deepmorph_detect.camera import Camera, homography_from_pose, viewbox_corners, viewbox_to_frame
 
 if TYPE_CHECKING:
     from deepmorph_core.codemodel import DeepMorphModel
@@ -244,9 +244,8 @@ class SceneMaker:
         img = random_background(rng, self.size)
         taken: list[np.ndarray] = []
         placements: list[Placement] = []
-        vx, vy, vw, vh = self.viewbox
-        # drawing frame (SVG units) -> pose frame (centre origin, width units)
-        to_frame = np.array([[1 / vw, 0, -vx / vw - 0.5], [0, 1 / vw, -(vy + vh / 2) / vw], [0, 0, 1]])
+        _, _, vw, vh = self.viewbox
+        to_frame = viewbox_to_frame(self.viewbox)  # drawing (SVG units) -> pose frame
         jobs: list[str] = ["drawing"] * drawings + ["distractor"] * distractors
         if aruco:
             jobs.append("aruco")
@@ -269,26 +268,22 @@ class SceneMaker:
                     self._svg_cache[idx] = self.model.encode(payload)
                 svg = self._svg_cache[idx] if idx >= 0 else self.model.encode(payload)
                 art = self._render(f"p{idx}", svg, rw, idx >= 0)
-                src_to_frame = to_frame
-                truth = plane @ to_frame
             elif kind == "distractor":
                 icons = distractor_svgs()
                 label, svg = icons[int(rng.integers(len(icons)))]
-                svg = svg.replace("currentColor", "#000")
-                art = self._render(label, svg, rw, True)
-                ah, aw = art.shape
-                src_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
-                truth = plane @ src_to_frame
-                src_to_frame = None  # art is in pixels already
+                art = self._render(label, svg.replace("currentColor", "#000"), rw, True)
             else:
                 art, label = _marker_art(kind, rw, rng, qr)
-                src_to_frame = None
-                truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])  # unit square -> pixels
             ah, aw = art.shape
             # art pixels -> frame units -> image pixels
             art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
             _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng)
-            del src_to_frame
+            if kind == "drawing":  # truth in SVG units
+                truth = plane @ to_frame
+            elif kind == "distractor":  # truth in the icon's art pixels
+                truth = plane @ art_to_frame
+            else:  # truth on the unit square
+                truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])
             corners_src = _frame_corners(kind, self.viewbox, art.shape)
             pts = np.column_stack([corners_src, np.ones(4)]) @ truth.T
             placements.append(Placement(kind, rvec, tvec, truth, pts[:, :2] / pts[:, 2:3], payload, label))
@@ -298,12 +293,11 @@ class SceneMaker:
 
 def _frame_corners(kind: str, viewbox: tuple[float, float, float, float], art_shape: tuple[int, int]) -> np.ndarray:
     if kind == "drawing":
-        x, y, w, h = viewbox
-        return np.array([[x, y], [x + w, y], [x + w, y + h], [x, y + h]], dtype=np.float64)
+        return viewbox_corners(viewbox)
     if kind == "distractor":
         h, w = art_shape
-        return np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64)
-    return np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+        return viewbox_corners((0, 0, w, h))
+    return viewbox_corners((0, 0, 1, 1))
 
 
 def _overlap(a: np.ndarray, b: np.ndarray) -> bool:

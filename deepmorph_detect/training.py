@@ -27,7 +27,7 @@ from torch import Tensor
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.train import Interrupted
+from deepmorph_core.train import interrupted
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input
 from deepmorph_detect.scenes import Placement, SceneMaker
 
@@ -245,11 +245,7 @@ class DetectorTrainer:
                 if rec.step % cfg.checkpoint_every == 0 and rec.step < cfg.steps:
                     self.checkpoint()
         except KeyboardInterrupt:
-            rec.elapsed_s = time.perf_counter() - start
-            self.checkpoint()
-            raise Interrupted(
-                f"interrupted at step {rec.step}/{cfg.steps}; checkpoint written to {self.out} (continue with --resume)"
-            ) from None
+            raise interrupted(rec, start, self.checkpoint, self.out, cfg.steps) from None
         rec.finished = True
         self.net.eval()
         self.checkpoint()
