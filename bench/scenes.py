@@ -7,6 +7,8 @@ whole-payload success, pose error against the truth next to ArUco's on the same 
 and time per frame on ``--threads`` (default 1) next to ArUco detection and OpenCV's QR
 detect-and-decode on same-size frames. Then ``--negatives`` scenes holding no drawing of the
 model (other drawings, an ArUco marker, photos and clutter) count wrong payloads reported ok.
+Last, the morph check's rejection rates for right, random and one-bit-off payloads on the
+drawings found, and frame fusion over ``--sequences`` hard 5-frame sequences.
 
     .venv/bin/python bench/scenes.py --n 200 --negatives 1000
 """
@@ -41,7 +43,7 @@ def main() -> None:
     cv2.setNumThreads(args.threads)
     from deepmorph_core.api import BUNDLED_MODEL
     from deepmorph_core.codemodel import DeepMorphModel
-    from deepmorph_detect.benchmark import bench_scenes, write_scenes
+    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, write_scenes
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import SceneMaker
 
@@ -54,6 +56,7 @@ def main() -> None:
             t0 = time.perf_counter()
             write_scenes(model, folder, args.n, sev, args.seed, distractors=args.distractors, aruco=True)
             reports[sev] = bench_scenes(model, folder)
+            reports[sev]["morph_check"] = morph_check_rates(model, folder, args.seed)
             print(f"{sev}: {args.n} scenes in {time.perf_counter() - t0:.0f} s", flush=True)
     # negatives: no drawing of the model, only other drawings, markers, photos and clutter
     locator = Locator(model)
@@ -73,12 +76,12 @@ def main() -> None:
     for _ in range(args.sequences):
         scene = fmaker.make(drawings=1, frames=5)
         truth = scene.placements[0].payload
-        fuser = FrameFuser(model.codec)
+        fuser = FrameFuser(model.codec, locator.confirm)
         for k, frame in enumerate(scene.frames):
             dets = locator.locate(frame, camera=scene.camera)
             fusion["frames"] += 1
             fusion["single_ok"] += any(d.result.ok and (d.result.payload == truth).all() for d in dets)
-            fuser.add(str(k), dets)
+            fuser.add(str(k), dets, frame)
         fused = fuser.results()
         right = "".join(map(str, truth))
         fusion["fused_ok"] += any(e["ok"] and e["payload"]["bits"] == right for e in fused)
@@ -102,6 +105,10 @@ def main() -> None:
     print(
         table(["severity", f"ours ms ({args.threads} thread)", "ArUco ms", "QR detect+decode ms", "ours / QR"], speed)
     )
+    checks = [[sev] + [f"{r['morph_check'][k]['rejected']}/{r['morph_check'][k]['n']}"
+                       for k in ("right", "random", "one_bit_off")] for sev, r in reports.items()]  # fmt: skip
+    print()
+    print(table(["morph check rejects", "right payload", "random payload", "one bit off"], checks))
     print(f"\nnegatives: {neg['images']} scenes without the drawing -> {neg['detections']} detections, "
           f"{neg['wrong_ok']} wrong payloads reported ok")  # fmt: skip
     if args.sequences:

@@ -92,12 +92,12 @@ def decode(
             results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
             save_overlay(path, payload, dets)
             continue
-        fuser = FrameFuser(m.codec)
+        fuser = FrameFuser(m.codec, locator.confirm)
         frames = ((p.name, read_image_bgr(p)) for p in payload) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:
             dets = locator.locate(frame, camera=cam, soft=soft)
-            fuser.add(label, dets)
+            fuser.add(label, dets, frame)
             last = (frame, dets)
         results.append({"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)})
         if last is not None:

@@ -206,6 +206,44 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
     return report
 
 
+def morph_check_rates(model: DeepMorphModel, folder: Path, seed: int = 0) -> dict[str, Any]:
+    """How the morph check treats right and wrong payloads on the drawings found in a folder.
+
+    For every drawing found, the photo is aligned to three morphs from the same start: the true
+    payload's, a random payload's (what a drawing-less photo would decode to), and the morph of
+    the true payload with one bit flipped (a near miss, like a CRC collision next to the truth).
+    Reports, for each, how many the check rejects and the spread of the correlation gain.
+    """
+    _, scenes = read_scenes(folder)
+    locator = Locator(model)
+    rng = np.random.default_rng(seed)
+    gains: dict[str, list[float]] = {"right": [], "random": [], "one_bit_off": []}
+    for path, truth in scenes:
+        image = read_image_bgr(path)
+        drawings = [p for p in truth["placements"] if p.kind == "drawing"]
+        for det in locator.locate(image):
+            p = _match(det.corners, drawings)
+            if p is None or p.payload is None:
+                continue
+            near = p.payload.copy()
+            near[rng.integers(len(near))] ^= 1
+            random = rng.integers(0, 2, len(p.payload)).astype(np.uint8)
+            for name, payload in (("right", p.payload), ("random", random), ("one_bit_off", near)):
+                fit = locator.fit_morph(image, det.homography, payload)
+                gains[name].append(np.nan if fit is None else fit.gain)
+    out: dict[str, Any] = {}
+    for name, values in gains.items():
+        v = np.asarray(values, dtype=np.float64)
+        fitted = v[np.isfinite(v)]
+        out[name] = {
+            "n": len(v),
+            "rejected": int(len(v) - np.sum(fitted > 0)),
+            "gain_p5": round(float(np.percentile(fitted, 5)), 4) if len(fitted) else None,
+            "gain_median": round(float(np.median(fitted)), 4) if len(fitted) else None,
+        }
+    return out
+
+
 def _qr_timing(model: DeepMorphModel, size: tuple[int, int], n: int) -> float:
     """Median ms of ``cv2.QRCodeDetector().detectAndDecode`` on scenes holding one QR code."""
     maker = SceneMaker(model, size, "medium", seed=99)
@@ -244,4 +282,4 @@ def format_report(report: dict[str, Any]) -> str:
     return "\n".join(f"{a:<{width}}  {b!s:>20}  {c!s:>16}" for a, b, c in rows)
 
 
-__all__ = ["aruco_detector", "bench_scenes", "format_report", "read_scenes", "write_scenes"]
+__all__ = ["aruco_detector", "bench_scenes", "format_report", "morph_check_rates", "read_scenes", "write_scenes"]

@@ -3,18 +3,23 @@
 Each frame's detections are matched to tracks by where the drawing is (its centre, relative to
 its size); a track sums its frames' per-bit log-odds, which is the optimal combination for
 independent frames, and the codec decodes the fused probabilities once more. Bits that one
-blurry frame gets wrong are outvoted by the sharp ones.
+blurry frame gets wrong are outvoted by the sharp ones. A fused payload that passes the CRC is
+checked by synthesis like a single frame's (:meth:`~deepmorph_detect.locate.Locator.fit_morph`),
+on the last frame the drawing was seen in.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from deepmorph_core.codec import PayloadCodec
-from deepmorph_detect.locate import Located
+from deepmorph_detect.locate import Located, MorphFit
+
+MorphCheck = Callable[[np.ndarray, Located, np.ndarray], MorphFit | None]
 
 LOGIT_CLIP = 6.0  # no single frame may be more than ~99.75 % sure of a bit
 MATCH_DISTANCE = 0.6  # centres within this share of the drawing's size belong to one track
@@ -29,6 +34,7 @@ class Track:
     frames: list[str] = field(default_factory=list)
     centre: np.ndarray = field(default_factory=lambda: np.zeros(2))
     size: float = 1.0
+    image: np.ndarray | None = None  # the last frame it was seen in (for the morph check)
 
 
 def _where(det: Located) -> tuple[np.ndarray, float]:
@@ -42,14 +48,22 @@ def _logits(p: np.ndarray) -> np.ndarray:
 
 
 class FrameFuser:
-    """Accumulates detections frame by frame; :meth:`results` decodes each track."""
+    """Accumulates detections frame by frame; :meth:`results` decodes each track.
 
-    def __init__(self, codec: PayloadCodec) -> None:
+    Args:
+        codec: the model's payload codec.
+        check: the morph check (``Locator.confirm``) run on a fused payload that passes the
+            CRC; without it, the CRC alone decides ``ok``.
+    """
+
+    def __init__(self, codec: PayloadCodec, check: MorphCheck | None = None) -> None:
         self.codec = codec
+        self.check = check
         self.tracks: list[Track] = []
         self.frames = 0
 
-    def add(self, label: str, detections: list[Located]) -> None:
+    def add(self, label: str, detections: list[Located], image: np.ndarray | None = None) -> None:
+        """One frame's detections (``image``: the frame, kept per track for the morph check)."""
         self.frames += 1
         free = list(range(len(self.tracks)))
         for det in sorted(detections, key=lambda d: -d.correlation):
@@ -61,12 +75,12 @@ class FrameFuser:
                 if d < MATCH_DISTANCE and (best_d is None or d < best_d):
                     best, best_d = i, d
             if best is None:
-                self.tracks.append(Track(_logits(det.probabilities), det, [label], centre, size))
+                self.tracks.append(Track(_logits(det.probabilities), det, [label], centre, size, image))
             else:
                 free.remove(best)
                 tr = self.tracks[best]
                 tr.logits = tr.logits + _logits(det.probabilities)
-                tr.last, tr.centre, tr.size = det, centre, size
+                tr.last, tr.centre, tr.size, tr.image = det, centre, size, image
                 tr.frames.append(label)
 
     def results(self, soft: bool = True) -> list[dict[str, Any]]:
@@ -76,6 +90,15 @@ class FrameFuser:
             probs = 1.0 / (1.0 + np.exp(-tr.logits))
             fused = self.codec.decode(probs.astype(np.float32), soft=soft)
             entry = tr.last.to_json()
+            check = "not run"
+            if fused.ok and self.check is not None and tr.image is not None:
+                fit = self.check(tr.image, tr.last, fused.payload)
+                check = "passed" if fit is not None and fit.confirms else "failed"
+                if check == "failed":
+                    fused = replace(fused, ok=False)
+                elif fit is not None:
+                    entry["morph_fit"] = round(fit.gain, 4)
+            entry["morph_check"] = check
             entry.update(fused.to_json())
             entry["bit_probabilities"] = [round(float(p), 4) for p in probs]
             entry["frames"] = len(tr.frames)
@@ -84,4 +107,4 @@ class FrameFuser:
         return out
 
 
-__all__ = ["FrameFuser", "Track"]
+__all__ = ["FrameFuser", "MorphCheck", "Track"]

@@ -5,7 +5,12 @@ unmorphed drawing itself with OpenCV's ECC (enhanced correlation coefficient) ma
 over a full homography, coarse to fine. Every ink pixel of the drawing acts as a keypoint,
 so no point has to be singled out, and the correlation it reaches doubles as a check that
 the thing found really is this drawing (another icon, a marker or clutter does not correlate).
-A morph moves points by at most a few percent, so the unmorphed drawing is a faithful template.
+A morph moves points by at most a few percent, so the unmorphed drawing is a faithful enough
+template to find, verify and decode the drawing. It is not faithful enough for the pose: the
+alignment absorbs part of the morph (about 2 px of corner error). Once the payload is read, the
+locator aligns the photo once more, to the drawing morphed with that payload
+(:func:`refine_at` with a template of the decoded morph), which brings the corners to a
+fraction of a pixel.
 """
 
 from __future__ import annotations
@@ -19,7 +24,10 @@ import numpy as np
 from deepmorph_core.render import render_svg
 from deepmorph_detect.camera import viewbox_corners
 
-LEVELS = (48, 96, 160)  # template widths, coarse to fine
+LEVELS = (48, 128)  # template widths, coarse to fine
+COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
+FINE_ITERATIONS = 12  # at each finer level
+ORDER_MARGIN = 0.15  # a corner order this far behind the best in plain correlation is not tried
 
 
 @dataclass
@@ -35,13 +43,16 @@ class Template:
     images: dict[int, np.ndarray]
 
     @classmethod
-    def from_svg(cls, svg: str, viewbox: tuple[float, float, float, float]) -> Template:
-        return cls(viewbox, {w: render_svg(svg, w) for w in LEVELS})
+    def from_svg(
+        cls, svg: str, viewbox: tuple[float, float, float, float], levels: tuple[int, ...] = LEVELS
+    ) -> Template:
+        """``svg`` rendered by the real renderer at each width in ``levels``."""
+        return cls(viewbox, {w: render_svg(svg, w) for w in levels})
 
     @functools.cached_property
     def coarse_blurred(self) -> np.ndarray:
         """The coarsest level, blurred as candidates are before their corner order is scored."""
-        return cv2.GaussianBlur(self.images[LEVELS[0]], (5, 5), 0)
+        return cv2.GaussianBlur(self.images[min(self.images)], (5, 5), 0)
 
     def shape(self, width: int) -> tuple[int, int]:
         """``(h, w)`` of the drawing's viewBox at ``width`` pixels."""
@@ -57,10 +68,12 @@ class Template:
 
 @dataclass
 class Alignment:
-    """A refined homography (SVG units -> image pixels) and the correlation it reached."""
+    """A refined homography (SVG units -> image pixels), the correlation it reached, and the
+    template width it was reached at."""
 
     homography: np.ndarray
     correlation: float
+    width: int = 0
 
 
 class ImagePyramid:
@@ -117,6 +130,15 @@ def _ecc_step(
     return out / out[2, 2], float(rho)
 
 
+def refine_at(
+    pyramid: ImagePyramid, homography: np.ndarray, template: Template, width: int, iterations: int = 10
+) -> Alignment | None:
+    """One ECC solve against ``template`` at ``width`` (which it must hold), from ``homography``;
+    ``None`` when ECC diverges."""
+    step = _ecc_step(pyramid, np.asarray(homography, np.float64), template, width, iterations, 3)
+    return None if step is None else Alignment(*step, width)
+
+
 def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray]:
     """The homography with the frame's corners taken in each of the four cyclic orders
     (the drawing turned by 0, 90, 180 and 270 degrees within the same outline)."""
@@ -138,14 +160,16 @@ def refine(
     pyramid: ImagePyramid,
     homography: np.ndarray,
     template: Template,
-    iterations: tuple[int, ...] = (25, 12, 8),
+    iterations: tuple[int, ...] | None = None,
     orders: int = 1,
     min_start: float = 0.1,
 ) -> Alignment | None:
-    """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine.
+    """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
+    template's levels.
 
     Args:
-        iterations: ECC iterations at each level (most converge in fewer).
+        iterations: ECC iterations at each level (most converge in fewer); by default
+            :data:`COARSE_ITERATIONS` at the coarsest and :data:`FINE_ITERATIONS` at the others.
         orders: 4 to also try the frame's corners in the other cyclic orders (the detector
             outlines a drawing but may miss its turn); the order that correlates best with the
             template before any iteration is kept.
@@ -156,26 +180,31 @@ def refine(
         The refined alignment, or ``None`` when the candidate is rejected or ECC diverges at the
         coarsest level.
     """
+    levels = sorted(template.images)
+    its = iterations or (COARSE_ITERATIONS,) + (FINE_ITERATIONS,) * (len(levels) - 1)
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
     scored = []
     for H in starts:
-        crop = warp_to_template(pyramid, H, template, LEVELS[0])
+        crop = warp_to_template(pyramid, H, template, levels[0])
         scored.append((correlation(template.coarse_blurred, cv2.GaussianBlur(crop, (5, 5), 0)), H, crop))
     scored.sort(key=lambda r: -r[0])
     if scored[0][0] < min_start:
         return None
     # the best two orders by plain correlation hold the right one almost always; ECC decides
-    tries = [_ecc_step(pyramid, H, template, LEVELS[0], iterations[0], 5, crop) for _, H, crop in scored[:2]]
+    # between them unless the best is ahead by a clear margin
+    close = [r for r in scored[:2] if scored[0][0] - r[0] < ORDER_MARGIN]
+    tries = [_ecc_step(pyramid, H, template, levels[0], its[0], 5, crop) for _, H, crop in close]
     found = [t for t in tries if t is not None]
     if not found:
         return None
     H, rho = max(found, key=lambda r: r[1])
-    for width, its in zip(LEVELS[1:], iterations[1:]):
-        step = _ecc_step(pyramid, H, template, width, its, 3)
+    reached = levels[0]
+    for width, n in zip(levels[1:], its[1:]):
+        step = _ecc_step(pyramid, H, template, width, n, 3)
         if step is None:
             break
-        H, rho = step
-    return Alignment(H, rho)
+        (H, rho), reached = step, width
+    return Alignment(H, rho, reached)
 
 
 __all__ = [
@@ -186,5 +215,6 @@ __all__ = [
     "corner_orders",
     "correlation",
     "refine",
+    "refine_at",
     "warp_to_template",
 ]
