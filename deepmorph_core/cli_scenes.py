@@ -111,6 +111,8 @@ def decode(
             out.print(f"{name}: no drawing found")
         for d in r["detections"]:
             status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
+            if d.get("morph_check") == "failed":
+                status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             where = ""
             if "pose" in d:
                 t = d["pose"]["tvec"]

@@ -11,10 +11,11 @@
 3. the drawing is rectified (perspective removed) and decoded by the model's decoder;
 4. a payload that passes the integrity check is checked once more, by synthesis: the drawing
    morphed with that payload is rendered and aligned to the photo, and must fit it better than
-   the unmorphed drawing does (:meth:`Locator.fit_morph`). A wrong payload that slipped through
-   the CRC morphs the drawing the wrong way and fits worse, so it is reported as not ok. The
-   alignment to the decoded morph is also exact where the unmorphed one absorbed the morph, so
-   the pose comes from it;
+   the unmorphed drawing does (:meth:`Locator.fit_morph`), else its ``ok`` is withdrawn. A
+   payload unrelated to the print (what a CRC collision on clutter gives) fails this almost
+   always; a near miss next to the true payload fails it only sometimes. The alignment to the
+   decoded morph is also exact where the unmorphed one absorbed the morph, so the pose comes
+   from it;
 5. the homography gives keypoints and, through PnP, the camera pose.
 """
 
@@ -156,7 +157,6 @@ class Located(Detection):
     source: str = "detector"
     morph: MorphFit | None = None
     morph_check: str = "not run"  # "passed", "failed" (ok withdrawn) or "not run" (CRC failed)
-    decoder_input: np.ndarray | None = None  # (H, W) what the decoder read (not in the JSON)
 
     def to_json(self) -> dict[str, Any]:
         out = super().to_json()
@@ -335,31 +335,30 @@ class Locator:
             # homography fitted to the unmorphed drawing can absorb part of a morph whose every
             # point moves (no fixed elements); the better-verified reading wins.
             views.append(gray)
-        readings: list[tuple[DecodeResult, np.ndarray, np.ndarray | None]] = []
+        readings: list[tuple[DecodeResult, np.ndarray]] = []
         for view in views:
             aligned = align_to_frame(view, model.image_size, model.canonical_moments())
             if aligned is None:
                 continue
             probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
-            readings.append((model.codec.decode(probs, soft=soft), probs, aligned[0]))
+            readings.append((model.codec.decode(probs, soft=soft), probs))
         if not readings:
             probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
-            readings.append((model.codec.decode(probs, soft=soft), probs, None))
+            readings.append((model.codec.decode(probs, soft=soft), probs))
         readings.sort(key=lambda r: (r[0].ok, r[0].confidence), reverse=True)
-        result, probs, seen = readings[0]
+        result, probs = readings[0]
         morph, check = None, "not run"
-        for reading, reading_probs, reading_seen in readings:
+        for reading, reading_probs in readings:
             if not reading.ok:
                 break
             fit = self.fit_morph(pyramid, H, reading.payload, alignment)
             if fit is not None and fit.confirms:
-                result, probs, seen, morph, check = reading, reading_probs, reading_seen, fit, "passed"
+                result, probs, morph, check = reading, reading_probs, fit, "passed"
                 H = fit.homography
                 break
             # the CRC passed but the photo does not show this payload's morph: withdraw the ok
             if check == "not run":
-                result, probs, seen = replace(reading, ok=False), reading_probs, reading_seen
-                morph, check = fit, "failed"
+                result, probs, morph, check = replace(reading, ok=False), reading_probs, fit, "failed"
         corners = project(H, self.frame_corners)
         grid = np.array([[fx, fy] for fy in (0.0, 0.5, 1.0) for fx in (0.0, 0.5, 1.0)])
         x, y, vw, vh = self.viewbox
@@ -385,7 +384,6 @@ class Locator:
             source=source,
             morph=morph,
             morph_check=check,
-            decoder_input=seen,
         )
 
 

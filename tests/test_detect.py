@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from deepmorph_core.api import BUNDLED_MODEL
 from deepmorph_core.cli import app
+from deepmorph_core.codec import PayloadCodec
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import to_gray
@@ -156,7 +157,7 @@ def test_alignment_to_the_decoded_morph_beats_the_unmorphed_drawing(model: DeepM
 
 
 def test_a_wrong_payload_that_passes_the_crc_is_withdrawn(
-    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     scene = SceneMaker(model, severity="easy", seed=21).make(drawings=1)
     truth = scene.placements[0]
@@ -174,6 +175,15 @@ def test_a_wrong_payload_that_passes_the_crc_is_withdrawn(
     data = det.to_json()
     assert not det.result.ok and data["ok"] is False and data["morph_check"] == "failed"
     assert data["pose_aligned_to"] == "unmorphed drawing"
+    # and the command line says why
+    cv2.imwrite(str(tmp_path / "photo.png"), scene.image)
+    monkeypatch.setattr(
+        PayloadCodec,
+        "decode",
+        lambda self, probs, soft=True: replace(real_decode(probs, soft=soft), payload=wrong, ok=True),
+    )
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "photo.png")])
+    assert res.exit_code == 0 and "decoded morph does not fit the photo" in " ".join(res.output.split()), res.output
 
 
 def test_several_drawings_in_one_photo(model: DeepMorphModel, locator: Locator) -> None:
