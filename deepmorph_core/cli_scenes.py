@@ -92,7 +92,7 @@ def decode(
             results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
             save_overlay(path, payload, dets)
             continue
-        fuser = FrameFuser(m.codec, locator.confirm)
+        fuser = FrameFuser(m.codec, locator.check_payload)
         frames = ((p.name, read_image_bgr(p)) for p in payload) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:

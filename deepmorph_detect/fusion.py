@@ -4,22 +4,22 @@ Each frame's detections are matched to tracks by where the drawing is (its centr
 its size); a track sums its frames' per-bit log-odds, which is the optimal combination for
 independent frames, and the codec decodes the fused probabilities once more. Bits that one
 blurry frame gets wrong are outvoted by the sharp ones. A fused payload that passes the CRC is
-checked by synthesis like a single frame's (:meth:`~deepmorph_detect.locate.Locator.fit_morph`),
+checked by synthesis like a single frame's (:meth:`~deepmorph_detect.locate.Locator.check_payload`),
 on the last frame the drawing was seen in.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from deepmorph_core.codec import PayloadCodec
-from deepmorph_detect.locate import Located, MorphFit
+from deepmorph_core.codec import DecodeResult, PayloadCodec
+from deepmorph_detect.locate import Located, PayloadCheck
 
-MorphCheck = Callable[[np.ndarray, Located, np.ndarray], MorphFit | None]
+MorphCheck = Callable[[np.ndarray, np.ndarray, DecodeResult], PayloadCheck]
 
 LOGIT_CLIP = 6.0  # no single frame may be more than ~99.75 % sure of a bit
 MATCH_DISTANCE = 0.6  # centres within this share of the drawing's size belong to one track
@@ -52,8 +52,8 @@ class FrameFuser:
 
     Args:
         codec: the model's payload codec.
-        check: the morph check (``Locator.confirm``) run on a fused payload that passes the
-            CRC; without it, the CRC alone decides ``ok``.
+        check: the morph check (``Locator.check_payload``) run on a fused payload that passes
+            the CRC; without it, the CRC alone decides ``ok``.
     """
 
     def __init__(self, codec: PayloadCodec, check: MorphCheck | None = None) -> None:
@@ -90,16 +90,14 @@ class FrameFuser:
             probs = 1.0 / (1.0 + np.exp(-tr.logits))
             fused = self.codec.decode(probs.astype(np.float32), soft=soft)
             entry = tr.last.to_json()
-            check = "not run"
-            if fused.ok and self.check is not None and tr.image is not None:
-                fit = self.check(tr.image, tr.last, fused.payload)
-                check = "passed" if fit is not None and fit.confirms else "failed"
-                if check == "failed":
-                    fused = replace(fused, ok=False)
-                elif fit is not None:
-                    entry["morph_fit"] = round(fit.gain, 4)
-            entry["morph_check"] = check
-            entry.update(fused.to_json())
+            checked = PayloadCheck(fused, None, "not run")
+            if self.check is not None and tr.image is not None and tr.last.homography is not None:
+                checked = self.check(tr.image, tr.last.homography, fused)
+            entry["morph_check"] = checked.status
+            entry.pop("morph_fit", None)  # the last frame's own check, not the fused payload's
+            if checked.fit is not None:
+                entry["morph_fit"] = round(checked.fit.gain, 4)
+            entry.update(checked.result.to_json())
             entry["bit_probabilities"] = [round(float(p), 4) for p in probs]
             entry["frames"] = len(tr.frames)
             entry["first_frame"], entry["last_frame"] = tr.frames[0], tr.frames[-1]

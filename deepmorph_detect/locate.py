@@ -70,6 +70,21 @@ class MorphFit:
         return self.gain > MIN_MORPH_GAIN
 
 
+@dataclass
+class PayloadCheck:
+    """The verdict of the morph check on one decoded payload.
+
+    Attributes:
+        result: the decode, with ``ok`` withdrawn when the check failed.
+        fit: the alignment to the payload's morph (``None`` when not run or diverged).
+        status: ``passed``, ``failed`` or ``not run`` (the CRC had failed).
+    """
+
+    result: DecodeResult
+    fit: MorphFit | None
+    status: str
+
+
 class CentreNetDetector:
     """The built-in detector: :class:`~deepmorph_detect.network.DetectorNet` peaks.
 
@@ -262,9 +277,22 @@ class Locator:
             return None
         return MorphFit(morphed.homography, morphed.correlation, plain.correlation)
 
-    def confirm(self, image: np.ndarray, located: Located, payload: np.ndarray) -> MorphFit | None:
-        """:meth:`fit_morph` for a payload fused over frames, on the last frame it was seen in."""
-        return None if located.homography is None else self.fit_morph(image, located.homography, payload)
+    def check_payload(
+        self,
+        image: np.ndarray | ImagePyramid,
+        homography: np.ndarray,
+        result: DecodeResult,
+        unmorphed: Alignment | None = None,
+    ) -> PayloadCheck:
+        """The morph check of a decoded payload (one frame's, or one fused over frames): a
+        payload that passed the CRC keeps its ``ok`` only when its morph fits the photo better
+        than the unmorphed drawing (:meth:`fit_morph`); a failed CRC is not checked."""
+        if not result.ok:
+            return PayloadCheck(result, None, "not run")
+        fit = self.fit_morph(image, homography, result.payload, unmorphed)
+        if fit is not None and fit.confirms:
+            return PayloadCheck(result, fit, "passed")
+        return PayloadCheck(replace(result, ok=False), fit, "failed")
 
     # -- the chain ------------------------------------------------------------------------
 
@@ -346,19 +374,16 @@ class Locator:
             probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
             readings.append((model.codec.decode(probs, soft=soft), probs))
         readings.sort(key=lambda r: (r[0].ok, r[0].confidence), reverse=True)
-        result, probs = readings[0]
-        morph, check = None, "not run"
-        for reading, reading_probs in readings:
-            if not reading.ok:
+        checked, probs = PayloadCheck(readings[0][0], None, "not run"), readings[0][1]
+        for reading, reading_probs in readings:  # ok readings first
+            attempt = self.check_payload(pyramid, H, reading, alignment)
+            if attempt.status == "not run":
                 break
-            fit = self.fit_morph(pyramid, H, reading.payload, alignment)
-            if fit is not None and fit.confirms:
-                result, probs, morph, check = reading, reading_probs, fit, "passed"
-                H = fit.homography
+            if attempt.status == "passed" or checked.status == "not run":
+                checked, probs = attempt, reading_probs
+            if attempt.status == "passed":
+                H = attempt.fit.homography
                 break
-            # the CRC passed but the photo does not show this payload's morph: withdraw the ok
-            if check == "not run":
-                result, probs, morph, check = replace(reading, ok=False), reading_probs, fit, "failed"
         corners = project(H, self.frame_corners)
         grid = np.array([[fx, fy] for fy in (0.0, 0.5, 1.0) for fx in (0.0, 0.5, 1.0)])
         x, y, vw, vh = self.viewbox
@@ -370,7 +395,7 @@ class Locator:
         keypoints = {n: [round(float(v), 2) for v in c] for n, c in zip(names, corners)}
         keypoints["centre"] = [round(float(v), 2) for v in project(H, np.array([[x + vw / 2, y + vh / 2]]))[0]]
         return Located(
-            result,
+            checked.result,
             probs,
             _bbox(corners, w, h),
             corners=corners,
@@ -382,9 +407,9 @@ class Locator:
             camera=cam,
             keypoints=keypoints,
             source=source,
-            morph=morph,
-            morph_check=check,
+            morph=checked.fit,
+            morph_check=checked.status,
         )
 
 
-__all__ = ["MIN_CORRELATION", "MIN_MORPH_GAIN", "CentreNetDetector", "Located", "Locator", "MorphFit"]
+__all__ = ["MIN_CORRELATION", "MIN_MORPH_GAIN", "CentreNetDetector", "Located", "Locator", "MorphFit", "PayloadCheck"]
