@@ -267,6 +267,12 @@ def train(
         float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
     ] = 0.25,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    encoder_init: Annotated[
+        str,
+        typer.Option(
+            "--encoder-init", help="Encoder start: spread (each bit drives its own variables) or random (the paper's)."
+        ),
+    ] = "spread",
     device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
     threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
@@ -310,6 +316,7 @@ def train(
                 "width": width,
                 "severity": severity,
                 "seed": seed,
+                "encoder_init": encoder_init,
                 "device": device,
                 "threads": threads,
                 "hard_fraction": hard_fraction,

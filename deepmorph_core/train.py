@@ -35,6 +35,7 @@ from torch import Tensor, nn
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import canonicalize, render_moments
+from deepmorph_core.model import spread_weights
 from deepmorph_core.render import render_svg
 
 
@@ -56,6 +57,10 @@ class TrainConfig(BaseModel):
         curriculum: share of ``steps`` over which corruption ramps up through the milder presets
             (a decoder facing full corruption from a random start learns nothing: measured at
             chance after 350 steps at ``medium``, against 82 % bit accuracy without corruption).
+        encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
+            variables at full range (:func:`deepmorph_core.model.spread_weights`; on the bundled
+            ghost, bit errors under medium corruption fall from about 4 % to 0.1 %).
+            ``random``: the paper's dense random matrix.
         seed: makes a run reproducible (same seed, same threads: same model).
         device: ``cpu`` or ``cuda``.
         threads: torch CPU threads (``None``: torch's default).
@@ -75,6 +80,7 @@ class TrainConfig(BaseModel):
     hard_fraction: float = Field(default=0.25, ge=0, le=1)
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
     curriculum: float = Field(default=0.5, ge=0, le=1)
+    encoder_init: Literal["spread", "random"] = "spread"
     seed: int = 0
     device: Literal["cpu", "cuda"] = "cpu"
     threads: int | None = Field(default=None, ge=1, le=256)
@@ -133,6 +139,30 @@ def real_renders(model: DeepMorphModel, values: Tensor) -> Tensor:
     return torch.from_numpy(out).to(values.device)
 
 
+def variable_effects(model: DeepMorphModel, chunk: int = 64) -> Tensor:
+    """What each variable does to the picture, as a Gram matrix ``(N_v, N_v)``.
+
+    Each variable sweeps its whole range with every other variable neutral (soft raster at the
+    model's width); entry ``(i, k)`` is the dot product of the pixel changes of ``i`` and ``k``.
+    The diagonal is how visible a variable is; the correlations show variables that look alike.
+    """
+    space = model.drawing.space
+    raster = model.rasterizer()
+    neutral = space.neutral_unit(1)[0]
+    changes = []
+    with torch.no_grad():
+        for start in range(0, space.n_variables, chunk):
+            idx = torch.arange(start, min(start + chunk, space.n_variables))
+            unit = neutral.repeat(2 * len(idx), 1)
+            rows = torch.arange(len(idx))
+            unit[2 * rows, idx] = 0.0
+            unit[2 * rows + 1, idx] = 1.0
+            images = raster(space.values_from_unit(unit))
+            changes.append((images[1::2] - images[0::2]).flatten(1).double())
+    change = torch.cat(changes)
+    return change @ change.T
+
+
 class Trainer:
     """Runs (or resumes) training of one model.
 
@@ -164,6 +194,10 @@ class Trainer:
         self.bce = nn.BCEWithLogitsLoss()
         self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
         torch.manual_seed(config.seed)
+        if config.encoder_init == "spread" and model.meta.record.step == 0 and not model.extra_tensors:
+            weights = spread_weights(variable_effects(model), model.codec.spec.code_bits, self.gen)
+            with torch.no_grad():
+                model.encoder.linear.weight.copy_(weights.to(self.device))
         self.opt_dec = torch.optim.Adam(model.decoder.parameters(), lr=config.lr)
         self.opt_enc = torch.optim.Adam(model.encoder.parameters(), lr=config.encoder_lr)
         self.record = model.meta.record

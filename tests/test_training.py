@@ -11,13 +11,14 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from deepmorph_core.api import train_model
+from deepmorph_core.api import BUNDLED_MODEL, train_model
 from deepmorph_core.cli import app
 from deepmorph_core.codec import random_payloads
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.model import Encoder, spread_weights
 from deepmorph_core.render import render_svg, save_gray
-from deepmorph_core.train import Interrupted
+from deepmorph_core.train import Interrupted, variable_effects
 from tests.conftest import make_svg
 
 #: A tiny drawing with generous bounds: fast to render, easy to learn.
@@ -270,3 +271,76 @@ def test_train_refuses_missing_or_broken_drawings(tmp_path: Path) -> None:
         assert result.exit_code == 1 and message in result.stderr, result.output
         assert result.stderr.count("\n") == 1
     assert not (tmp_path / "m.dmm").exists()
+
+
+@pytest.mark.parametrize("n_vars, code_bits", [(58, 38), (40, 40), (26, 44), (5, 17)])
+def test_spread_weights_give_every_bit_its_own_full_range_variables(n_vars: int, code_bits: int) -> None:
+    gen = torch.Generator().manual_seed(0)
+    changes = torch.randn(n_vars, 300, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    changes *= torch.rand(n_vars, 1, generator=torch.Generator().manual_seed(2), dtype=torch.float64) + 0.2
+    changes[3] = -changes[1]  # a twin: the same move, mirrored (a closed path's repeated start)
+    effects = changes @ changes.T
+    weights = spread_weights(effects, code_bits, gen)
+    assert weights.shape == (n_vars, code_bits)
+    used = weights != 0
+    assert used.any(0).all(), "a code bit drives no variable"
+    assert used.any(1).all(), "a variable carries no bit"
+    # twins carry the same bits, signed so that their effects add up instead of cancelling
+    torch.testing.assert_close(weights[3], -weights[1])
+    groups = n_vars - 1
+    if groups >= code_bits:
+        assert (used.sum(1) == 1).all()  # each variable follows exactly one bit, at full strength
+        assert torch.allclose(weights.abs()[used], torch.tensor(4.0))
+        # dealt most visible first to the least loaded bit: the most and least visible bits
+        # differ by at most one group's visibility
+        visibility = effects.diagonal().clone()
+        visibility[1] = (changes[1] - changes[3]).pow(2).sum()
+        visibility[3] = 0
+        load = (used.double() * visibility[:, None]).sum(0)
+        assert load.max() - load.min() <= visibility.max() + 1e-6
+    else:
+        assert used.sum(1).max() <= -(-code_bits // groups)
+        torch.testing.assert_close(weights.abs().sum(1), torch.full((n_vars,), 4.0))
+    # distinct code words give distinct morphs: a decoder can tell them apart
+    bits = torch.randint(0, 2, (256, code_bits), generator=gen).float()
+    encoder = Encoder(code_bits, n_vars)
+    with torch.no_grad():
+        encoder.linear.weight.copy_(weights)
+        unit = encoder(bits)
+    if groups >= code_bits:
+        assert ((unit < 0.03) | (unit > 0.97)).float().mean() > 0.9  # bits move variables end to end
+    codes = {tuple(row) for row in bits.int().tolist()}
+    morphs = {tuple(row) for row in (unit * 1000).round().int().tolist()}
+    assert len(morphs) == len(codes)
+
+
+def test_the_ghosts_twin_variables_share_a_bit() -> None:
+    """The ghost's head is a half circle between two vertical strokes. Lowering its left end or
+    its right end turns the half circle about the same centre, which leaves the same circle:
+    the two moves look alike (the soft rasterizer and resvg agree). Two bits on them would be
+    told apart by nothing; the Gram matrix of picture changes finds them, so they share one."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    effects = variable_effects(model)
+    energy = effects.diagonal()
+    corr = effects / torch.sqrt(energy[:, None] * energy[None, :])
+    left, right = 3, 5  # move-y of the head's two ends (points 1 and 2 of the body path)
+    roles = [(v.role, v.point) for v in model.drawing.variables]
+    assert roles[left] == ("move-y", 1) and roles[right] == ("move-y", 2)
+    assert corr[left, right] > 0.99
+    others = corr.abs().fill_diagonal_(0)
+    others[left, right] = others[right, left] = 0
+    assert others.max() < 0.95  # no other pair is that alike
+    weights = spread_weights(effects, model.codec.spec.code_bits, torch.Generator().manual_seed(0))
+    torch.testing.assert_close(weights[left], weights[right])
+
+
+def test_training_starts_from_spread_weights_unless_asked_not_to(tiny_svg: Path, tmp_path: Path) -> None:
+    for init in ("spread", "random"):
+        out = tmp_path / f"{init}.dmm"
+        cfg = {**FAST, "steps": 1, "encoder_init": init, "seed": 2}
+        train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train=cfg)
+        density = (DeepMorphModel.load(out).encoder.linear.weight != 0).float().mean().item()
+        if init == "spread":
+            assert density < 0.2, density  # one (or a few) bits per variable
+        else:
+            assert density > 0.9, density  # the paper's dense random start
