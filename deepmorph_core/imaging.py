@@ -93,6 +93,28 @@ def normalise_contrast(gray: np.ndarray) -> np.ndarray | None:
     return np.clip((gray - lo) / (hi - lo), 0.0, 1.0)
 
 
+def flatten_illumination(gray: np.ndarray, feature_px: float) -> np.ndarray:
+    """Divide out shadows and slow changes of light: paper becomes 1 everywhere.
+
+    The paper's brightness under the ink is estimated by a grey closing (a max filter, then a
+    min filter) wider than any ink feature, so that strokes vanish from it, then smoothed. A
+    shadow edge across a print otherwise reads as ink: it drags the ink framing off and the
+    payload with it.
+
+    Args:
+        gray: ``(H, W)`` float image, 1 = white.
+        feature_px: the thickest ink feature (stroke or fill) in pixels.
+
+    Returns:
+        ``(H, W)`` float32 in ``[0, 1]``.
+    """
+    k = int(1.5 * feature_px) | 1
+    k = max(5, min(k, (min(gray.shape) // 2) | 1))
+    closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    paper = cv2.GaussianBlur(closed, (0, 0), k / 4)
+    return np.clip(gray / np.maximum(paper, 1e-3), 0.0, 1.0).astype(np.float32)
+
+
 def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """The drawing's ink: Otsu on a 3x3 blur, minus specks and anything touching the border
     (a desk or a shadow at the edge of a cropped photo is not ink).

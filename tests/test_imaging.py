@@ -9,7 +9,7 @@ import torch
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.capture import simulate_photo
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import align_to_frame, canonicalize, read_image, render_moments
+from deepmorph_core.imaging import align_to_frame, canonicalize, flatten_illumination, read_image, render_moments
 from deepmorph_core.render import render_svg, save_gray
 
 
@@ -71,3 +71,17 @@ def test_read_image_errors(tmp_path) -> None:
     save_gray(np.linspace(0, 1, 64).reshape(8, 8), ok)
     img = read_image(ok)
     assert img.shape == (8, 8) and img.dtype == np.float32 and 0 <= img.min() and img.max() <= 1
+
+
+def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:
+    _drawing, render = ghost
+    render = render.astype(np.float32)
+    shadowed = render.copy()
+    shadowed[:, int(0.6 * shadowed.shape[1]) :] *= 0.45  # a hard shadow edge across the print
+    stroke_px = 2.6 / 64 * render.shape[1]
+    flat = flatten_illumination(shadowed, stroke_px)
+    assert np.abs(shadowed - render).mean() > 0.1
+    assert np.abs(flat - render).mean() < 0.02
+    assert np.abs(flatten_illumination(render, stroke_px) - render).mean() < 0.01  # clean paper: unchanged
+    ink = render < 0.5
+    assert flat[ink].mean() < 0.35 and flat[~ink].mean() > 0.95
