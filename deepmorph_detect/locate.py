@@ -146,6 +146,22 @@ class CentreNetDetector:
         return out
 
 
+def plausible_outline(quad: np.ndarray, frame: np.ndarray) -> bool:
+    """Whether ``quad`` (the drawing's frame corners in the photo) can be a print seen from the
+    front: convex, and turning the same way as ``frame``. ECC on clutter can converge to a
+    folded (self-crossing) or mirrored outline that still correlates; no print looks like that.
+    """
+
+    def turns(q: np.ndarray) -> np.ndarray:
+        edges = np.roll(q, -1, axis=0) - q
+        nxt = np.roll(edges, -1, axis=0)
+        return edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
+
+    want = np.sign(turns(np.asarray(frame, np.float64)))
+    got = turns(np.asarray(quad, np.float64))
+    return bool(np.all(np.sign(got) == want))
+
+
 def _same_order(quad: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """``quad`` cyclically rolled to match ``ref`` corner by corner."""
     rolls = [np.roll(quad, k, axis=0) for k in range(4)]
@@ -333,6 +349,8 @@ class Locator:
             alignment = refine(pyramid, H0, self.template, orders=4 if "homography" not in cand else 1)
             if alignment is None or alignment.correlation < self.min_correlation:
                 continue
+            if not plausible_outline(project(alignment.homography, self.frame_corners), self.frame_corners):
+                continue
             centre = self._centre(alignment.homography)
             diagonal = project(alignment.homography, self.frame_corners[[0, 2]])
             size = float(np.linalg.norm(diagonal[1] - diagonal[0]))
@@ -471,4 +489,13 @@ class Locator:
         )
 
 
-__all__ = ["MIN_CORRELATION", "MIN_MORPH_GAIN", "CentreNetDetector", "Located", "Locator", "MorphFit", "PayloadCheck"]
+__all__ = [
+    "MIN_CORRELATION",
+    "MIN_MORPH_GAIN",
+    "CentreNetDetector",
+    "Located",
+    "Locator",
+    "MorphFit",
+    "PayloadCheck",
+    "plausible_outline",
+]

@@ -339,3 +339,15 @@ def test_a_shadow_across_the_print_is_read_at_the_second_look(
     monkeypatch.setattr(Locator, "_read_again", lambda self, *args: [])
     first_looks = [locator.locate(photo) for photo in photos]
     assert not any(d.result.ok for dets in first_looks for d in dets)
+
+
+def test_folded_or_mirrored_outlines_are_not_prints() -> None:
+    from deepmorph_detect.locate import plausible_outline
+
+    frame = np.array([[0, 0], [64, 0], [64, 64], [0, 64]], float)
+    tilted = np.array([[100, 50], [300, 80], [280, 260], [90, 240]], float)
+    assert plausible_outline(tilted, frame)
+    assert plausible_outline(np.roll(tilted, 1, axis=0), frame)  # turned: still a print
+    assert not plausible_outline(tilted[::-1], frame)  # mirrored: a print seen from behind
+    folded = np.array([[407, 95], [511, 177], [522, 92], [520, 174]], float)  # ECC on clutter (hard scene 51)
+    assert not plausible_outline(folded, frame)
