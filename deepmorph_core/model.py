@@ -48,13 +48,14 @@ def spread_weights(
     the bundled ghost (58 variables, 38 code bits, 2400 steps): 2.3 % of code bits read wrong
     even on clean renders. Giving each bit whole variables, pushed to the ends of their bounds
     (``sigmoid(+-strength)``, 98 % of the way for 4.0), makes every bit a full-range move: the
-    same training then reads 99.9 % of bits right under medium capture corruption.
+    same training then reads about 99.5 % of bits right under medium capture corruption.
 
     How:
 
     * Variables whose effects on the picture are the same (correlation ``>= same`` in absolute
-      value: a path's start repeated as its end, say) always go to the same bit, signed so
-      that they add up. Two bits on twins would be told apart by nothing.
+      value: the two ends of the ghost's half-circle head, which both turn the half circle
+      about the same centre) always go to the same bit, signed so that they add up. Two bits
+      on twins would be told apart by nothing.
     * These groups are dealt out most visible first to the bit with the least visibility so
       far, so the bits end up about equally visible.
     * With fewer groups than bits, each group carries several bits at weights ``c, c/2, c/4 ...``

@@ -59,7 +59,7 @@ class TrainConfig(BaseModel):
             chance after 350 steps at ``medium``, against 82 % bit accuracy without corruption).
         encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
             variables at full range (:func:`deepmorph_core.model.spread_weights`; on the bundled
-            ghost, bit errors under medium corruption fall from about 4 % to 0.1 %).
+            ghost, bit errors under medium corruption fall from about 4 % to 0.5 %).
             ``random``: the paper's dense random matrix.
         seed: makes a run reproducible (same seed, same threads: same model).
         device: ``cpu`` or ``cuda``.

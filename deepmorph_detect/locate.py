@@ -267,10 +267,17 @@ class Locator:
 
     def morphed_template(self, payload: np.ndarray) -> Template:
         """The drawing morphed with ``payload``, rendered at :data:`MORPH_WIDTH` (cached)."""
-        key = np.asarray(payload, dtype=np.uint8).tobytes()
+        return self.code_template(self.model.codec.encode(np.asarray(payload, dtype=np.uint8)))
+
+    def code_template(self, code_bits: np.ndarray) -> Template:
+        """The drawing morphed by ``(N_b,)`` code bits (a code word, or a misread one), rendered
+        at :data:`MORPH_WIDTH`; the last :data:`MORPH_CACHE` are kept."""
+        code = np.asarray(code_bits, dtype=np.uint8)
+        key = code.tobytes()
         template = self._morphed.get(key)
         if template is None:
-            template = Template.from_svg(self.model.encode(payload), self.viewbox, (MORPH_WIDTH,))
+            values = self.model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
+            template = Template.from_svg(self.model.drawing.to_svg(values), self.viewbox, (MORPH_WIDTH,))
             self._morphed[key] = template
             if len(self._morphed) > MORPH_CACHE:
                 self._morphed.popitem(last=False)
@@ -349,11 +356,11 @@ class Locator:
             alignment = refine(pyramid, H0, self.template, orders=4 if "homography" not in cand else 1)
             if alignment is None or alignment.correlation < self.min_correlation:
                 continue
-            if not plausible_outline(project(alignment.homography, self.frame_corners), self.frame_corners):
+            outline = project(alignment.homography, self.frame_corners)
+            if not plausible_outline(outline, self.frame_corners):
                 continue
             centre = self._centre(alignment.homography)
-            diagonal = project(alignment.homography, self.frame_corners[[0, 2]])
-            size = float(np.linalg.norm(diagonal[1] - diagonal[0]))
+            size = float(np.linalg.norm(outline[2] - outline[0]))
             if any(np.linalg.norm(centre - self._centre(a.homography)) < 0.3 * size for _, a in kept):
                 continue
             kept.append((cand, alignment))
@@ -414,11 +421,7 @@ class Locator:
         if not readings:
             return
         best = max(readings, key=lambda r: r[0].confidence)[1]
-        code = torch.from_numpy((best > 0.5).astype(np.float32))[None]
-        guess = Template.from_svg(
-            self.model.drawing.to_svg(self.model.morph_values(code)[0]), self.viewbox, (MORPH_WIDTH,)
-        )
-        realigned = refine_at(pyramid, H, guess, MORPH_WIDTH)
+        realigned = refine_at(pyramid, H, self.code_template(best > 0.5), MORPH_WIDTH)
         if realigned is None:
             return
         again = self.rectify(pyramid, realigned.homography)
