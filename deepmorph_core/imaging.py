@@ -115,6 +115,28 @@ def flatten_illumination(gray: np.ndarray, feature_px: float) -> np.ndarray:
     return np.clip(gray / np.maximum(paper, 1e-3), 0.0, 1.0).astype(np.float32)
 
 
+def paper_preprocess(gray: np.ndarray, region: np.ndarray | None = None) -> np.ndarray:
+    """The paper's preprocessing of a rectified cutout, for comparison: a 3x3 Gaussian blur
+    (sigma 0.95), Otsu's threshold, everything outside a coarse ``region`` around the graphic
+    set to paper, and the same blur again.
+
+    The decoder does not use it: ``bench/preprocess.py`` measures it against the plain
+    rectified view, and on our scenes it loses bits (``docs/detection.md``).
+
+    Args:
+        gray: ``(H, W)`` float image, 1 = white.
+        region: ``(H, W)`` bool, where the graphic may lie; ``None`` keeps everything.
+
+    Returns:
+        ``(H, W)`` float32 in ``[0, 1]``.
+    """
+    u8 = np.clip(gray * 255, 0, 255).astype(np.uint8)
+    _, binary = cv2.threshold(cv2.GaussianBlur(u8, (3, 3), 0.95), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    if region is not None:
+        binary[~region] = 255
+    return cv2.GaussianBlur(binary, (3, 3), 0.95).astype(np.float32) / 255.0
+
+
 def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """The drawing's ink: Otsu on a 3x3 blur, minus specks and anything touching the border
     (a desk or a shadow at the edge of a cropped photo is not ink).

@@ -351,9 +351,12 @@ class Locator:
         kept: list[tuple[dict[str, Any], Any]] = []
         for cand in candidates:
             H0 = cand.get("homography")
-            if H0 is None:
-                H0 = self._homography(cand["corners"])
-            alignment = refine(pyramid, H0, self.template, orders=4 if "homography" not in cand else 1)
+            if H0 is None:  # a detector's outline: its turn and size may be off, search wider
+                alignment = refine(
+                    pyramid, self._homography(cand["corners"]), self.template, orders=4, accept=self.min_correlation
+                )
+            else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
+                alignment = refine(pyramid, H0, self.template)
             if alignment is None or alignment.correlation < self.min_correlation:
                 continue
             outline = project(alignment.homography, self.frame_corners)

@@ -351,3 +351,39 @@ def test_folded_or_mirrored_outlines_are_not_prints() -> None:
     assert not plausible_outline(tilted[::-1], frame)  # mirrored: a print seen from behind
     folded = np.array([[407, 95], [511, 177], [522, 92], [520, 174]], float)  # ECC on clutter (hard scene 51)
     assert not plausible_outline(folded, frame)
+
+
+def test_a_loose_outline_is_found_by_the_wider_search(model: DeepMorphModel, locator: Locator) -> None:
+    """The detector's outline turned by 35 degrees and 15 % too large: the quick path (best
+    corner orders by plain correlation, then ECC) does not converge from it; the wider search
+    (every order, then turned and scaled outlines) finds the drawing."""
+    from deepmorph_detect.refine import outline_sweep
+
+    maker = SceneMaker(model, severity="medium", seed=8)
+    wide = quick = 0
+    for _ in range(4):
+        scene = maker.make(drawings=1)
+        truth = scene.placements[0]
+        centre = truth.corners.mean(0)
+        a = np.deg2rad(35)
+        turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 1.15
+        loose = (truth.corners - centre) @ turn.T + centre
+        pyramid = ImagePyramid(to_gray(scene.image))
+        start = locator._homography(loose)
+
+        def err(al, truth=truth) -> float:
+            if al is None:
+                return np.inf
+            return np.linalg.norm(
+                project(al.homography, viewbox_corners(locator.viewbox)) - truth.corners, axis=1
+            ).mean()
+
+        found_quick = refine(pyramid, start, locator.template, orders=4)
+        found_wide = refine(pyramid, start, locator.template, orders=4, accept=locator.min_correlation)
+        close = 0.05 * np.linalg.norm(truth.corners[1] - truth.corners[0])  # the unmorphed fit absorbs some morph
+        quick += err(found_quick) < close and found_quick.correlation >= locator.min_correlation
+        wide += err(found_wide) < close and found_wide.correlation >= locator.min_correlation
+    assert wide == 4 and quick <= 1, (wide, quick)
+    sweep = outline_sweep(start, locator.template)
+    assert len(sweep) == 24 * 3
+    np.testing.assert_allclose(sweep[24] / sweep[24][2, 2], start / start[2, 2], atol=1e-6)
