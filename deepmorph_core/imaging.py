@@ -120,8 +120,10 @@ def paper_preprocess(gray: np.ndarray, region: np.ndarray | None = None) -> np.n
     (sigma 0.95), Otsu's threshold, everything outside a coarse ``region`` around the graphic
     set to paper, and the same blur again.
 
-    The decoder does not use it: ``bench/preprocess.py`` measures it against the plain
-    rectified view, and on our scenes it loses bits (``docs/detection.md``).
+    The decoder does not use it. ``bench/preprocess.py`` measures it against the plain
+    rectified view: on 100 scenes per severity it read as many payloads at easy and medium and
+    fewer at hard (85.1 % against 87.2 %); dividing out the light (:func:`flatten_illumination`)
+    read more than either (``docs/detection.md``).
 
     Args:
         gray: ``(H, W)`` float image, 1 = white.

@@ -85,3 +85,28 @@ def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:
     assert np.abs(flatten_illumination(render, stroke_px) - render).mean() < 0.01  # clean paper: unchanged
     ink = render < 0.5
     assert flat[ink].mean() < 0.35 and flat[~ink].mean() > 0.95
+
+
+def test_paper_preprocess_binarises_masks_and_blurs(ghost) -> None:
+    """The paper's preprocessing: a grey, noisy render becomes the blurred binary drawing, and
+    specks outside the region around the graphic become paper."""
+    import cv2
+
+    from deepmorph_core.imaging import paper_preprocess
+
+    _drawing, render = ghost
+    rng = np.random.default_rng(0)
+    grey = (0.3 + 0.5 * render + rng.normal(0, 0.03, render.shape)).astype(np.float32)  # ink 0.3, paper 0.8
+    grey[2:6, 2:6] = 0.2  # a speck in the corner, outside the drawing
+    ink = render < 0.5
+    region = cv2.dilate(ink.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    assert not region[2:6, 2:6].any()
+    out = paper_preprocess(grey, region)
+    assert out.dtype == np.float32 and out.shape == render.shape
+    assert out.min() >= 0 and out.max() <= 1
+    # binary before the last blur: solid ink and paper away from the edges
+    solid = cv2.erode(ink.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    paper = cv2.erode((~ink).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert out[solid].max() < 0.05 and out[paper].min() > 0.95
+    assert out[2:6, 2:6].min() == 1.0  # masked out
+    assert paper_preprocess(grey)[2:6, 2:6].max() < 0.5  # without the region, the speck stays ink
