@@ -26,7 +26,8 @@ from deepmorph_detect.camera import viewbox_corners
 
 LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
-FINE_ITERATIONS = 12  # at each finer level
+FINE_ITERATIONS = 6  # at each finer level (12 gave the same recall, payloads and corners, 20 % slower)
+REFIT_ITERATIONS = 5  # refine_at: one level, from an alignment that is already close
 ECC_EPS = 1e-5  # ECC stops early when the correlation gains less than this in one iteration
 ORDER_MARGIN = 0.15  # a corner order this far behind the best in plain correlation is not tried
 SWEEP_TURNS = 24  # outline_sweep: turns of the detector's outline in 15-degree steps ...
@@ -136,7 +137,11 @@ def _ecc_step(
 
 
 def refine_at(
-    pyramid: ImagePyramid, homography: np.ndarray, template: Template, width: int, iterations: int = 10
+    pyramid: ImagePyramid,
+    homography: np.ndarray,
+    template: Template,
+    width: int,
+    iterations: int = REFIT_ITERATIONS,
 ) -> Alignment | None:
     """One ECC solve against ``template`` at ``width`` (which it must hold), from ``homography``;
     ``None`` when ECC diverges."""
