@@ -239,8 +239,9 @@ def refine(
     def good(a: Alignment | None) -> bool:
         return a is not None and a.correlation >= bar
 
-    # measured on 400 scenes: the detector's corner order was a quarter turn off, and plain
-    # correlation ranked the right order third or fourth, in 4 of 19 misses at medium and hard
+    # of the 22 drawings the detector proposed but alignment missed in 400 scenes (medium and
+    # hard), 7 were found this way: the detector's corner order was a quarter turn off, and
+    # plain correlation ranked the right order third or fourth
     for i, (start, H, crop) in enumerate(scored):
         if i == chosen or start < min_start:
             continue
