@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -94,3 +95,28 @@ def write_json(path: str | Path, data: Any) -> Path:
 def parse_ints(text: str) -> list[int]:
     """``"64,128"`` -> ``[64, 128]``."""
     return [int(x) for x in text.replace(" ", "").split(",") if x]
+
+
+def add_scene_options(ap: argparse.ArgumentParser, n: int, out: Path) -> None:
+    """The options every scene benchmark takes: the bundle, scenes per severity, severities,
+    threads, seed and the JSON output."""
+    ap.add_argument("--model", type=Path, default=None, help="bundle (default: the bundled ghost)")
+    ap.add_argument("--n", type=int, default=n, help="scenes per severity")
+    ap.add_argument("--severities", default="easy,medium,hard")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=out)
+
+
+def load_scene_model(args: argparse.Namespace) -> tuple[Path, Any]:
+    """Pin torch and OpenCV to ``--threads``, then load ``--model`` (default: the bundled ghost):
+    its path and the :class:`~deepmorph_core.codemodel.DeepMorphModel`."""
+    set_threads(args.threads)
+    import cv2
+
+    from deepmorph_core.api import BUNDLED_MODEL
+    from deepmorph_core.codemodel import DeepMorphModel
+
+    cv2.setNumThreads(args.threads)
+    path = args.model or BUNDLED_MODEL
+    return path, DeepMorphModel.load(path)

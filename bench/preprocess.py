@@ -20,27 +20,19 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, add_scene_options, environment, load_scene_model, table, write_json  # noqa: E402
 
 MASK_MARGIN = 0.06  # the coarse region: the unmorphed drawing's ink grown by this much of its width
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", type=Path, default=None, help="bundle (default: the bundled ghost)")
-    ap.add_argument("--n", type=int, default=100, help="scenes per severity")
-    ap.add_argument("--severities", default="easy,medium,hard")
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=RESULTS / "preprocess.json")
+    add_scene_options(ap, n=100, out=RESULTS / "preprocess.json")
     args = ap.parse_args()
-    set_threads(args.threads)
+    model_path, model = load_scene_model(args)
     import cv2
     import numpy as np
 
-    cv2.setNumThreads(args.threads)
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_core.imaging import flatten_illumination, paper_preprocess, read_image_bgr, to_gray
     from deepmorph_core.render import render_svg
     from deepmorph_detect.benchmark import _match, read_scenes, write_scenes
@@ -48,8 +40,6 @@ def main() -> None:
     from deepmorph_detect.locate import RECTIFY_WIDTH_FACTOR, Locator
     from deepmorph_detect.refine import ImagePyramid
 
-    model_path = args.model or BUNDLED_MODEL
-    model = DeepMorphModel.load(model_path)
     locator = Locator(model)
     md = model.drawing
     width = model.width * RECTIFY_WIDTH_FACTOR  # the rectified view's width

@@ -22,33 +22,21 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, add_scene_options, environment, load_scene_model, table, write_json  # noqa: E402
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", type=Path, default=None, help="bundle (default: the bundled ghost)")
-    ap.add_argument("--n", type=int, default=200, help="scenes per severity")
-    ap.add_argument("--severities", default="easy,medium,hard")
+    add_scene_options(ap, n=200, out=RESULTS / "scenes.json")
     ap.add_argument("--distractors", type=int, default=1)
     ap.add_argument("--negatives", type=int, default=1000, help="scenes without the drawing")
     ap.add_argument("--sequences", type=int, default=50, help="hard 5-frame sequences for frame fusion")
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=RESULTS / "scenes.json")
     args = ap.parse_args()
-    set_threads(args.threads)
-    import cv2
-
-    cv2.setNumThreads(args.threads)
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
+    model_path, model = load_scene_model(args)
     from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, write_scenes
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import SceneMaker
 
-    model_path = args.model or BUNDLED_MODEL
-    model = DeepMorphModel.load(model_path)
     reports = {}
     with tempfile.TemporaryDirectory() as tmp:
         for sev in args.severities.split(","):
