@@ -266,6 +266,15 @@ def train(
     hard_fraction: Annotated[
         float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
     ] = 0.25,
+    small_prints: Annotated[
+        float,
+        typer.Option(
+            "--small-prints",
+            min=0,
+            max=1,
+            help="Share of each batch captured as a small print (corrupted at 55-95 % of the width, enlarged).",
+        ),
+    ] = 0.0,
     seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
     encoder_init: Annotated[
         str,
@@ -320,6 +329,7 @@ def train(
                 "device": device,
                 "threads": threads,
                 "hard_fraction": hard_fraction,
+                "small_prints": small_prints,
             },
             on_start=on_start,
         )

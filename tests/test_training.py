@@ -344,3 +344,26 @@ def test_training_starts_from_spread_weights_unless_asked_not_to(tiny_svg: Path,
             assert density < 0.2, density  # one (or a few) bits per variable
         else:
             assert density > 0.9, density  # the paper's dense random start
+
+
+def test_small_print_captures_are_blurred_enlargements_and_still_train(tiny_svg: Path, tmp_path: Path) -> None:
+    """``small_prints``: part of each batch is corrupted at 55-95 % of the width and enlarged
+    again, as a small print in a photo is. Training with half the batch so still learns."""
+    from deepmorph_core.train import SMALL_PRINT_SCALE, TrainConfig, Trainer
+
+    out = tmp_path / "small.dmm"
+    train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train={**FAST, "steps": 150, "small_prints": 0.5})
+    model = DeepMorphModel.load(out)
+    assert model.meta.train["small_prints"] == 0.5
+    assert soft_bit_accuracy(model) > 0.8  # chance is 0.5
+
+    trainer = Trainer(model, TrainConfig(**{**FAST, "steps": 10, "small_prints": 0.5}), tmp_path / "again.dmm")
+    clean = 1.0 - trainer.raster(model.drawing.neutral_values(4)).detach()
+    small = trainer.small_prints(clean)
+    assert small.shape == clean.shape and 0 <= float(small.min()) and float(small.max()) <= 1
+    sharpness = lambda x: (x[..., :, 1:] - x[..., :, :-1]).abs().mean().item()  # noqa: E731
+    assert sharpness(small) < 0.9 * sharpness(clean)  # detail lost at the small size
+    assert (small - clean).abs().mean() < 0.1  # but the same drawing
+    assert 0 < SMALL_PRINT_SCALE[0] < SMALL_PRINT_SCALE[1] <= 1
+    bits = torch.randint(0, 2, (16, model.codec.spec.code_bits), generator=torch.Generator().manual_seed(0)).float()
+    assert trainer.images(bits, train_encoder=False).shape == (16, 1, *model.image_size)
