@@ -267,3 +267,63 @@ def train_model(
     trainer = Trainer(model, config, out)
     on_log = on_start(config.steps, model.meta.record.step) if on_start else None
     return trainer.run(on_log)
+
+
+def tune_decoder(
+    model_path: str | Path,
+    out: str | Path,
+    *,
+    steps: int = 800,
+    small_prints: float = 0.5,
+    lr: float = 3e-4,
+    seed: int = 0,
+    threads: int | None = None,
+    overwrite: bool = False,
+    on_start: Any = None,
+) -> dict[str, Any]:
+    """Train a trained bundle's decoder further, encoder frozen, and write the result to ``out``.
+
+    The morphs do not change, so printed codes still decode and the bundle's detector stays
+    valid. The run uses the bundle's own corruption, batch and real-render share, at full
+    corruption from the first step, with ``small_prints`` of each batch captured as small
+    prints (:class:`deepmorph_core.train.TrainConfig`); the learning rate decays from ``lr``
+    by a cosine to 10 %. The run is recorded in the bundle's ``tuning`` list.
+
+    Args:
+        model_path: a bundle whose training has finished.
+        out: where to write the tuned bundle (may be ``model_path`` itself).
+        on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback.
+
+    Returns:
+        The bundle's new ``tuning`` entry.
+    """
+    from pydantic import ValidationError
+
+    from deepmorph_core.bounds import format_validation_error
+    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.train import TrainConfig
+    from deepmorph_core.train import tune_decoder as tune
+
+    model_path, out = Path(model_path), Path(out)
+    model = DeepMorphModel.load(model_path)
+    if not model.meta.record.finished:
+        raise DeepMorphError(f"{model_path}: its training has not finished; resume it before tuning")
+    if out.exists() and not overwrite and out.resolve() != model_path.resolve():
+        raise DeepMorphError(f"{out}: already exists; choose another --out")
+    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity", "device") if k in model.meta.train}
+    try:
+        config = TrainConfig(
+            **kept,
+            width=model.width,
+            steps=steps,
+            small_prints=small_prints,
+            lr=lr,
+            seed=seed,
+            threads=threads,
+            curriculum=0.0,
+            freeze_encoder=True,
+        )
+    except ValidationError as exc:
+        raise DeepMorphError(f"tuning settings: {format_validation_error(exc).replace('dm:', '--')}") from None
+    on_log = on_start(config.steps, 0) if on_start else None
+    return tune(model, config, out, on_log)

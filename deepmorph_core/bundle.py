@@ -77,6 +77,7 @@ class BundleMeta(BaseModel):
     train: dict[str, Any]
     record: TrainingRecord
     detector: DetectorMeta | None = None
+    tuning: list[dict[str, Any]] = Field(default_factory=list)  # decoder tunings after training, oldest first
 
 
 def _bad(path: Path | str, why: str) -> DeepMorphError:

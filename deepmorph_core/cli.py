@@ -389,9 +389,51 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
                 f"{json.dumps(drec['metrics'])}",
             )
         )
+    for run in data["tuning"]:
+        rows.append(
+            (
+                "decoder tuned",
+                f"{run['steps']}/{run['total_steps']} steps, {run['elapsed_s']:.0f} s, small prints "
+                f"{run['small_prints']:.0%}, bit acc {run.get('bit_acc', float('nan')):.4f}"
+                + ("" if run["finished"] else " (interrupted)"),
+            )
+        )
     for k, v in rows:
         table.add_row(k, v)
     out.print(table)
+
+
+@app.command("tune-decoder")
+@friendly
+def tune_decoder(
+    model: ModelArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Bundle to write (may be the same file).")],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Tuning steps.")] = 800,
+    small_prints: Annotated[
+        float,
+        typer.Option("--small-prints", min=0, max=1, help="Share of each batch captured as a small print."),
+    ] = 0.5,
+    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1e-1, help="Start learning rate (cosine to 10 %).")] = 3e-4,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
+) -> None:
+    """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
+    from deepmorph_core.api import tune_decoder as tune
+
+    progress = progress_bar()
+
+    def on_start(total: int, done: int) -> Callable[[Any], None]:
+        progress.start()
+        task = progress.add_task("tuning", total=total, completed=done)
+        return lambda m: progress.update(task, completed=m.step, description=f"decoder bit acc {m.bit_acc:.4f}")
+
+    try:
+        run = tune(model, out_path, steps=steps, small_prints=small_prints, lr=lr, seed=seed, threads=threads,
+                   on_start=on_start)  # fmt: skip
+    finally:
+        if progress.live.is_started:
+            progress.stop()
+    out.print(f"wrote {out_path} ({run['steps']} steps in {run['elapsed_s']:.0f} s, bit acc {run['bit_acc']:.4f})")
 
 
 @app.command()

@@ -243,6 +243,7 @@ class DeepMorphModel:
             "record": m.record.model_dump(),
             "versions": m.versions,
             "detector": None if m.detector is None else m.detector.model_dump(),
+            "tuning": m.tuning,
         }
 
 

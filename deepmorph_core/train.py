@@ -23,7 +23,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -33,6 +33,7 @@ import torch.nn.functional as F
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor, nn
 
+from deepmorph_core.bundle import TrainingRecord
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import canonicalize, render_moments
@@ -68,6 +69,9 @@ class TrainConfig(BaseModel):
             variables at full range (:func:`deepmorph_core.model.spread_weights`; on the bundled
             ghost, bit errors under medium corruption fall from about 4 % to 0.5 %).
             ``random``: the paper's dense random matrix.
+        freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
+            stage 2), learning rate decaying by a cosine to 10 % over all steps: what
+            :func:`tune_decoder` runs on a trained bundle.
         seed: makes a run reproducible (same seed, same threads: same model).
         device: ``cpu`` or ``cuda``.
         threads: torch CPU threads (``None``: torch's default).
@@ -89,6 +93,7 @@ class TrainConfig(BaseModel):
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
     curriculum: float = Field(default=0.5, ge=0, le=1)
     encoder_init: Literal["spread", "random"] = "spread"
+    freeze_encoder: bool = False
     seed: int = 0
     device: Literal["cpu", "cuda"] = "cpu"
     threads: int | None = Field(default=None, ge=1, le=256)
@@ -204,7 +209,8 @@ class Trainer:
         self.bce = nn.BCEWithLogitsLoss()
         self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
         torch.manual_seed(config.seed)
-        if config.encoder_init == "spread" and model.meta.record.step == 0 and not model.extra_tensors:
+        fresh = model.meta.record.step == 0 and not model.extra_tensors
+        if config.encoder_init == "spread" and fresh and not config.freeze_encoder:
             weights = spread_weights(variable_effects(model), model.codec.spec.code_bits, self.gen)
             with torch.no_grad():
                 model.encoder.linear.weight.copy_(weights.to(self.device))
@@ -329,7 +335,9 @@ class Trainer:
         """
         rec, cfg = self.record, self.cfg
         factor = 1.0
-        if rec.stage == 2 and rec.stage2_start is not None and cfg.steps > rec.stage2_start:
+        if cfg.freeze_encoder:
+            factor = 0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * min(1.0, rec.step / cfg.steps)))
+        elif rec.stage == 2 and rec.stage2_start is not None and cfg.steps > rec.stage2_start:
             progress = min(1.0, (rec.step - rec.stage2_start) / (cfg.steps - rec.stage2_start))
             factor = 0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress))
         for opt, base in ((self.opt_dec, cfg.lr), (self.opt_enc, cfg.encoder_lr)):
@@ -338,7 +346,7 @@ class Trainer:
 
     def _update_stage(self, bit_acc: float) -> None:
         rec, cfg = self.record, self.cfg
-        if rec.stage == 2:
+        if rec.stage == 2 or cfg.freeze_encoder:
             return
         self._window.append(bit_acc)
         limit = math.ceil(cfg.stage1_max_fraction * cfg.steps)
@@ -395,6 +403,63 @@ class Trainer:
         self.checkpoint()
         plot = plot_history(history, self.log_path.with_suffix(".png"))
         return TrainingRecordSummary(self.out, self.log_path, plot, rec.step, rec.stage2_start, rec.elapsed_s)
+
+
+def tune_decoder(
+    model: DeepMorphModel,
+    config: TrainConfig,
+    out: Path,
+    on_log: Callable[[StepMetrics], None] | None = None,
+) -> dict[str, Any]:
+    """Train a trained bundle's decoder further, its encoder frozen, and write it to ``out``.
+
+    The morphs stay exactly as they were, so codes already printed still decode and the
+    bundle's detector stays valid. The bundle's training record is kept; this run is appended
+    to ``meta.tuning``. Ctrl-C writes the decoder tuned so far, recorded as not finished.
+
+    Returns:
+        The ``meta.tuning`` entry of this run.
+
+    Raises:
+        Interrupted: after Ctrl-C, once the bundle is written.
+    """
+    if not config.freeze_encoder:
+        raise ValueError("tune_decoder trains the decoder alone: config.freeze_encoder must be set")
+    trained = model.meta.record
+    model.meta.record = TrainingRecord()
+    trainer = Trainer(model, config, out)
+    rec = trainer.record
+    entry: dict[str, Any] = {
+        "steps": 0,
+        "total_steps": config.steps,
+        **{k: getattr(config, k) for k in ("small_prints", "severity", "lr", "batch", "hard_fraction", "seed")},
+        "threads": rec.threads,
+    }
+    window: list[float] = []
+
+    def finish(finished: bool) -> None:
+        entry.update(steps=rec.step, finished=finished, elapsed_s=round(time.perf_counter() - start, 1))
+        if window:
+            entry["bit_acc"] = round(float(np.mean(window)), 5)
+        model.meta.record = trained
+        model.meta.tuning.append(entry)
+        model.decoder.eval()
+        model.save(out)
+
+    start = time.perf_counter()
+    try:
+        while rec.step < config.steps:
+            m = trainer.step()
+            window = (window + [m.bit_acc])[-config.log_every :]
+            if on_log and (rec.step % config.log_every == 0 or rec.step == config.steps):
+                on_log(replace(m, bit_acc=float(np.mean(window)), elapsed_s=time.perf_counter() - start))
+    except KeyboardInterrupt:
+        finish(False)
+        raise Interrupted(
+            f"interrupted at step {rec.step}/{config.steps}; the decoder tuned so far is in {out}"
+        ) from None
+    finish(True)
+    return entry
 
 
 @dataclass

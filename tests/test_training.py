@@ -367,3 +367,56 @@ def test_small_print_captures_are_blurred_enlargements_and_still_train(tiny_svg:
     assert 0 < SMALL_PRINT_SCALE[0] < SMALL_PRINT_SCALE[1] <= 1
     bits = torch.randint(0, 2, (16, model.codec.spec.code_bits), generator=torch.Generator().manual_seed(0)).float()
     assert trainer.images(bits, train_encoder=False).shape == (16, 1, *model.image_size)
+
+
+def test_tune_decoder_keeps_the_encoder_and_records_the_run(trained: Path, tmp_path: Path) -> None:
+    """``deepmorph tune-decoder``: only the decoder changes (printed codes and the detector stay
+    valid), the training record is kept, the run is appended to ``tuning``, and it still reads."""
+    before = DeepMorphModel.load(trained)
+    out = tmp_path / "tuned.dmm"
+    result = CliRunner().invoke(
+        app,
+        ["tune-decoder", str(trained), "--out", str(out), "--steps", "30", "--small-prints", "0.5", "--threads", "1"],
+    )
+    assert result.exit_code == 0, result.output
+    after = DeepMorphModel.load(out)
+    for name, value in before.encoder.state_dict().items():
+        assert torch.equal(value, after.encoder.state_dict()[name]), name
+    changed = [n for n, v in before.decoder.state_dict().items() if not torch.equal(v, after.decoder.state_dict()[n])]
+    assert changed
+    assert after.meta.record == before.meta.record
+    (run,) = after.meta.tuning
+    assert run["steps"] == 30 and run["finished"] and run["small_prints"] == 0.5
+    assert soft_bit_accuracy(after) > 0.9
+    info = CliRunner().invoke(app, ["info", str(out)])
+    assert info.exit_code == 0 and "decoder tuned" in info.output
+
+    # refused: an existing --out, and a bundle whose training has not finished
+    again = CliRunner().invoke(app, ["tune-decoder", str(trained), "--out", str(out), "--steps", "1"])
+    assert again.exit_code != 0 and "already exists" in again.output
+    unfinished = tmp_path / "unfinished.dmm"
+    before.meta.record.finished = False
+    before.save(unfinished)
+    refused = CliRunner().invoke(app, ["tune-decoder", str(unfinished), "--out", str(tmp_path / "x.dmm")])
+    assert refused.exit_code != 0 and "not finished" in refused.output
+
+
+def test_an_interrupted_tuning_writes_what_it_has(
+    trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from deepmorph_core.api import tune_decoder
+    from deepmorph_core.train import Trainer
+
+    real_step = Trainer.step
+
+    def step_then_stop(self: Trainer):
+        if self.record.step == 7:
+            raise KeyboardInterrupt
+        return real_step(self)
+
+    monkeypatch.setattr(Trainer, "step", step_then_stop)
+    out = tmp_path / "part.dmm"
+    with pytest.raises(Interrupted, match="step 7/50"):
+        tune_decoder(trained, out, steps=50, threads=1)
+    (run,) = DeepMorphModel.load(out).meta.tuning
+    assert run["steps"] == 7 and not run["finished"]
