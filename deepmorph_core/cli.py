@@ -9,7 +9,8 @@ from __future__ import annotations
 import functools
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, Optional, TypeVar
 
@@ -110,6 +111,26 @@ def progress_bar(description: str = "{task.description}"):  # noqa: ANN201 - a r
         TimeRemainingColumn(),
         console=err,
     )
+
+
+@contextmanager
+def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[Callable[[int, int], Callable[[Any], None]]]:
+    """A progress bar for a training run: yields ``on_start(total, done)``, which starts the bar
+    and returns the per-log callback (``describe(metrics)`` is its text). Callers start it
+    only once the settings are validated, so an error prints alone; a bar never started is
+    never stopped (that would print a stray newline)."""
+    progress = progress_bar()
+
+    def on_start(total: int, done: int) -> Callable[[Any], None]:
+        progress.start()
+        task = progress.add_task(label, total=total, completed=done)
+        return lambda m: progress.update(task, completed=m.step, description=describe(m))
+
+    try:
+        yield on_start
+    finally:
+        if progress.live.is_started:
+            progress.stop()
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
@@ -245,6 +266,8 @@ def _render_ink(svg: Path, size: int, soft: bool) -> np.ndarray:
 
 
 ModelArg = Annotated[Path, typer.Argument(help="A DeepMorph model bundle (.dmm).", show_default=False)]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")]
+ThreadsOpt = Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")]
 
 
 @app.command()
@@ -275,7 +298,7 @@ def train(
             help="Share of each batch captured as a small print (corrupted at 55-95 % of the width, enlarged).",
         ),
     ] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    seed: SeedOpt = 0,
     encoder_init: Annotated[
         str,
         typer.Option(
@@ -283,7 +306,7 @@ def train(
         ),
     ] = "spread",
     device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
-    threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
+    threads: ThreadsOpt = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
     move: MoveOpt = None,
     shift: ShiftOpt = None,
@@ -293,19 +316,8 @@ def train(
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
     from deepmorph_core.api import train_model
 
-    progress = progress_bar()
-
-    def on_start(total: int, done: int) -> Callable[[Any], None]:
-        # started only once the drawing and settings are validated, so errors print alone
-        progress.start()
-        task = progress.add_task("training", total=total, completed=done)
-        return lambda m: progress.update(
-            task,
-            completed=m.step,
-            description=f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}",
-        )
-
-    try:
+    describe = lambda m: f"stage {m.stage} loss {m.loss:.3f} bit acc {m.bit_acc:.3f} all-bits {m.word_acc:.2f}"  # noqa: E731
+    with step_progress("training", describe) as on_start:
         summary = train_model(
             svg,
             out_path,
@@ -333,9 +345,6 @@ def train(
             },
             on_start=on_start,
         )
-    finally:
-        if progress.live.is_started:  # stopping a bar never shown would print a stray newline
-            progress.stop()
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
@@ -414,25 +423,15 @@ def tune_decoder(
         typer.Option("--small-prints", min=0, max=1, help="Share of each batch captured as a small print."),
     ] = 0.5,
     lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1e-1, help="Start learning rate (cosine to 10 %).")] = 3e-4,
-    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
-    threads: Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")] = None,
+    seed: SeedOpt = 0,
+    threads: ThreadsOpt = None,
 ) -> None:
     """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
     from deepmorph_core.api import tune_decoder as tune
 
-    progress = progress_bar()
-
-    def on_start(total: int, done: int) -> Callable[[Any], None]:
-        progress.start()
-        task = progress.add_task("tuning", total=total, completed=done)
-        return lambda m: progress.update(task, completed=m.step, description=f"decoder bit acc {m.bit_acc:.4f}")
-
-    try:
+    with step_progress("tuning", lambda m: f"decoder bit acc {m.bit_acc:.4f}") as on_start:
         run = tune(model, out_path, steps=steps, small_prints=small_prints, lr=lr, seed=seed, threads=threads,
                    on_start=on_start)  # fmt: skip
-    finally:
-        if progress.live.is_started:
-            progress.stop()
     out.print(f"wrote {out_path} ({run['steps']} steps in {run['elapsed_s']:.0f} s, bit acc {run['bit_acc']:.4f})")
 
 

@@ -9,7 +9,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli import JsonOpt, ModelArg, app, friendly, out, progress_bar
+from deepmorph_core.cli import JsonOpt, ModelArg, SeedOpt, app, friendly, out, progress_bar
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 
@@ -199,7 +199,7 @@ def train_detector_cmd(
     out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps.")] = 2000,
     batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
-    seed: Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")] = 0,
+    seed: SeedOpt = 0,
     threads: Annotated[int, typer.Option("--threads", min=1, help="torch threads of the training process.")] = 1,
     workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
