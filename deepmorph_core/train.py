@@ -329,16 +329,17 @@ class Trainer:
         return StepMetrics(rec.step, rec.stage, loss.item(), bit_acc, word_acc, rec.elapsed_s)
 
     def _set_learning_rates(self) -> None:
-        """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step.
+        """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step (over every
+        step when the encoder is frozen).
 
         A function of the step alone, so a resumed run follows the same schedule.
         """
         rec, cfg = self.record, self.cfg
+        # the decay runs over stage 2, or over every step when only the decoder trains
+        decay_start = 0 if cfg.freeze_encoder else rec.stage2_start if rec.stage == 2 else None
         factor = 1.0
-        if cfg.freeze_encoder:
-            factor = 0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * min(1.0, rec.step / cfg.steps)))
-        elif rec.stage == 2 and rec.stage2_start is not None and cfg.steps > rec.stage2_start:
-            progress = min(1.0, (rec.step - rec.stage2_start) / (cfg.steps - rec.stage2_start))
+        if decay_start is not None and cfg.steps > decay_start:
+            progress = min(1.0, (rec.step - decay_start) / (cfg.steps - decay_start))
             factor = 0.1 + 0.9 * 0.5 * (1.0 + math.cos(math.pi * progress))
         for opt, base in ((self.opt_dec, cfg.lr), (self.opt_enc, cfg.encoder_lr)):
             for group in opt.param_groups:

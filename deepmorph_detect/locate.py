@@ -61,6 +61,13 @@ class MorphFit:
     correlation: float
     unmorphed_correlation: float
 
+    @classmethod
+    def between(cls, plain: Alignment | None, morphed: Alignment | None) -> MorphFit | None:
+        """The fit from the unmorphed and the morphed alignments (``None`` when one diverged)."""
+        if plain is None or morphed is None:
+            return None
+        return cls(morphed.homography, morphed.correlation, plain.correlation)
+
     @property
     def gain(self) -> float:
         """How much better the decoded morph explains the photo than no morph at all."""
@@ -308,19 +315,14 @@ class Locator:
         if plain is None:
             plain = refine_at(pyramid, homography, self.template, MORPH_WIDTH)
         template = self.morphed_template(payload)
-        morphed = refine_at(pyramid, homography, template, MORPH_WIDTH)
-        fit = (
-            None
-            if plain is None or morphed is None
-            else MorphFit(morphed.homography, morphed.correlation, plain.correlation)
-        )
+        fit = MorphFit.between(plain, refine_at(pyramid, homography, template, MORPH_WIDTH))
         if fit is not None and fit.confirms:
             return fit
-        plain = refine_at(pyramid, homography, self.template, MORPH_WIDTH, RECHECK_ITERATIONS)
-        morphed = refine_at(pyramid, homography, template, MORPH_WIDTH, RECHECK_ITERATIONS)
-        if plain is None or morphed is None:
-            return fit
-        return MorphFit(morphed.homography, morphed.correlation, plain.correlation)
+        recheck = MorphFit.between(
+            refine_at(pyramid, homography, self.template, MORPH_WIDTH, RECHECK_ITERATIONS),
+            refine_at(pyramid, homography, template, MORPH_WIDTH, RECHECK_ITERATIONS),
+        )
+        return fit if recheck is None else recheck
 
     def check_payload(
         self,
