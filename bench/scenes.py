@@ -8,7 +8,9 @@ and time per frame on ``--threads`` (default 1) next to ArUco detection and Open
 detect-and-decode on same-size frames. Then ``--negatives`` scenes holding no drawing of the
 model (other drawings, an ArUco marker, photos and clutter) count wrong payloads reported ok.
 Last, the morph check's rejection rates for right, random and one-bit-off payloads on the
-drawings found, and frame fusion over ``--sequences`` hard 5-frame sequences.
+drawings found, frame fusion over ``--sequences`` hard 5-frame sequences, and ``--tracking``
+10-frame videos per severity (medium, hard) of a moving camera, every frame searched against
+drawings followed from frame to frame, with QR's time in the same run.
 
     .venv/bin/python bench/scenes.py --n 200 --negatives 1000
 """
@@ -31,9 +33,10 @@ def main() -> None:
     ap.add_argument("--distractors", type=int, default=1)
     ap.add_argument("--negatives", type=int, default=1000, help="scenes without the drawing")
     ap.add_argument("--sequences", type=int, default=50, help="hard 5-frame sequences for frame fusion")
+    ap.add_argument("--tracking", type=int, default=12, help="moving 10-frame videos per severity (medium, hard)")
     args = ap.parse_args()
     model_path, model = load_scene_model(args)
-    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, write_scenes
+    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, tracking_rates, write_scenes
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import SceneMaker
 
@@ -75,6 +78,9 @@ def main() -> None:
         fusion["fused_ok"] += any(e["ok"] and e["payload"]["bits"] == right for e in fused)
         fusion["fused_wrong_ok"] += sum(e["ok"] and e["payload"]["bits"] != right for e in fused)
 
+    tracking = [tracking_rates(model, sev, args.tracking, seed=args.seed + 3000) for sev in ("medium", "hard")]
+    tracking = tracking if args.tracking else []
+
     rows = []
     for sev, r in reports.items():
         d, a = r["pose"]["deepmorph"], r["pose"]["aruco"]
@@ -104,8 +110,19 @@ def main() -> None:
             f"frame fusion (hard, 5 frames): single frames {fusion['single_ok'] / max(fusion['frames'], 1):.1%}, "
             f"fused sequences {fusion['fused_ok'] / args.sequences:.1%} ({fusion['fused_wrong_ok']} wrong ok)"
         )
+    if tracking:
+        rows = []
+        for t in tracking:
+            qr = t["qr_detect_and_decode_median"]
+            for mode in ("every frame searched", "tracked"):
+                r = t[mode]
+                rows.append([t["severity"], mode, f"{r['read']}/{t['frames']}", r["wrong_ok"], r["corner_px_median"],
+                             r["ms_median"], r["ms_mean"], qr, round(r["ms_mean"] / qr, 2)])  # fmt: skip
+        print()
+        print(table(["video (8 px shake)", "frames", "read", "wrong ok", "corner px", "ms median", "ms mean",
+                     "QR ms", "mean / QR"], rows))  # fmt: skip
     out = {"environment": environment(), "model": str(model_path), "severities": reports, "negatives": neg}
-    write_json(args.out, {**out, "fusion": fusion})
+    write_json(args.out, {**out, "fusion": fusion, "tracking": tracking})
     print(f"wrote {args.out}")
 
 

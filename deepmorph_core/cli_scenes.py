@@ -58,6 +58,7 @@ def decode(
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.media import check_video, folder_frames, is_video, video_frames
     from deepmorph_detect.overlay import draw_overlay
+    from deepmorph_detect.tracking import SequenceLocator
 
     m = DeepMorphModel.load(model)
     cam = parse_camera(camera) if camera else None
@@ -93,10 +94,11 @@ def decode(
             save_overlay(path, payload, dets)
             continue
         fuser = FrameFuser(m.codec, locator.check_payload)
+        follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
         frames = ((p.name, read_image_bgr(p)) for p in payload) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:
-            dets = locator.locate(frame, camera=cam, soft=soft)
+            dets = follow(frame, camera=cam, soft=soft)
             fuser.add(label, dets, frame)
             last = (frame, dets)
         results.append({"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)})

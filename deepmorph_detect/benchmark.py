@@ -8,6 +8,8 @@
   the ArUco markers printed at the same size in the same scenes (found by ``cv2.aruco``);
 * time per frame on the current thread count: our locate+decode, ArUco detection on the same
   frames, and ``cv2.QRCodeDetector().detectAndDecode`` on same-size frames holding a QR code.
+
+:func:`tracking_rates` compares searching every frame of a filmed print with following it.
 """
 
 from __future__ import annotations
@@ -244,6 +246,50 @@ def morph_check_rates(model: DeepMorphModel, folder: Path, seed: int = 0) -> dic
     return out
 
 
+def tracking_rates(
+    model: DeepMorphModel, severity: str, sequences: int, frames: int = 10, shake_px: float = 8.0, seed: int = 0
+) -> dict[str, Any]:
+    """Videos of a hand-held camera, every frame searched (:meth:`Locator.locate`) against
+    drawings followed (:class:`~deepmorph_detect.tracking.SequenceLocator`), on the same frames.
+
+    Each sequence films one print for ``frames`` frames; between frames the camera moves the
+    image corners by about ``shake_px`` pixels (:meth:`SceneMaker.make`). Per mode: median ms
+    per frame, frames whose payload was read right, wrong payloads reported ok, and the median
+    corner error against the moved truth; plus QR's detect-and-decode on same-size frames.
+    """
+    from deepmorph_detect.tracking import SequenceLocator
+
+    maker = SceneMaker(model, (640, 480), severity, seed=seed)
+    scenes = [maker.make(drawings=1, frames=frames, shake_px=shake_px) for _ in range(sequences)]
+    locator = Locator(model)
+    out: dict[str, Any] = {"severity": severity, "sequences": sequences, "frames": sequences * frames}
+    for mode in ("every frame searched", "tracked"):
+        times: list[float] = []
+        read = wrong = 0
+        errors: list[float] = []
+        for scene in scenes:
+            follow = SequenceLocator(locator)
+            truth = scene.placements[0]
+            for k, frame in enumerate(scene.frames):
+                t0 = time.perf_counter()
+                found = locator.locate(frame, scene.camera) if mode != "tracked" else follow(frame, scene.camera)
+                times.append(time.perf_counter() - t0)
+                right = [d for d in found if d.result.ok and np.array_equal(d.result.payload, truth.payload)]
+                wrong += sum(bool(d.result.ok) for d in found) - len(right)
+                read += bool(right)
+                if right:
+                    errors.append(_corner_error(right[0].corners, scene.corners_in_frame(truth, k)))
+        out[mode] = {
+            "ms_median": round(1000 * float(np.median(times)), 2),
+            "ms_mean": round(1000 * float(np.mean(times)), 2),
+            "read": read,
+            "wrong_ok": wrong,
+            "corner_px_median": round(float(np.median(errors)), 3) if errors else None,
+        }
+    out["qr_detect_and_decode_median"] = _qr_timing(model, (640, 480), n=30)
+    return out
+
+
 def _qr_timing(model: DeepMorphModel, size: tuple[int, int], n: int) -> float:
     """Median ms of ``cv2.QRCodeDetector().detectAndDecode`` on scenes holding one QR code."""
     maker = SceneMaker(model, size, "medium", seed=99)
@@ -282,4 +328,12 @@ def format_report(report: dict[str, Any]) -> str:
     return "\n".join(f"{a:<{width}}  {b!s:>20}  {c!s:>16}" for a, b, c in rows)
 
 
-__all__ = ["aruco_detector", "bench_scenes", "format_report", "morph_check_rates", "read_scenes", "write_scenes"]
+__all__ = [
+    "aruco_detector",
+    "bench_scenes",
+    "format_report",
+    "morph_check_rates",
+    "read_scenes",
+    "tracking_rates",
+    "write_scenes",
+]

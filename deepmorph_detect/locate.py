@@ -44,6 +44,7 @@ RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wi
 MORPH_WIDTH = LEVELS[-1]  # template width of the alignment to the decoded morph
 MIN_MORPH_GAIN = 0.0  # the decoded morph must correlate better than the unmorphed drawing by more
 RECHECK_ITERATIONS = 20  # ECC iterations of the longer refit when the decoded morph does not win at once
+TRACK_ITERATIONS = 10  # ECC iterations following a read drawing's morph from the previous frame
 MORPH_CACHE = 64  # rendered morph templates kept (a video shows the same payloads again and again)
 
 
@@ -196,7 +197,10 @@ class Located(Detection):
     keypoints: dict[str, list[float]] = field(default_factory=dict)
     source: str = "detector"
     morph: MorphFit | None = None
-    morph_check: str = "not run"  # "passed", "failed" (ok withdrawn) or "not run" (CRC failed)
+    # "passed", "failed" (ok withdrawn), "not run" (CRC failed); from Locator.track also
+    # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
+    # and "track conflict" (another payload than the track's passed: ok withdrawn)
+    morph_check: str = "not run"
 
     def to_json(self) -> dict[str, Any]:
         out = super().to_json()
@@ -206,7 +210,8 @@ class Located(Detection):
         out["morph_check"] = self.morph_check
         if self.morph is not None:
             out["morph_fit"] = round(self.morph.gain, 4)
-        out["pose_aligned_to"] = "decoded morph" if self.morph_check == "passed" else "unmorphed drawing"
+        aligned_to_morph = self.morph_check in ("passed", "tracked")
+        out["pose_aligned_to"] = "decoded morph" if aligned_to_morph else "unmorphed drawing"
         if self.corners is not None:
             out["corners"] = np.round(self.corners, 2).tolist()
         if self.homography is not None:
@@ -366,6 +371,86 @@ class Locator:
             results.append(self._decode(gray, pyramid, cand, alignment, cam, source, soft))
         return results
 
+    def track(
+        self, image: np.ndarray, previous: list[Located], camera: Camera | None = None, soft: bool = True
+    ) -> list[Located]:
+        """The read drawings of ``previous`` (the last frame's results) followed into ``image``,
+        the next frame of a video: no detector, and no second payload check. Only drawings
+        whose payload is confirmed (``ok``, ``morph_check`` ``passed`` or ``tracked``) are
+        followed. A drawing not found again is left out, and one that newly entered the view
+        is not looked for: :class:`~deepmorph_detect.tracking.SequenceLocator` runs
+        :meth:`locate` then.
+
+        Each drawing is aligned straight to its payload's morph from its last homography
+        (:data:`TRACK_ITERATIONS` of ECC at :data:`MORPH_WIDTH`). When the correlation clears
+        the bar and the rectified view reads the same payload with a passing CRC, that is the
+        result (``morph_check`` ``tracked``): the morph was confirmed on this print before, and
+        a payload read twice is no CRC collision. Otherwise the drawing goes the whole way of
+        :meth:`locate` from there, without the detector, and a payload other than the track's
+        loses its ``ok`` (``morph_check`` ``track conflict``): a print does not change.
+
+        Drawings whose payload was not read are not followed: every poor frame in which an
+        unread drawing is aligned is one more chance for a wrong reading to pass CRC-8 and the
+        morph check. Following them too let one wrong payload through in 120 hard frames of a
+        trial; :meth:`locate` found nothing in that frame.
+        """
+        gray = to_gray(image)
+        h, w = gray.shape
+        if h < 16 or w < 16:
+            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
+        cam = camera or Camera.default(w, h)
+        pyramid = ImagePyramid(gray)
+        found: list[Located] = []
+        for prev in previous:
+            confirmed = prev.result.payload if prev.morph_check in ("passed", "tracked") and prev.result.ok else None
+            if prev.homography is None or confirmed is None:
+                continue
+            located = self._follow(gray, pyramid, prev.homography, confirmed, prev.score, cam, soft)
+            if located is None or located.homography is None:
+                continue
+            centre = self._centre(located.homography)
+            size = float(np.linalg.norm(located.corners[2] - located.corners[0]))
+            if any(np.linalg.norm(centre - self._centre(f.homography)) < 0.3 * size for f in found):
+                continue  # two tracks converged on one drawing
+            found.append(located)
+        return found
+
+    def _follow(
+        self,
+        gray: np.ndarray,
+        pyramid: ImagePyramid,
+        start: np.ndarray,
+        confirmed: np.ndarray,
+        score: float,
+        cam: Camera,
+        soft: bool,
+    ) -> Located | None:
+        """The drawing last seen at ``start`` with payload ``confirmed``, in this frame
+        (:meth:`track`), or ``None``."""
+        fit = refine_at(pyramid, start, self.morphed_template(confirmed), MORPH_WIDTH, TRACK_ITERATIONS)
+        if fit is not None and fit.correlation >= self.min_correlation and self._plausible(fit.homography):
+            reading = self._read(self.rectify(pyramid, fit.homography), soft)
+            if reading is not None and reading[0].ok and np.array_equal(reading[0].payload, confirmed):
+                checked = PayloadCheck(reading[0], None, "tracked")
+                return self._place(gray, fit.homography, checked, reading[1], fit.correlation, score, cam, "tracked")
+            start = fit.homography
+        alignment = refine(pyramid, start, self.template)
+        if (
+            alignment is None
+            or alignment.correlation < self.min_correlation
+            or not self._plausible(alignment.homography)
+        ):
+            return None
+        located = self._decode(gray, pyramid, {"score": score}, alignment, cam, "tracked", soft)
+        if located.result.ok and not np.array_equal(located.result.payload, confirmed):
+            # a CRC collision on a poor frame; the next full search reads the drawing afresh
+            located.result = replace(located.result, ok=False)
+            located.morph_check = "track conflict"
+        return located
+
+    def _plausible(self, H: np.ndarray) -> bool:
+        return plausible_outline(project(H, self.frame_corners), self.frame_corners)
+
     def _verify(self, pyramid: ImagePyramid, candidates: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Any]]:
         """Refined, verified candidates, duplicates (same drawing twice) removed."""
         kept: list[tuple[dict[str, Any], Any]] = []
@@ -461,7 +546,6 @@ class Locator:
         source: str,
         soft: bool,
     ) -> Located:
-        h, w = gray.shape
         model = self.model
         H = alignment.homography
         views = [self.rectify(pyramid, H)]
@@ -487,6 +571,21 @@ class Locator:
             if attempt.status == "passed":
                 H = attempt.fit.homography
                 break
+        return self._place(gray, H, checked, probs, alignment.correlation, float(cand.get("score", 0.0)), cam, source)
+
+    def _place(
+        self,
+        gray: np.ndarray,
+        H: np.ndarray,
+        checked: PayloadCheck,
+        probs: np.ndarray,
+        correlation: float,
+        score: float,
+        cam: Camera,
+        source: str,
+    ) -> Located:
+        """A decoded drawing at homography ``H``: its corners, keypoints and camera pose."""
+        h, w = gray.shape
         corners = project(H, self.frame_corners)
         grid = np.array([[fx, fy] for fy in (0.0, 0.5, 1.0) for fx in (0.0, 0.5, 1.0)])
         x, y, vw, vh = self.viewbox
@@ -503,8 +602,8 @@ class Locator:
             _bbox(corners, w, h),
             corners=corners,
             homography=H,
-            correlation=alignment.correlation,
-            score=float(cand.get("score", 0.0)),
+            correlation=correlation,
+            score=score,
             rvec=rvec,
             tvec=tvec,
             camera=cam,
@@ -518,6 +617,7 @@ class Locator:
 __all__ = [
     "MIN_CORRELATION",
     "MIN_MORPH_GAIN",
+    "TRACK_ITERATIONS",
     "CentreNetDetector",
     "Located",
     "Locator",

@@ -115,6 +115,14 @@ class Scene:
     camera: Camera
     placements: list[Placement] = field(default_factory=list)
     frames: list[np.ndarray] = field(default_factory=list)  # more photos of the same layout
+    # per frame, image pixels of ``image`` -> that frame's pixels (the camera's shake; identity when still)
+    frame_warps: list[np.ndarray] = field(default_factory=list)
+
+    def corners_in_frame(self, placement: Placement, k: int) -> np.ndarray:
+        """``(4, 2)`` corners of ``placement`` in frame ``k`` (the placements hold frame 0's)."""
+        M = self.frame_warps[k] if k < len(self.frame_warps) else np.eye(3)
+        pts = np.column_stack([placement.corners, np.ones(4)]) @ M.T
+        return pts[:, :2] / pts[:, 2:3]
 
     def truth_json(self) -> dict[str, Any]:
         h, w = self.image.shape[:2]
@@ -229,13 +237,22 @@ class SceneMaker:
     # -- making ---------------------------------------------------------------------------
 
     def make(
-        self, drawings: int = 1, distractors: int = 0, aruco: bool = False, qr: str | None = None, frames: int = 1
+        self,
+        drawings: int = 1,
+        distractors: int = 0,
+        aruco: bool = False,
+        qr: str | None = None,
+        frames: int = 1,
+        shake_px: float = 0.0,
     ) -> Scene:
         """One scene holding ``drawings`` payload morphs, ``distractors`` other icons, and
         optionally an ArUco marker and a QR code (each at the drawing's printed size).
 
         With ``frames`` > 1, ``Scene.frames`` holds that many photos of the same layout, each
         with its own light, blur, noise and compression (a held phone filming a still scene).
+        With ``shake_px`` > 0 the camera also moves between frames: each frame is the last one
+        shifted, turned and zoomed by a random step that moves the image corners by about
+        ``shake_px`` pixels (``Scene.frame_warps`` holds the motion, for the truth).
         """
         W, H = self.size
         sv = self.severity
@@ -287,8 +304,31 @@ class SceneMaker:
             corners_src = _frame_corners(kind, self.viewbox, art.shape)
             pts = np.column_stack([corners_src, np.ones(4)]) @ truth.T
             placements.append(Placement(kind, rvec, tvec, truth, pts[:, :2] / pts[:, 2:3], payload, label))
-        shots = [_photograph(img, sv, rng) for _ in range(max(1, frames))]
-        return Scene(shots[0], cam, placements, shots)
+        warps = [np.eye(3)]
+        for _ in range(1, max(1, frames)):
+            warps.append(_shake(rng, self.size, shake_px) @ warps[-1] if shake_px > 0 else warps[-1])
+        shots = [_photograph(_moved(img, M), sv, rng) for M in warps]
+        return Scene(shots[0], cam, placements, shots, warps)
+
+
+def _shake(rng: np.random.Generator, size: tuple[int, int], px: float) -> np.ndarray:
+    """One random step of a hand-held camera: a shift, turn and zoom about the image centre
+    that moves the corners by about ``px`` pixels."""
+    W, H = size
+    reach = 0.5 * math.hypot(W, H)
+    angle = rng.normal(0, 0.5 * px / reach)
+    zoom = 1.0 + rng.normal(0, 0.5 * px / reach)
+    tx, ty = rng.normal(0, px / math.sqrt(2), 2)
+    c, s = zoom * math.cos(angle), zoom * math.sin(angle)
+    cx, cy = W / 2, H / 2
+    return np.array([[c, -s, cx - c * cx + s * cy + tx], [s, c, cy - s * cx - c * cy + ty], [0, 0, 1]])
+
+
+def _moved(img: np.ndarray, M: np.ndarray) -> np.ndarray:
+    if np.allclose(M, np.eye(3)):
+        return img
+    h, w = img.shape[:2]
+    return cv2.warpPerspective(img, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
 
 
 def _frame_corners(kind: str, viewbox: tuple[float, float, float, float], art_shape: tuple[int, int]) -> np.ndarray:
