@@ -348,18 +348,22 @@ class Locator:
 
     # -- the chain ------------------------------------------------------------------------
 
+    @staticmethod
+    def _frame(image: np.ndarray, camera: Camera | None) -> tuple[np.ndarray, Camera, ImagePyramid]:
+        """The photo as gray, its camera (the default one when none is given) and its pyramid."""
+        gray = to_gray(image)
+        h, w = gray.shape
+        if h < 16 or w < 16:
+            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
+        return gray, camera or Camera.default(w, h), ImagePyramid(gray)
+
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.
 
         Args:
             camera: intrinsics for the pose; ``None`` assumes the default field of view.
         """
-        gray = to_gray(image)
-        h, w = gray.shape
-        if h < 16 or w < 16:
-            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
-        cam = camera or Camera.default(w, h)
-        pyramid = ImagePyramid(gray)
+        gray, cam, pyramid = self._frame(image, camera)
         candidates = self.detector.detect(gray) if self.detector is not None else []
         source = "detector"
         found = self._verify(pyramid, candidates)
@@ -394,12 +398,7 @@ class Locator:
         morph check. Following them too let one wrong payload through in 120 hard frames of a
         trial; :meth:`locate` found nothing in that frame.
         """
-        gray = to_gray(image)
-        h, w = gray.shape
-        if h < 16 or w < 16:
-            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
-        cam = camera or Camera.default(w, h)
-        pyramid = ImagePyramid(gray)
+        gray, cam, pyramid = self._frame(image, camera)
         found: list[Located] = []
         for prev in previous:
             confirmed = prev.result.payload if prev.morph_check in ("passed", "tracked") and prev.result.ok else None
