@@ -202,6 +202,13 @@ class Located(Detection):
     # and "track conflict" (another payload than the track's passed: ok withdrawn)
     morph_check: str = "not run"
 
+    @property
+    def confirmed(self) -> bool:
+        """Whether the payload is read and confirmed on the print: ``ok``, and its morph check
+        passed in this frame or in an earlier one of its track (what :meth:`Locator.track`
+        follows)."""
+        return bool(self.result.ok) and self.morph_check in ("passed", "tracked")
+
     def to_json(self) -> dict[str, Any]:
         out = super().to_json()
         out["score"] = round(self.score, 4)
@@ -401,15 +408,12 @@ class Locator:
         gray, cam, pyramid = self._frame(image, camera)
         found: list[Located] = []
         for prev in previous:
-            confirmed = prev.result.payload if prev.morph_check in ("passed", "tracked") and prev.result.ok else None
-            if prev.homography is None or confirmed is None:
+            if prev.homography is None or not prev.confirmed:
                 continue
-            located = self._follow(gray, pyramid, prev.homography, confirmed, prev.score, cam, soft)
+            located = self._follow(gray, pyramid, prev.homography, prev.result.payload, prev.score, cam, soft)
             if located is None or located.homography is None:
                 continue
-            centre = self._centre(located.homography)
-            size = float(np.linalg.norm(located.corners[2] - located.corners[0]))
-            if any(np.linalg.norm(centre - self._centre(f.homography)) < 0.3 * size for f in found):
+            if self._seen(located.homography, [f.homography for f in found]):
                 continue  # two tracks converged on one drawing
             found.append(located)
         return found
@@ -427,18 +431,14 @@ class Locator:
         """The drawing last seen at ``start`` with payload ``confirmed``, in this frame
         (:meth:`track`), or ``None``."""
         fit = refine_at(pyramid, start, self.morphed_template(confirmed), MORPH_WIDTH, TRACK_ITERATIONS)
-        if fit is not None and fit.correlation >= self.min_correlation and self._plausible(fit.homography):
+        if self._accepts(fit):
             reading = self._read(self.rectify(pyramid, fit.homography), soft)
             if reading is not None and reading[0].ok and np.array_equal(reading[0].payload, confirmed):
                 checked = PayloadCheck(reading[0], None, "tracked")
                 return self._place(gray, fit.homography, checked, reading[1], fit.correlation, score, cam, "tracked")
             start = fit.homography
         alignment = refine(pyramid, start, self.template)
-        if (
-            alignment is None
-            or alignment.correlation < self.min_correlation
-            or not self._plausible(alignment.homography)
-        ):
+        if not self._accepts(alignment):
             return None
         located = self._decode(gray, pyramid, {"score": score}, alignment, cam, "tracked", soft)
         if located.result.ok and not np.array_equal(located.result.payload, confirmed):
@@ -447,8 +447,19 @@ class Locator:
             located.morph_check = "track conflict"
         return located
 
-    def _plausible(self, H: np.ndarray) -> bool:
-        return plausible_outline(project(H, self.frame_corners), self.frame_corners)
+    def _accepts(self, alignment: Alignment | None) -> bool:
+        """Whether an alignment shows this drawing: it correlates well enough, and its outline
+        can be a print (:func:`plausible_outline`)."""
+        if alignment is None or alignment.correlation < self.min_correlation:
+            return False
+        return plausible_outline(project(alignment.homography, self.frame_corners), self.frame_corners)
+
+    def _seen(self, H: np.ndarray, others: list[np.ndarray]) -> bool:
+        """Whether the drawing at ``H`` is one already at one of ``others`` (centres closer
+        than 0.3 of its diagonal)."""
+        corners = project(H, self.frame_corners)
+        centre, size = self._centre(H), float(np.linalg.norm(corners[2] - corners[0]))
+        return any(np.linalg.norm(centre - self._centre(other)) < 0.3 * size for other in others)
 
     def _verify(self, pyramid: ImagePyramid, candidates: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Any]]:
         """Refined, verified candidates, duplicates (same drawing twice) removed."""
@@ -461,14 +472,7 @@ class Locator:
                 )
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
                 alignment = refine(pyramid, H0, self.template)
-            if alignment is None or alignment.correlation < self.min_correlation:
-                continue
-            outline = project(alignment.homography, self.frame_corners)
-            if not plausible_outline(outline, self.frame_corners):
-                continue
-            centre = self._centre(alignment.homography)
-            size = float(np.linalg.norm(outline[2] - outline[0]))
-            if any(np.linalg.norm(centre - self._centre(a.homography)) < 0.3 * size for _, a in kept):
+            if not self._accepts(alignment) or self._seen(alignment.homography, [a.homography for _, a in kept]):
                 continue
             kept.append((cand, alignment))
         return kept

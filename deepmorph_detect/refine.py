@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.render import render_svg
-from deepmorph_detect.camera import viewbox_corners
+from deepmorph_detect.camera import project, viewbox_corners
 
 LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
@@ -153,8 +153,7 @@ def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray
     """The homography with the frame's corners taken in each of the four cyclic orders
     (the drawing turned by 0, 90, 180 and 270 degrees within the same outline)."""
     frame = viewbox_corners(template.viewbox).astype(np.float32)
-    pts = np.column_stack([frame, np.ones(4)]) @ np.asarray(homography, dtype=np.float64).T
-    quad = (pts[:, :2] / pts[:, 2:3]).astype(np.float32)
+    quad = project(homography, frame).astype(np.float32)
     return [cv2.getPerspectiveTransform(frame, np.roll(quad, k, axis=0)).astype(np.float64) for k in range(4)]
 
 
@@ -173,8 +172,7 @@ def outline_sweep(
     steps and scaled by each of ``scales``: starts for a drawing the detector outlined
     loosely (turned by a fraction of a quarter, or too large or too small)."""
     frame = viewbox_corners(template.viewbox).astype(np.float32)
-    pts = np.column_stack([frame, np.ones(4)]) @ np.asarray(homography, dtype=np.float64).T
-    quad = pts[:, :2] / pts[:, 2:3]
+    quad = project(homography, frame)
     centre = quad.mean(0)
     out = []
     for scale in scales:

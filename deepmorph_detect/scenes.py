@@ -26,7 +26,7 @@ import numpy as np
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.render import render_svg
 from deepmorph_detect.backgrounds import random_background
-from deepmorph_detect.camera import Camera, homography_from_pose, viewbox_corners, viewbox_to_frame
+from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners, viewbox_to_frame
 
 if TYPE_CHECKING:
     from deepmorph_core.codemodel import DeepMorphModel
@@ -120,9 +120,7 @@ class Scene:
 
     def corners_in_frame(self, placement: Placement, k: int) -> np.ndarray:
         """``(4, 2)`` corners of ``placement`` in frame ``k`` (the placements hold frame 0's)."""
-        M = self.frame_warps[k] if k < len(self.frame_warps) else np.eye(3)
-        pts = np.column_stack([placement.corners, np.ones(4)]) @ M.T
-        return pts[:, :2] / pts[:, 2:3]
+        return project(self.frame_warps[k] if k < len(self.frame_warps) else np.eye(3), placement.corners)
 
     def truth_json(self) -> dict[str, Any]:
         h, w = self.image.shape[:2]

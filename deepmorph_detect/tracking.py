@@ -22,10 +22,6 @@ from deepmorph_detect.locate import Located, Locator
 REDETECT_EVERY = 10  # frames between full searches while every drawing is followed
 
 
-def _confirmed(found: Located) -> bool:
-    return bool(found.result.ok) and found.morph_check in ("passed", "tracked")
-
-
 class SequenceLocator:
     """Locates drawings in consecutive frames, following the ones already found.
 
@@ -49,7 +45,7 @@ class SequenceLocator:
 
     def __call__(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """The drawings in ``image``, the next frame (``(H, W)`` or ``(H, W, 3)``)."""
-        if self._previous and self._since_search < self.redetect_every - 1 and all(map(_confirmed, self._previous)):
+        if self._previous and self._since_search < self.redetect_every - 1 and all(f.confirmed for f in self._previous):
             found = self.locator.track(image, self._previous, camera, soft)
             if len(found) == len(self._previous):  # every drawing followed
                 self._previous = found

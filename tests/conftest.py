@@ -13,7 +13,10 @@ from hypothesis import settings
 import deepmorph_augment.plugin as builtin_augmentations
 import deepmorph_detect.plugin as builtin_detectors
 import deepmorph_primitives.plugin as builtin_plugin
+from deepmorph_core.api import BUNDLED_MODEL
+from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
+from deepmorph_detect.locate import Locator
 
 # Property tests are deterministic (same examples every run) so that CI cannot flake.
 settings.register_profile("deepmorph", derandomize=True, deadline=None)
@@ -56,3 +59,15 @@ def with_bezier(bezier_registry: Registry) -> Registry:
     """Make the process-wide registry the built-ins plus the Bézier plugin."""
     set_default_registry(bezier_registry)
     return bezier_registry
+
+
+@pytest.fixture(scope="module")
+def model() -> DeepMorphModel:
+    """The bundled ghost with its detector (loaded once per test module)."""
+    return DeepMorphModel.load(BUNDLED_MODEL)
+
+
+@pytest.fixture(scope="module")
+def locator(model: DeepMorphModel) -> Locator:
+    """A locator for the bundled ghost."""
+    return Locator(model)

@@ -35,16 +35,6 @@ from deepmorph_detect.scenes import SceneMaker
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def model() -> DeepMorphModel:
-    return DeepMorphModel.load(BUNDLED_MODEL)
-
-
-@pytest.fixture(scope="module")
-def locator(model: DeepMorphModel) -> Locator:
-    return Locator(model)
-
-
 def _matches(det, placement) -> bool:
     size = np.linalg.norm(placement.corners[2] - placement.corners[0])
     return bool(np.linalg.norm(det.corners.mean(0) - placement.corners.mean(0)) < 0.25 * size)

@@ -7,23 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from deepmorph_core.api import BUNDLED_MODEL
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_detect.backgrounds import random_background
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.tracking import SequenceLocator
-
-
-@pytest.fixture(scope="module")
-def model() -> DeepMorphModel:
-    return DeepMorphModel.load(BUNDLED_MODEL)
-
-
-@pytest.fixture(scope="module")
-def locator(model: DeepMorphModel) -> Locator:
-    return Locator(model)
 
 
 @pytest.fixture(scope="module")
