@@ -115,6 +115,11 @@ def decode(
             status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
             if d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
+            elif d.get("morph_check") == "contradicted":
+                status = (
+                    f"NOT VERIFIED (the CRC passed, but the photo shows {d['bits_contradicted']} of its"
+                    " code bits flipped)"
+                )
             where = ""
             if "pose" in d:
                 t = d["pose"]["tvec"]

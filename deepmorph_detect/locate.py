@@ -38,6 +38,7 @@ from deepmorph_core.imaging import align_to_frame, flatten_illumination, ink_mas
 from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, normalise_input
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine, refine_at, warp_to_template
+from deepmorph_detect.synthesis import BitEvidence, MorphSynthesis
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
@@ -87,12 +88,17 @@ class PayloadCheck:
     Attributes:
         result: the decode, with ``ok`` withdrawn when the check failed.
         fit: the alignment to the payload's morph (``None`` when not run or diverged).
-        status: ``passed``, ``failed`` or ``not run`` (the CRC had failed).
+        status: ``passed``, ``failed`` (the morph fits no better than the unmorphed drawing),
+            ``contradicted`` (it does, but the photo shows more than
+            :data:`~deepmorph_detect.synthesis.MAX_CONTRADICTED` of its bits flipped) or
+            ``not run`` (the CRC had failed).
+        bits: the per-bit evidence, when it was asked for (:meth:`Locator.check_payload`).
     """
 
     result: DecodeResult
     fit: MorphFit | None
     status: str
+    bits: BitEvidence | None = None
 
 
 class CentreNetDetector:
@@ -197,7 +203,9 @@ class Located(Detection):
     keypoints: dict[str, list[float]] = field(default_factory=dict)
     source: str = "detector"
     morph: MorphFit | None = None
-    # "passed", "failed" (ok withdrawn), "not run" (CRC failed); from Locator.track also
+    bits: BitEvidence | None = None  # the per-bit check, when it ran (Locator.check_payload)
+    # "passed", "failed" (ok withdrawn), "contradicted" (the photo shows some of its bits flipped:
+    # ok withdrawn), "not run" (CRC failed); from Locator.track also
     # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
     # and "track conflict" (another payload than the track's passed: ok withdrawn)
     morph_check: str = "not run"
@@ -217,6 +225,8 @@ class Located(Detection):
         out["morph_check"] = self.morph_check
         if self.morph is not None:
             out["morph_fit"] = round(self.morph.gain, 4)
+        if self.bits is not None:
+            out["bits_contradicted"] = self.bits.contradicted
         aligned_to_morph = self.morph_check in ("passed", "tracked")
         out["pose_aligned_to"] = "decoded morph" if aligned_to_morph else "unmorphed drawing"
         if self.corners is not None:
@@ -257,6 +267,7 @@ class Locator:
         depth = cv2.distanceTransform((self.template.images[finest] < 0.5).astype(np.uint8), cv2.DIST_L2, 3)
         self._ink_thickness = 2.0 * float(depth.max()) * model.width * RECTIFY_WIDTH_FACTOR / finest
         self._morphed: OrderedDict[bytes, Template] = OrderedDict()
+        self.synthesis = MorphSynthesis(model, self.template)
 
     # -- candidates -----------------------------------------------------------------------
 
@@ -342,16 +353,32 @@ class Locator:
         homography: np.ndarray,
         result: DecodeResult,
         unmorphed: Alignment | None = None,
+        bitwise: bool | None = None,
     ) -> PayloadCheck:
         """The morph check of a decoded payload (one frame's, or one fused over frames): a
         payload that passed the CRC keeps its ``ok`` only when its morph fits the photo better
-        than the unmorphed drawing (:meth:`fit_morph`); a failed CRC is not checked."""
+        than the unmorphed drawing (:meth:`fit_morph`); a failed CRC is not checked.
+
+        A payload that needed corrections (``bitwise`` None), or any when ``bitwise`` is True,
+        is then checked bit by bit (:class:`~deepmorph_detect.synthesis.MorphSynthesis`): the
+        photo may contradict at most :data:`~deepmorph_detect.synthesis.MAX_CONTRADICTED` of
+        its code bits. A CRC collision near the true payload differs from it in six code bits
+        or more; one correlation over the whole drawing passes such near misses about half
+        the time, the bits rarely. Readings without corrections skip it (about 50 ms).
+        """
         if not result.ok:
             return PayloadCheck(result, None, "not run")
-        fit = self.fit_morph(image, homography, result.payload, unmorphed)
-        if fit is not None and fit.confirms:
+        pyramid = image if isinstance(image, ImagePyramid) else ImagePyramid(to_gray(image))
+        fit = self.fit_morph(pyramid, homography, result.payload, unmorphed)
+        if fit is None or not fit.confirms:
+            return PayloadCheck(replace(result, ok=False), fit, "failed")
+        if not (result.corrected_bits > 0 if bitwise is None else bitwise):
             return PayloadCheck(result, fit, "passed")
-        return PayloadCheck(replace(result, ok=False), fit, "failed")
+        code = self.model.codec.encode(np.asarray(result.payload, dtype=np.uint8))
+        bits = self.synthesis.evidence(pyramid, fit.homography, code)
+        if bits.agrees:
+            return PayloadCheck(result, fit, "passed", bits)
+        return PayloadCheck(replace(result, ok=False), fit, "contradicted", bits)
 
     # -- the chain ------------------------------------------------------------------------
 
@@ -373,13 +400,13 @@ class Locator:
         gray, cam, pyramid = self._frame(image, camera)
         candidates = self.detector.detect(gray) if self.detector is not None else []
         source = "detector"
-        found = self._verify(pyramid, candidates)
+        found = self._verify(pyramid, candidates, gray)
         if not found:
             found = self._verify(pyramid, self._whole_frame(gray))
             source = "whole-frame"
         results = []
-        for cand, alignment in found:
-            results.append(self._decode(gray, pyramid, cand, alignment, cam, source, soft))
+        for cand, alignment, seen_in in found:
+            results.append(self._decode(gray, seen_in, cand, alignment, cam, source, soft))
         return results
 
     def track(
@@ -461,21 +488,47 @@ class Locator:
         centre, size = self._centre(H), float(np.linalg.norm(corners[2] - corners[0]))
         return any(np.linalg.norm(centre - self._centre(other)) < 0.3 * size for other in others)
 
-    def _verify(self, pyramid: ImagePyramid, candidates: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Any]]:
-        """Refined, verified candidates, duplicates (same drawing twice) removed."""
-        kept: list[tuple[dict[str, Any], Any]] = []
+    def _verify(
+        self, pyramid: ImagePyramid, candidates: list[dict[str, Any]], gray: np.ndarray | None = None
+    ) -> list[tuple[dict[str, Any], Alignment, ImagePyramid]]:
+        """Refined, verified candidates, duplicates (same drawing twice) removed; each with the
+        pyramid it was verified in (the photo, or with ``gray`` given, the photo with the light
+        divided out around a detector outline that did not align in the photo itself)."""
+        kept: list[tuple[dict[str, Any], Alignment, ImagePyramid]] = []
         for cand in candidates:
             H0 = cand.get("homography")
+            seen_in = pyramid
             if H0 is None:  # a detector's outline: its turn and size may be off, search wider
-                alignment = refine(
-                    pyramid, self._homography(cand["corners"]), self.template, orders=4, accept=self.min_correlation
-                )
+                start = self._homography(cand["corners"])
+                alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
+                if not self._accepts(alignment) and gray is not None:
+                    seen_in = self._in_flat_light(gray, cand["corners"])
+                    alignment = refine(seen_in, start, self.template, orders=4, accept=self.min_correlation)
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
                 alignment = refine(pyramid, H0, self.template)
-            if not self._accepts(alignment) or self._seen(alignment.homography, [a.homography for _, a in kept]):
+            if not self._accepts(alignment) or self._seen(alignment.homography, [a.homography for _, a, _ in kept]):
                 continue
-            kept.append((cand, alignment))
+            kept.append((cand, alignment, seen_in))
         return kept
+
+    def _in_flat_light(self, gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:
+        """The photo with shadows and light gradients divided out around a detector outline.
+
+        A shadow edge across a print is an edge the drawing does not have: ECC bends to it or
+        diverges. Of 10 prints in 400 medium scenes that the detector outlined but alignment
+        missed, 7 aligned once the light was divided out (``flatten_illumination``, sized to
+        the thickest ink feature at the outline's scale).
+        """
+        quad = np.asarray(corners, dtype=np.float64)
+        size = max(np.linalg.norm(quad[1] - quad[0]), np.linalg.norm(quad[2] - quad[1]), 1.0)
+        h, w = gray.shape
+        x0, y0 = np.clip(np.floor(quad.min(0) - 0.3 * size), 0, [w, h]).astype(int)
+        x1, y1 = np.clip(np.ceil(quad.max(0) + 0.3 * size), 0, [w, h]).astype(int)
+        flat = gray.copy()
+        if x1 - x0 >= 16 and y1 - y0 >= 16:
+            feature_px = self._ink_thickness * size / (self.model.width * RECTIFY_WIDTH_FACTOR)
+            flat[y0:y1, x0:x1] = flatten_illumination(gray[y0:y1, x0:x1], max(feature_px, 1.0))
+        return ImagePyramid(flat)
 
     def _centre(self, H: np.ndarray) -> np.ndarray:
         return project(H, self.frame_corners.mean(0, keepdims=True))[0]
@@ -525,6 +578,20 @@ class Locator:
                     break
         return out
 
+    def _read_by_synthesis(
+        self, pyramid: ImagePyramid, H: np.ndarray, readings: list[tuple[DecodeResult, np.ndarray]]
+    ) -> tuple[DecodeResult, np.ndarray]:
+        """The last look: the most confident reading's probabilities with the photo's own
+        evidence on each bit (:meth:`MorphSynthesis.read`), decoded with hard decisions.
+
+        Its payload, when one passes the CRC, is always checked bit by bit. Measured on 22
+        drawings found but not read in 250 hard scenes: 11 read, none wrong; 40 read drawings
+        given to it stayed right (``docs/detection.md``).
+        """
+        best = max(readings, key=lambda r: r[0].confidence)[1]
+        probs = self.synthesis.read(pyramid, H, best)
+        return self.model.codec.decode(probs, soft=False), probs
+
     def _second_looks(
         self, pyramid: ImagePyramid, H: np.ndarray, view: np.ndarray, readings: list[tuple[DecodeResult, np.ndarray]]
     ) -> Iterator[np.ndarray]:
@@ -558,15 +625,20 @@ class Locator:
             # point moves (no fixed elements); the better-verified reading wins.
             views.append(gray)
         readings = [r for r in (self._read(view, soft) for view in views) if r is not None]
+        synthesised = None
         if not any(r[0].ok for r in readings):
             readings += self._read_again(pyramid, H, views[0], readings)
+        if readings and not any(r[0].ok for r in readings):
+            synthesised = self._read_by_synthesis(pyramid, H, readings)
+            readings.append(synthesised)
         if not readings:
             probs = np.full(model.codec.spec.code_bits, 0.5, dtype=np.float32)
             readings.append((model.codec.decode(probs, soft=soft), probs))
         readings.sort(key=lambda r: (r[0].ok, r[0].confidence), reverse=True)
         checked, probs = PayloadCheck(readings[0][0], None, "not run"), readings[0][1]
         for reading, reading_probs in readings:  # ok readings first
-            attempt = self.check_payload(pyramid, H, reading, alignment)
+            bitwise = True if synthesised is not None and reading is synthesised[0] else None
+            attempt = self.check_payload(pyramid, H, reading, alignment, bitwise)
             if attempt.status == "not run":
                 break
             if attempt.status == "passed" or checked.status == "not run":
@@ -613,6 +685,7 @@ class Locator:
             keypoints=keypoints,
             source=source,
             morph=checked.fit,
+            bits=checked.bits,
             morph_check=checked.status,
         )
 

@@ -331,6 +331,30 @@ def test_a_shadow_across_the_print_is_read_at_the_second_look(
     assert not any(d.result.ok for dets in first_looks for d in dets)
 
 
+@pytest.mark.parametrize("seed", [21, 5])
+def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
+    model: DeepMorphModel, locator: Locator, seed: int
+) -> None:
+    """A shadow edge through the middle of a print (half of it 50 % darker): ECC in the photo
+    bends to the edge or diverges; with the light divided out around the detector's outline
+    the print is found, read and placed."""
+    scene = SceneMaker(model, severity="easy", seed=seed).make(drawings=1)
+    truth = scene.placements[0]
+    centre = truth.corners.mean(0)
+    h, w = scene.image.shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    for turn in (0.3, 1.2):
+        side = (x - centre[0]) * np.cos(turn) + (y - centre[1]) * np.sin(turn)
+        shade = 1 - 0.5 / (1 + np.exp(-side / 1.5))
+        photo = np.clip(scene.image * shade[..., None], 0, 255).astype(np.uint8)
+        gray = to_gray(photo)
+        assert locator.detector.detect(gray), "the detector outlines the print"
+        assert locator._verify(ImagePyramid(gray), locator.detector.detect(gray)) == []  # the photo alone: missed
+        (det,) = locator.locate(photo, camera=scene.camera)
+        assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
+        assert np.abs(det.corners - truth.corners).max() < 2.0
+
+
 def test_folded_or_mirrored_outlines_are_not_prints() -> None:
     from deepmorph_detect.locate import plausible_outline
 

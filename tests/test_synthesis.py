@@ -1,0 +1,143 @@
+"""Code bits read and checked by synthesis (deepmorph_detect.synthesis), on the bundled model,
+real resvg renders and simulated photos."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from deepmorph_core.api import BUNDLED_MODEL
+from deepmorph_core.cli import app
+from deepmorph_core.codec import PayloadCodec, random_payloads
+from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.render import render_svg
+from deepmorph_detect.locate import Locator
+from deepmorph_detect.refine import ImagePyramid
+from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.synthesis import MAX_CONTRADICTED
+
+runner = CliRunner()
+
+
+def _small_print(model: DeepMorphModel, payload: np.ndarray, width: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A blurred, noisy photo of a print ``width`` px wide, and its homography (SVG -> px)."""
+    page = np.ones((width * 2, width * 2), np.float32)
+    page[width // 2 : width // 2 + width, width // 2 : width // 2 + width] = render_svg(model.encode(payload), width)
+    page = cv2.GaussianBlur(page, (0, 0), 0.8) * 0.7 + 0.15
+    page += np.random.default_rng(seed).normal(0, 0.02, page.shape).astype(np.float32)
+    x, y, vw, _ = model.drawing.drawing.viewbox
+    s = width / vw
+    H = np.array([[s, 0, width / 2 - x * s], [0, s, width / 2 - y * s], [0, 0, 1]])
+    return np.clip(page, 0, 1), H
+
+
+def _near_payloads(payload: np.ndarray) -> list[np.ndarray]:
+    """Every payload one bit away: each has a valid CRC and a code word several bits away."""
+    out = []
+    for j in range(len(payload)):
+        near = payload.copy()
+        near[j] ^= 1
+        out.append(near)
+    return out
+
+
+def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_one(
+    model: DeepMorphModel, locator: Locator
+) -> None:
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(3))[0]
+    photo, H = _small_print(model, payload, 80, seed=1)
+    pyramid = ImagePyramid(photo)
+    true_code = model.codec.encode(payload)
+    said = locator.synthesis.evidence(pyramid, H, true_code)
+    assert said.contradicted == 0 and said.agrees and said.fit > 0.9
+    assert np.median(said.evidence) == pytest.approx(1.0, abs=0.3)  # +1: the photo shows the word's bit
+    for near in _near_payloads(payload)[:4]:
+        code = model.codec.encode(near)
+        differs = code != true_code
+        assert differs.sum() >= 4
+        fit = locator.fit_morph(pyramid, H, near)  # aligned to its own morph, as the check does
+        said = locator.synthesis.evidence(pyramid, fit.homography, code)
+        assert not said.agrees and said.contradicted > MAX_CONTRADICTED
+        # the bits seen flipped are mostly the ones that differ from the printed word
+        flipped = said.evidence < 0
+        assert flipped[differs].mean() >= 0.5 > flipped[~differs].mean() + 0.25
+
+
+def test_reading_by_synthesis_corrects_confident_misreadings(model: DeepMorphModel, locator: Locator) -> None:
+    """70 px prints whose CNN readings have 6 confidently wrong bits each (BCH corrects 1)."""
+    rng = np.random.default_rng(8)
+    read_whole, errors = 0, []
+    for payload in random_payloads(4, model.codec.spec.payload_bits, rng):
+        photo, H = _small_print(model, payload, 70, seed=int(payload.sum()))
+        code = model.codec.encode(payload)
+        probs = np.where(code == 1, 0.9, 0.1).astype(np.float32)
+        wrong = rng.choice(len(code), 6, replace=False)
+        probs[wrong] = np.where(code[wrong] == 1, 0.03, 0.97)
+        assert not model.codec.decode(probs, soft=False).ok
+        read = locator.synthesis.read(ImagePyramid(photo), H, probs)
+        errors.append(int(((read > 0.5) != (code == 1)).sum()))
+        result = model.codec.decode(read, soft=False)
+        assert not result.ok or np.array_equal(result.payload, payload)  # never another payload
+        read_whole += result.ok
+    assert read_whole >= 3 and np.mean(errors) <= 1.5, errors
+
+
+def test_the_locator_reads_by_synthesis_when_no_view_passes_the_crc(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene = SceneMaker(model, severity="easy", seed=21).make(drawings=1)
+    truth = scene.placements[0]
+    code = model.codec.encode(truth.payload)
+    wrong = np.random.default_rng(0).choice(len(code), 5, replace=False)
+    misread = np.where(code == 1, 0.95, 0.05).astype(np.float32)
+    misread[wrong] = np.where(code[wrong] == 1, 0.02, 0.98)
+    # every CNN reading, first and second looks, has the same five confident errors
+    monkeypatch.setattr(Locator, "_read", lambda self, view, soft: (model.codec.decode(misread, soft=False), misread))
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
+    assert det.morph_check == "passed" and det.bits is not None and det.bits.agrees  # always checked bit by bit
+    assert det.to_json()["bits_contradicted"] == det.bits.contradicted
+
+
+def test_a_near_miss_that_passes_the_crc_and_the_morph_check_is_contradicted(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A CRC collision one payload bit from the truth, after corrections: one correlation over
+    the whole drawing often cannot tell its morph from the true one; the bits can."""
+    scene = SceneMaker(model, severity="medium", seed=4).make(drawings=1)
+    truth = scene.placements[0]
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    assert det.result.ok and np.array_equal(det.result.payload, truth.payload) and det.morph_check == "passed"
+    pyramid = ImagePyramid(cv2.cvtColor(scene.image, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255)
+    passing = [
+        p for p in _near_payloads(truth.payload) if (f := locator.fit_morph(pyramid, det.homography, p)) and f.confirms
+    ]
+    assert passing, "no near miss passes the whole-drawing morph check on this print"
+    near = passing[0]
+    real_decode = model.codec.decode
+
+    def collide(self_or_probs, *args, **kw):  # works as a bound or an unbound codec method
+        probs = args[0] if isinstance(self_or_probs, PayloadCodec) else self_or_probs
+        return replace(real_decode(probs, soft=False), payload=near, ok=True, corrected_bits=2)
+
+    monkeypatch.setattr(model.codec, "decode", collide)
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    data = det.to_json()
+    assert not det.result.ok and data["ok"] is False and data["morph_check"] == "contradicted"
+    assert data["bits_contradicted"] > MAX_CONTRADICTED and data["pose_aligned_to"] == "unmorphed drawing"
+    # the true payload, read with corrections, passes the same check
+    monkeypatch.setattr(
+        model.codec, "decode", lambda probs, soft=True: replace(real_decode(probs, soft=soft), corrected_bits=1)
+    )
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    assert det.result.ok and det.morph_check == "passed" and det.bits is not None and det.bits.agrees
+    # and the command line says why a payload is not verified
+    cv2.imwrite(str(tmp_path / "photo.png"), scene.image)
+    monkeypatch.setattr(PayloadCodec, "decode", collide)
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "photo.png")])
+    assert res.exit_code == 0 and "code bits flipped" in " ".join(res.output.split()), res.output
