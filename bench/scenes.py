@@ -91,18 +91,23 @@ def main() -> None:
         )  # fmt: skip
     print(table(["severity", "scenes", "recall", "precision", "payload ok", "wrong ok", "rot° ours", "rot° ArUco",
                  "trans ours", "trans ArUco", "corner px ours", "corner px ArUco", "ArUco found"], rows))  # fmt: skip
-    speed = [[sev, r["speed_ms"]["deepmorph_locate_decode_median"], r["speed_ms"]["aruco_detect_median"],
+    speed = [[sev, r["speed_ms"]["deepmorph_locate_decode_median"], r["speed_ms"]["deepmorph_locate_decode_mean"],
+              r["speed_ms"]["aruco_detect_median"],
               r["speed_ms"]["qr_detect_and_decode_median"],
               round(r["speed_ms"]["deepmorph_locate_decode_median"] / r["speed_ms"]["qr_detect_and_decode_median"], 2)]
              for sev, r in reports.items()]  # fmt: skip
     print()
     print(
-        table(["severity", f"ours ms ({args.threads} thread)", "ArUco ms", "QR detect+decode ms", "ours / QR"], speed)
+        table(["severity", f"ours ms median ({args.threads} thread)", "ours ms mean", "ArUco ms", "QR detect+decode ms",
+               "ours median / QR"], speed)
     )
     checks = [[sev] + [f"{r['morph_check'][k]['rejected']}/{r['morph_check'][k]['n']}"
-                       for k in ("right", "random", "one_bit_off")] for sev, r in reports.items()]  # fmt: skip
+                       for k in ("right", "random", "one_bit_off")]
+              + [f"{r['morph_check'][k]['rejected_with_bits']}/{r['morph_check'][k]['n']}"
+                 for k in ("right", "random", "one_bit_off")] for sev, r in reports.items()]  # fmt: skip
     print()
-    print(table(["morph check rejects", "right payload", "random payload", "one bit off"], checks))
+    print(table(["checks reject", "right (morph)", "random (morph)", "one bit off (morph)",
+                 "right (morph + bits)", "random (morph + bits)", "one bit off (morph + bits)"], checks))  # fmt: skip
     print(f"\nnegatives: {neg['images']} scenes without the drawing -> {neg['detections']} detections, "
           f"{neg['wrong_ok']} wrong payloads reported ok")  # fmt: skip
     if args.sequences:

@@ -6,16 +6,19 @@
    when it proposes none, the whole frame is tried as one candidate framed by its ink (a scan
    or a cropped photo in which the drawing fills the frame);
 2. :func:`~deepmorph_detect.refine.refine` aligns each candidate to the unmorphed drawing to
-   sub-pixel accuracy; candidates that do not correlate with the drawing are dropped, so a
-   photo without the drawing gives an empty list, not a guess;
+   sub-pixel accuracy (around a detector outline, in flat light when a shadow defeats it);
+   candidates that do not correlate with the drawing are dropped, so a photo without the
+   drawing gives an empty list, not a guess;
 3. the drawing is rectified (perspective removed) and decoded by the model's decoder;
 4. a payload that passes the integrity check is checked once more, by synthesis: the drawing
    morphed with that payload is rendered and aligned to the photo, and must fit it better than
    the unmorphed drawing does (:meth:`Locator.fit_morph`), else its ``ok`` is withdrawn. A
    payload unrelated to the print (what a CRC collision on clutter gives) fails this almost
-   always; a near miss next to the true payload fails it only sometimes. The alignment to the
-   decoded morph is also exact where the unmorphed one absorbed the morph, so the pose comes
-   from it;
+   always; a near miss next to the true payload fails it only sometimes. A payload read with
+   corrections is then checked bit by bit (:mod:`deepmorph_detect.synthesis`), which catches
+   near misses. The alignment to the decoded morph is also exact where the unmorphed one
+   absorbed the morph, so the pose comes from it. A drawing whose readings all fail gets more
+   looks: second looks, then a reading by synthesis;
 5. the homography gives keypoints and, through PnP, the camera pose.
 """
 

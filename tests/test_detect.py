@@ -306,6 +306,9 @@ def test_morph_check_rates_on_a_scene_folder(model: DeepMorphModel, tmp_path: Pa
     assert rates["right"]["n"] >= 5
     assert rates["right"]["rejected"] == 0 and rates["random"]["rejected"] >= rates["random"]["n"] - 1
     assert rates["right"]["gain_median"] > rates["one_bit_off"]["gain_median"] > rates["random"]["gain_median"]
+    # with the per-bit check, near misses are caught too, and right payloads still pass
+    assert rates["right"]["rejected_with_bits"] == 0
+    assert rates["one_bit_off"]["rejected_with_bits"] >= max(rates["one_bit_off"]["rejected"], rates["right"]["n"] - 1)
 
 
 def test_a_shadow_across_the_print_is_read_at_the_second_look(
