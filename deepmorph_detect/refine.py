@@ -31,7 +31,10 @@ REFIT_ITERATIONS = 5  # refine_at: one level, from an alignment that is already 
 ECC_EPS = 1e-5  # ECC stops early when the correlation gains less than this in one iteration
 ORDER_MARGIN = 0.15  # a corner order this far behind the best in plain correlation is not tried
 SWEEP_TURNS = 24  # outline_sweep: turns of the detector's outline in 15-degree steps ...
-SWEEP_SCALES = (0.85, 1.0, 1.15)  # ... each at these scales
+# ... each at these scales. The detector outlines some prints (cut by a shadow) at about 0.6x
+# their size; up to 1.85x, 400 scenes each side by side found 1 more print at medium and read 2
+# more at hard, with no detection on 1000 scenes without the drawing and under 1 ms more there
+SWEEP_SCALES = (0.85, 1.0, 1.15, 1.35, 1.6, 1.85)
 SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain correlation)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
 
