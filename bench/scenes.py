@@ -78,8 +78,11 @@ def main() -> None:
         fusion["fused_ok"] += any(e["ok"] and e["payload"]["bits"] == right for e in fused)
         fusion["fused_wrong_ok"] += sum(e["ok"] and e["payload"]["bits"] != right for e in fused)
 
-    tracking = [tracking_rates(model, sev, args.tracking, seed=args.seed + 3000) for sev in ("medium", "hard")]
-    tracking = tracking if args.tracking else []
+    tracking = (
+        [tracking_rates(model, sev, args.tracking, seed=args.seed + 3000) for sev in ("medium", "hard")]
+        if args.tracking
+        else []
+    )
 
     rows = []
     for sev, r in reports.items():

@@ -237,10 +237,11 @@ def morph_check_rates(model: DeepMorphModel, folder: Path, seed: int = 0) -> dic
             near[rng.integers(len(near))] ^= 1
             random = rng.integers(0, 2, len(p.payload)).astype(np.uint8)
             for name, payload in (("right", p.payload), ("random", random), ("one_bit_off", near)):
-                fit = locator.fit_morph(image, det.homography, payload)
-                gains[name].append(np.nan if fit is None else fit.gain)
+                # as a payload read with corrections: the morph check (its fit and gain), then the bits
                 read = DecodeResult(payload, ok=True, corrected_bits=1, confidence=1.0)
-                with_bits[name] += not locator.check_payload(image, det.homography, read, bitwise=True).result.ok
+                checked = locator.check_payload(image, det.homography, read, bitwise=True)
+                gains[name].append(np.nan if checked.fit is None else checked.fit.gain)
+                with_bits[name] += not checked.result.ok
     out: dict[str, Any] = {}
     for name, values in gains.items():
         v = np.asarray(values, dtype=np.float64)

@@ -41,7 +41,7 @@ from deepmorph_core.imaging import align_to_frame, flatten_illumination, ink_mas
 from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, normalise_input
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine, refine_at, warp_to_template
-from deepmorph_detect.synthesis import BitEvidence, MorphSynthesis
+from deepmorph_detect.synthesis import BitEvidence, MorphSynthesis, morph_template
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
@@ -310,8 +310,7 @@ class Locator:
         key = code.tobytes()
         template = self._morphed.get(key)
         if template is None:
-            values = self.model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-            template = Template.from_svg(self.model.drawing.to_svg(values), self.viewbox, (MORPH_WIDTH,))
+            template = morph_template(self.model, self.viewbox, code, MORPH_WIDTH)
             self._morphed[key] = template
             if len(self._morphed) > MORPH_CACHE:
                 self._morphed.popitem(last=False)

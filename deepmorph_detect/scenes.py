@@ -300,8 +300,7 @@ class SceneMaker:
             else:  # truth on the unit square
                 truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])
             corners_src = _frame_corners(kind, self.viewbox, art.shape)
-            pts = np.column_stack([corners_src, np.ones(4)]) @ truth.T
-            placements.append(Placement(kind, rvec, tvec, truth, pts[:, :2] / pts[:, 2:3], payload, label))
+            placements.append(Placement(kind, rvec, tvec, truth, project(truth, corners_src), payload, label))
         warps = [np.eye(3)]
         for _ in range(1, max(1, frames)):
             warps.append(_shake(rng, self.size, shake_px) @ warps[-1] if shake_px > 0 else warps[-1])

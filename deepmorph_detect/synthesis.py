@@ -40,7 +40,7 @@ import torch
 
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
-from deepmorph_detect.refine import ImagePyramid, Template, refine_at, warp_to_template
+from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (96 read fewer small prints, slower)
 BLUR_SIGMAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)  # print blur tried, in pixels at SYNTH_WIDTH
@@ -146,7 +146,7 @@ class MorphSynthesis:
         renders = self.variants(code)
         if renders.shape[1:] != photo.shape:
             renders = np.stack([cv2.resize(r, photo.shape[::-1], interpolation=cv2.INTER_AREA) for r in renders])
-        fit, sigma = max((_correlation(cv2.GaussianBlur(renders[0], (0, 0), s), photo), s) for s in BLUR_SIGMAS)
+        fit, sigma = max((correlation(cv2.GaussianBlur(renders[0], (0, 0), s), photo), s) for s in BLUR_SIGMAS)
         blurred = np.stack([cv2.GaussianBlur(r, (0, 0), sigma) for r in renders]).reshape(len(renders), -1)
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
@@ -181,7 +181,9 @@ class MorphSynthesis:
         cnn = np.log(p / (1 - p))
         bits = (p > 0.5).astype(np.uint8)
         soft = p
-        aligned = refine_at(pyramid, homography, self._soft_template(p), max(self.template.images), ALIGN_ITERATIONS)
+        width = max(self.template.images)
+        soft_morph = morph_template(self.model, self.template.viewbox, p, width)
+        aligned = refine_at(pyramid, homography, soft_morph, width, ALIGN_ITERATIONS)
         H = homography if aligned is None else aligned.homography
         for _ in range(READ_ROUNDS):
             said = self.evidence(pyramid, H, bits).evidence
@@ -195,16 +197,14 @@ class MorphSynthesis:
             bits = new
         return soft.astype(np.float32)
 
-    def _soft_template(self, soft_bits: np.ndarray) -> Template:
-        """The drawing morphed by soft code bits, rendered by the real renderer."""
-        values = self.model.morph_values(torch.from_numpy(np.asarray(soft_bits, dtype=np.float32))[None])[0]
-        return Template.from_svg(self.model.drawing.to_svg(values), self.template.viewbox, (max(self.template.images),))
+
+def morph_template(
+    model: DeepMorphModel, viewbox: tuple[float, float, float, float], code_bits: np.ndarray, width: int
+) -> Template:
+    """The drawing morphed by ``(N_b,)`` code bits, rendered by the real renderer at ``width``.
+    Soft bits (between 0 and 1) give a morph between the two values of each uncertain bit."""
+    values = model.morph_values(torch.from_numpy(np.asarray(code_bits, dtype=np.float32))[None])[0]
+    return Template.from_svg(model.drawing.to_svg(values), viewbox, (width,))
 
 
-def _correlation(a: np.ndarray, b: np.ndarray) -> float:
-    a = a.ravel() - a.mean()
-    b = b.ravel() - b.mean()
-    return float(a @ b / max(np.sqrt((a @ a) * (b @ b)), 1e-12))
-
-
-__all__ = ["BLUR_SIGMAS", "MAX_CONTRADICTED", "SYNTH_WIDTH", "BitEvidence", "MorphSynthesis"]
+__all__ = ["BLUR_SIGMAS", "MAX_CONTRADICTED", "SYNTH_WIDTH", "BitEvidence", "MorphSynthesis", "morph_template"]

@@ -15,6 +15,7 @@ from deepmorph_core.api import BUNDLED_MODEL
 from deepmorph_core.cli import app
 from deepmorph_core.codec import PayloadCodec, random_payloads
 from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.imaging import to_gray
 from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.refine import ImagePyramid
@@ -113,7 +114,7 @@ def test_a_near_miss_that_passes_the_crc_and_the_morph_check_is_contradicted(
     truth = scene.placements[0]
     (det,) = locator.locate(scene.image, camera=scene.camera)
     assert det.result.ok and np.array_equal(det.result.payload, truth.payload) and det.morph_check == "passed"
-    pyramid = ImagePyramid(cv2.cvtColor(scene.image, cv2.COLOR_BGR2GRAY).astype(np.float32) / 255)
+    pyramid = ImagePyramid(to_gray(scene.image))
     passing = [
         p for p in _near_payloads(truth.payload) if (f := locator.fit_morph(pyramid, det.homography, p)) and f.confirms
     ]
