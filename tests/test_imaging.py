@@ -9,7 +9,15 @@ import torch
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.capture import simulate_photo
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import align_to_frame, canonicalize, flatten_illumination, read_image, render_moments
+from deepmorph_core.imaging import (
+    align_to_frame,
+    canonicalize,
+    flatten_illumination,
+    ink_moments,
+    mask_moments,
+    read_image,
+    render_moments,
+)
 from deepmorph_core.render import render_svg, save_gray
 
 
@@ -25,6 +33,16 @@ def test_canonical_frame_is_a_fixed_point(ghost) -> None:
     target = render_moments(img)[0]
     framed = canonicalize(img, render_moments(img), target, (96, 96))
     assert (framed - img).abs().mean() < 0.01
+
+
+def test_one_mask_moments_match_the_batched_ones(ghost) -> None:
+    """Decoding frames a photo by OpenCV's moments, training by the batched torch ones: the
+    same numbers, for the drawing's ink, for speckle and for an empty mask."""
+    _, base = ghost
+    rng = np.random.default_rng(3)
+    for mask in (base < 0.5, rng.random((70, 130)) < 0.1, np.zeros((40, 50), bool)):
+        expected = mask_moments(torch.from_numpy(mask)[None])[0].numpy()
+        np.testing.assert_allclose(ink_moments(mask), expected, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("width, pad, tol", [(96, 0, 0.03), (300, 40, 0.03), (57, 5, 0.06)])
