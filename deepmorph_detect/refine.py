@@ -132,18 +132,19 @@ def _ecc_step(
     iterations: int,
     smooth: int,
     crop: np.ndarray | None = None,
-    from_afar: bool = False,
+    wide_basin: bool = False,
 ) -> tuple[np.ndarray, float] | None:
     """One ECC solve at one template width: the improved homography and its correlation
     (``crop``: the photo already warped through ``H`` at ``width``, when the caller has it).
 
-    ``from_afar`` (the coarsest level, from a detector's rough outline) solves with OpenCV's
-    forward-additive ECC, which has the wider basin; every other solve starts close and takes
-    the inverse-compositional form (:mod:`~deepmorph_detect.icalign`), about 3x faster.
+    Solves start close and take the inverse-compositional form
+    (:mod:`~deepmorph_detect.icalign`), about 3x faster, unless ``wide_basin``: then OpenCV's
+    forward-additive ECC, whose basin is wider (the coarsest level, from a detector's rough
+    outline).
     """
     if crop is None:
         crop = warp_to_template(pyramid, H, template, width)
-    if from_afar:
+    if wide_basin:
         W = np.eye(3, dtype=np.float32)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, ECC_EPS)
         try:
@@ -168,10 +169,12 @@ def refine_at(
     template: Template,
     width: int,
     iterations: int = REFIT_ITERATIONS,
+    wide_basin: bool = False,
 ) -> Alignment | None:
     """One ECC solve against ``template`` at ``width`` (which it must hold), from ``homography``;
-    ``None`` when ECC diverges."""
-    step = _ecc_step(pyramid, np.asarray(homography, np.float64), template, width, iterations, 3)
+    ``None`` when ECC diverges. ``wide_basin``: by OpenCV's ECC (:func:`_ecc_step`)."""
+    H = np.asarray(homography, np.float64)
+    step = _ecc_step(pyramid, H, template, width, iterations, 3, wide_basin=wide_basin)
     return None if step is None else Alignment(*step, width)
 
 
@@ -250,7 +253,7 @@ def refine(
     # the best two orders by plain correlation hold the right one almost always; ECC decides
     # between them at the coarsest level unless the best is ahead by a clear margin
     close = [r for r in scored[:2] if scored[0][0] - r[0] < ORDER_MARGIN]
-    coarse = [_ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, from_afar=True) for _, H, crop in close]
+    coarse = [_ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True) for _, H, crop in close]
     chosen = max(range(len(coarse)), key=lambda i: -1.0 if coarse[i] is None else coarse[i][1])
     best = None if coarse[chosen] is None else _finish(pyramid, coarse[chosen], template, levels, its)
 
@@ -272,7 +275,7 @@ def refine(
         if i < len(coarse):
             step = coarse[i]
         else:
-            step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, from_afar=True)
+            step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
         return best
@@ -281,7 +284,7 @@ def refine(
     for start, H, crop in swept[:SWEEP_TRIES]:
         if start < min_start:
             break
-        step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, from_afar=True)
+        step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     return best if good(best) else quick
 

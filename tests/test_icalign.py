@@ -76,3 +76,43 @@ def test_never_ends_worse_than_it_starts(template: np.ndarray) -> None:
 def test_a_negative_does_not_align(template: np.ndarray) -> None:
     """White ink on black paper anti-correlates: the solve breaks down instead of fitting it."""
     assert InverseECC(template, 3).align(1.0 - _photo(template, _known_warp()), 6, 1e-5) is None
+
+
+@pytest.mark.parametrize("wide_basin", [False, True])
+def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
+    wide_basin: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A refit from a start a pixel off solves by inverse composition, or by OpenCV's ECC
+    when asked for its wider basin; both land on the print, 80 px (enlarged to the 128 px
+    template) or 256 px wide."""
+    import deepmorph_detect.refine as refine_module
+    from deepmorph_detect.refine import ImagePyramid, Template, refine_at
+
+    md = MorphableDrawing.load(BUNDLED_DRAWING)
+    svg = md.to_svg(md.neutral_values()[0])
+    vx, vy, vw, vh = md.drawing.viewbox
+    template = Template.from_svg(svg, md.drawing.viewbox)
+    calls = {"inverse": 0, "opencv": 0}
+    real_align, real_ecc = InverseECC.align, cv2.findTransformECC
+
+    def spy_align(self, *args, **kwargs):
+        calls["inverse"] += 1
+        return real_align(self, *args, **kwargs)
+
+    def spy_ecc(*args, **kwargs):
+        calls["opencv"] += 1
+        return real_ecc(*args, **kwargs)
+
+    monkeypatch.setattr(InverseECC, "align", spy_align)
+    monkeypatch.setattr(refine_module.cv2, "findTransformECC", spy_ecc)
+    corners = np.array([[vx, vy, 1], [vx + vw, vy, 1], [vx + vw, vy + vh, 1], [vx, vy + vh, 1]])
+    for print_px in (80, 256):
+        photo = np.pad(render_svg(svg, print_px), 40, constant_values=1.0)
+        s = print_px / vw  # photo px per SVG unit
+        truth = np.array([[s, 0, 40 - s * vx], [0, s, 40 - s * vy], [0, 0, 1.0]])
+        start = truth @ np.array([[1.01, 0.01, 0.8], [-0.01, 0.99, -0.6], [0, 0, 1.0]])
+        found = refine_at(ImagePyramid(photo), start, template, 128, 20, wide_basin=wide_basin)
+        got, want = corners @ found.homography.T, corners @ truth.T
+        err = np.abs(got[:, :2] / got[:, 2:] - want[:, :2] / want[:, 2:]).max()
+        assert found.correlation > 0.95 and err < 0.3 * s, (print_px, found.correlation, err)
+    assert calls == ({"inverse": 0, "opencv": 2} if wide_basin else {"inverse": 2, "opencv": 0})
