@@ -1,10 +1,12 @@
 """Sub-pixel alignment of a detected drawing, and its verification.
 
 The detector's quadrilateral is good to a few pixels. Refinement aligns the photo to the
-unmorphed drawing itself with OpenCV's ECC (enhanced correlation coefficient) maximisation
-over a full homography, coarse to fine. Every ink pixel of the drawing acts as a keypoint,
-so no point has to be singled out, and the correlation it reaches doubles as a check that
-the thing found really is this drawing (another icon, a marker or clutter does not correlate).
+unmorphed drawing itself by ECC (enhanced correlation coefficient) maximisation over a full
+homography, coarse to fine: OpenCV's solver from the detector's rough outline, then our
+inverse-compositional one (:mod:`~deepmorph_detect.icalign`) for the finer solves. Every ink
+pixel of the drawing acts as a keypoint, so no point has to be singled out, and the
+correlation it reaches doubles as a check that the thing found really is this drawing
+(another icon, a marker or clutter does not correlate).
 A morph moves points by at most a few percent, so the unmorphed drawing is a faithful enough
 template to find, verify and decode the drawing. It is not faithful enough for the pose: the
 alignment absorbs part of the morph (about 2 px of corner error). Once the payload is read, the
