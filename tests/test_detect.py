@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -30,7 +31,7 @@ from deepmorph_detect.camera import (
 )
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.refine import ImagePyramid, refine
-from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.scenes import Placement, SceneMaker
 
 runner = CliRunner()
 
@@ -371,21 +372,30 @@ def test_folded_or_mirrored_outlines_are_not_prints() -> None:
     assert not plausible_outline(folded, frame)
 
 
+def _loose_outlines(
+    model: DeepMorphModel, locator: Locator, degrees: float, scale: float, n: int = 4
+) -> Iterator[tuple[Placement, ImagePyramid, np.ndarray]]:
+    """``n`` medium scenes of one print, each with its placement, photo pyramid, and a start
+    homography whose outline is the print's frame turned by ``degrees`` and scaled by
+    ``scale`` about its centre (a detector's loose outline)."""
+    maker = SceneMaker(model, severity="medium", seed=8)
+    a = np.deg2rad(degrees)
+    turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * scale
+    for _ in range(n):
+        scene = maker.make(drawings=1)
+        truth = scene.placements[0]
+        centre = truth.corners.mean(0)
+        start = locator._homography((truth.corners - centre) @ turn.T + centre)
+        yield truth, ImagePyramid(to_gray(scene.image)), start
+
+
 def test_an_outline_no_corner_order_fits_still_gets_the_wider_search(model: DeepMorphModel, locator: Locator) -> None:
     """The detector sometimes outlines only the ink, turned, at 0.6x the drawing's frame: no
     corner order of that outline correlates at all. Such a start is dropped at once when no
     bar is given (clutter costs no iterations), but a detector's candidate (``accept``) still
     gets the turned and scaled outlines, which find the print (4 of 500 medium prints were
     lost before)."""
-    maker = SceneMaker(model, severity="medium", seed=8)
-    for _ in range(4):
-        scene = maker.make(drawings=1)
-        truth = scene.placements[0]
-        centre = truth.corners.mean(0)
-        a = np.deg2rad(40)
-        turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 0.6
-        pyramid = ImagePyramid(to_gray(scene.image))
-        start = locator._homography((truth.corners - centre) @ turn.T + centre)
+    for truth, pyramid, start in _loose_outlines(model, locator, 40, 0.6):
         assert refine(pyramid, start, locator.template, orders=4) is None
         found = refine(pyramid, start, locator.template, orders=4, accept=locator.min_correlation)
         assert found is not None and found.correlation >= locator.min_correlation
@@ -401,17 +411,8 @@ def test_a_loose_outline_is_found_by_the_wider_search(
     (every order, then turned and scaled outlines) finds the drawing."""
     from deepmorph_detect.refine import outline_sweep
 
-    maker = SceneMaker(model, severity="medium", seed=8)
     wide = quick = 0
-    for _ in range(4):
-        scene = maker.make(drawings=1)
-        truth = scene.placements[0]
-        centre = truth.corners.mean(0)
-        a = np.deg2rad(35)
-        turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 1.15
-        loose = (truth.corners - centre) @ turn.T + centre
-        pyramid = ImagePyramid(to_gray(scene.image))
-        start = locator._homography(loose)
+    for truth, pyramid, start in _loose_outlines(model, locator, 35, 1.15):
 
         def err(al, truth=truth) -> float:
             if al is None:
