@@ -223,7 +223,13 @@ class Located(Detection):
         """Whether the payload is read and confirmed on the print: ``ok``, and its morph check
         passed in this frame or in an earlier one of its track (what :meth:`Locator.track`
         follows)."""
-        return bool(self.result.ok) and self.morph_check in ("passed", "tracked")
+        return bool(self.result.ok) and self.aligned_to_morph
+
+    @property
+    def aligned_to_morph(self) -> bool:
+        """Whether the homography (and so the pose) comes from the alignment to the decoded
+        payload's morph: its check passed in this frame, or it was followed on its track."""
+        return self.morph_check in ("passed", "tracked")
 
     def to_json(self) -> dict[str, Any]:
         out = super().to_json()
@@ -235,8 +241,7 @@ class Located(Detection):
             out["morph_fit"] = round(self.morph.gain, 4)
         if self.bits is not None:
             out["bits_contradicted"] = self.bits.contradicted
-        aligned_to_morph = self.morph_check in ("passed", "tracked")
-        out["pose_aligned_to"] = "decoded morph" if aligned_to_morph else "unmorphed drawing"
+        out["pose_aligned_to"] = "decoded morph" if self.aligned_to_morph else "unmorphed drawing"
         if self.corners is not None:
             out["corners"] = np.round(self.corners, 2).tolist()
         if self.homography is not None:

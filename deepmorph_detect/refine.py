@@ -250,6 +250,11 @@ def refine(
     levels = sorted(template.images)
     its = iterations or (COARSE_ITERATIONS,) + (FINE_ITERATIONS,) * (len(levels) - 1)
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
+
+    def from_outline(H: np.ndarray, crop: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """The coarsest level's solve from a start that may be several pixels off."""
+        return _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True)
+
     scored = _plain_scores(pyramid, starts, template, levels[0])
     coarse: list[tuple[np.ndarray, float] | None] = []
     chosen, best = -1, None
@@ -257,7 +262,7 @@ def refine(
         # the best two orders by plain correlation hold the right one almost always; ECC decides
         # between them at the coarsest level unless the best is ahead by a clear margin
         close = [r for r in scored[:2] if scored[0][0] - r[0] < ORDER_MARGIN]
-        coarse = [_ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True) for _, H, crop in close]
+        coarse = [from_outline(H, crop) for _, H, crop in close]
         chosen = max(range(len(coarse)), key=lambda i: -1.0 if coarse[i] is None else coarse[i][1])
         best = None if coarse[chosen] is None else _finish(pyramid, coarse[chosen], template, levels, its)
     elif accept is None:
@@ -281,10 +286,7 @@ def refine(
     for i, (start, H, crop) in enumerate(scored):
         if i == chosen or start < min_start:
             continue
-        if i < len(coarse):
-            step = coarse[i]
-        else:
-            step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True)
+        step = coarse[i] if i < len(coarse) else from_outline(H, crop)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
         return best
@@ -293,7 +295,7 @@ def refine(
     for start, H, crop in swept[:SWEEP_TRIES]:
         if start < min_start:
             break
-        step = _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop, wide_basin=True)
+        step = from_outline(H, crop)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     return best if good(best) else quick
 

@@ -8,6 +8,7 @@ import pytest
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.render import render_svg
+from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.icalign import InverseECC
 
 WIDTH = 128
@@ -27,9 +28,9 @@ def _photo(template: np.ndarray, warp: np.ndarray, gain: float = 1.0, offset: fl
 
 
 def _corners(warp: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """The image's corners (``shape`` = ``(h, w)``) carried through ``warp``."""
     h, w = shape
-    pts = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], dtype=np.float64) @ warp.T
-    return pts[:, :2] / pts[:, 2:]
+    return project(warp, np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64))
 
 
 def _known_warp() -> np.ndarray:
@@ -90,7 +91,7 @@ def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
 
     md = MorphableDrawing.load(BUNDLED_DRAWING)
     svg = md.to_svg(md.neutral_values()[0])
-    vx, vy, vw, vh = md.drawing.viewbox
+    vx, vy, vw, _ = md.drawing.viewbox
     template = Template.from_svg(svg, md.drawing.viewbox)
     calls = {"inverse": 0, "opencv": 0}
     real_align, real_ecc = InverseECC.align, cv2.findTransformECC
@@ -105,14 +106,13 @@ def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
 
     monkeypatch.setattr(InverseECC, "align", spy_align)
     monkeypatch.setattr(refine_module.cv2, "findTransformECC", spy_ecc)
-    corners = np.array([[vx, vy, 1], [vx + vw, vy, 1], [vx + vw, vy + vh, 1], [vx, vy + vh, 1]])
+    corners = viewbox_corners(md.drawing.viewbox)
     for print_px in (80, 256):
         photo = np.pad(render_svg(svg, print_px), 40, constant_values=1.0)
         s = print_px / vw  # photo px per SVG unit
         truth = np.array([[s, 0, 40 - s * vx], [0, s, 40 - s * vy], [0, 0, 1.0]])
         start = truth @ np.array([[1.01, 0.01, 0.8], [-0.01, 0.99, -0.6], [0, 0, 1.0]])
         found = refine_at(ImagePyramid(photo), start, template, 128, 20, wide_basin=wide_basin)
-        got, want = corners @ found.homography.T, corners @ truth.T
-        err = np.abs(got[:, :2] / got[:, 2:] - want[:, :2] / want[:, 2:]).max()
+        err = np.abs(project(found.homography, corners) - project(truth, corners)).max()
         assert found.correlation > 0.95 and err < 0.3 * s, (print_px, found.correlation, err)
     assert calls == ({"inverse": 0, "opencv": 2} if wide_basin else {"inverse": 2, "opencv": 0})
