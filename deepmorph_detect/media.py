@@ -6,6 +6,7 @@ frames, read by OpenCV's bundled FFmpeg) is one sequence whose frames are fused 
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,6 +18,10 @@ from deepmorph_core.errors import DeepMorphError
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm"}
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv"}
 MAX_FRAMES = 100_000
+
+# FFmpeg's own log lines ("moov atom not found", ...) would print before our one clear error for a
+# corrupt video; OpenCV reads this when it first opens a video. A user's own setting is kept.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 
 def is_video(path: Path) -> bool:

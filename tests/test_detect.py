@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -282,6 +285,24 @@ def test_cli_bad_inputs_are_one_clear_error(tmp_path: Path) -> None:
         res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), *args])
         assert res.exit_code == 1, res.output
         assert message in res.output and "Traceback" not in res.output
+
+
+def test_a_corrupt_video_prints_our_error_and_nothing_of_ffmpegs(tmp_path: Path) -> None:
+    # FFmpeg logs from native code, past Python's streams: only a real process shows it
+    clip = tmp_path / "clip.mp4"
+    clip.write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"\x00" * 64)
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    run = subprocess.run(
+        [sys.executable, "-c", "from deepmorph_core.cli import main; main()", "decode", str(BUNDLED_MODEL), str(clip)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert run.returncode == 1
+    assert run.stdout.strip() == "" and run.stderr.strip().splitlines() == [
+        f"error: {clip}: not a video OpenCV can read (corrupt, or an unsupported codec)"
+    ]
 
 
 def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
