@@ -4,12 +4,13 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli import JsonOpt, ModelArg, SeedOpt, app, friendly, out, progress_bar
+from deepmorph_core.cli import JsonOpt, ModelArg, SeedOpt, app, err, friendly, out, progress_bar
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 
@@ -26,6 +27,20 @@ def _size(text: str) -> tuple[int, int]:
     if not (64 <= w <= 8192 and 64 <= h <= 8192):
         raise DeepMorphError(f"--size {text!r}: width and height must be 64..8192 pixels")
     return w, h
+
+
+def _readable_frames(files: list[Path], skipped: list[dict[str, str]]) -> Iterator[tuple[str, Any]]:
+    """``(name, BGR image)`` of a folder's frames in order. A file that is not a readable image
+    (truncated while copying, say) is skipped with a warning and listed in ``skipped``: the
+    frames before and after it still count, and the work done on them is not thrown away."""
+    from deepmorph_core.imaging import read_image_bgr
+
+    for path in files:
+        try:
+            yield path.name, read_image_bgr(path)
+        except DeepMorphError as exc:
+            err.print(f"warning: skipped frame {exc}", markup=False, highlight=False)
+            skipped.append({"frame": path.name, "error": str(exc)})
 
 
 @app.command()
@@ -95,13 +110,19 @@ def decode(
             continue
         fuser = FrameFuser(m.codec, locator.check_payload)
         follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
-        frames = ((p.name, read_image_bgr(p)) for p in payload) if kind == "folder" else video_frames(path, every)
+        skipped: list[dict[str, str]] = []
+        frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:
             dets = follow(frame, camera=cam, soft=soft)
             fuser.add(label, dets, frame)
             last = (frame, dets)
-        results.append({"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)})
+        if last is None:  # a folder none of whose files is an image
+            raise DeepMorphError(f"{path}: no frame could be read ({skipped[0]['error']})")
+        entry = {"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)}
+        if skipped:
+            entry["skipped_frames"] = skipped
+        results.append(entry)
         if last is not None:
             save_overlay(path, *last)
     if as_json:

@@ -268,6 +268,23 @@ def test_cli_decode_video_and_folder_fuse_frames(model: DeepMorphModel, tmp_path
         (det,) = entry["detections"]
         assert det["frames"] >= 4 and det["ok"] and det["payload"]["bits"] == truth
         assert det["morph_check"] == "passed"
+        assert "skipped_frames" not in entry
+
+    # a frame cut short while copying is skipped with a warning; the others still count
+    whole = (frames / "f02.png").read_bytes()
+    (frames / "f02.png").write_bytes(whole[: len(whole) // 3])
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(frames), "--json"])
+    assert res.exit_code == 0, res.output
+    (entry,) = json.loads(res.stdout)
+    assert entry["frames"] == 4 and [s["frame"] for s in entry["skipped_frames"]] == ["f02.png"]
+    assert entry["detections"][0]["ok"] and entry["detections"][0]["payload"]["bits"] == truth
+    assert "warning: skipped frame" in res.stderr and "f02.png" in res.stderr
+    # a folder of nothing but unreadable files is one clear error
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "a.png").write_bytes(whole[:100])
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(broken), "--json"])
+    assert res.exit_code == 1 and "no frame could be read" in res.output and "Traceback" not in res.output
 
 
 def test_cli_bad_inputs_are_one_clear_error(tmp_path: Path) -> None:
