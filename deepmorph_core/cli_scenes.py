@@ -123,8 +123,7 @@ def decode(
         if skipped:
             entry["skipped_frames"] = skipped
         results.append(entry)
-        if last is not None:
-            save_overlay(path, *last)
+        save_overlay(path, *last)
     if as_json:
         out.print_json(json.dumps(results))
         return

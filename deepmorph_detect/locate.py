@@ -92,9 +92,9 @@ class PayloadCheck:
         result: the decode, with ``ok`` withdrawn when the check failed.
         fit: the alignment to the payload's morph (``None`` when not run or diverged).
         status: ``passed``, ``failed`` (the morph fits no better than the unmorphed drawing),
-            ``contradicted`` (it does, but the photo shows more than
-            :data:`~deepmorph_detect.synthesis.MAX_CONTRADICTED` of its bits flipped) or
-            ``not run`` (the CRC had failed).
+            ``contradicted`` (it does, but the photo does not show its code bits:
+            :attr:`~deepmorph_detect.synthesis.BitEvidence.agrees` is false) or ``not run``
+            (the CRC had failed).
         bits: the per-bit evidence, when it was asked for (:meth:`Locator.check_payload`).
     """
 
@@ -212,8 +212,8 @@ class Located(Detection):
     source: str = "detector"
     morph: MorphFit | None = None
     bits: BitEvidence | None = None  # the per-bit check, when it ran (Locator.check_payload)
-    # "passed", "failed" (ok withdrawn), "contradicted" (the photo shows some of its bits flipped:
-    # ok withdrawn), "not run" (CRC failed); from Locator.track also
+    # "passed", "failed" (ok withdrawn), "contradicted" (the photo does not show its code bits,
+    # BitEvidence.agrees: ok withdrawn), "not run" (CRC failed); from Locator.track also
     # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
     # and "track conflict" (another payload than the track's passed: ok withdrawn)
     morph_check: str = "not run"
@@ -373,10 +373,10 @@ class Locator:
 
         A payload that needed corrections (``bitwise`` None), or any when ``bitwise`` is True,
         is then checked bit by bit (:class:`~deepmorph_detect.synthesis.MorphSynthesis`): the
-        photo may contradict at most :data:`~deepmorph_detect.synthesis.MAX_CONTRADICTED` of
-        its code bits. A CRC collision near the true payload differs from it in six code bits
-        or more; one correlation over the whole drawing passes such near misses about half
-        the time, the bits rarely. Readings without corrections skip it (about 50 ms).
+        photo must show its code bits (:attr:`~deepmorph_detect.synthesis.BitEvidence.agrees`:
+        few contradicted, the weakest still supported). A CRC collision near the true payload
+        differs from it in six code bits or more; one correlation over the whole drawing passes
+        such near misses about half the time, the bits rarely. Readings without corrections skip it (about 50 ms).
         """
         if not result.ok:
             return PayloadCheck(result, None, "not run")
