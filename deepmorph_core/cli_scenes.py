@@ -73,6 +73,7 @@ def decode(
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.media import check_video, folder_frames, is_video, video_frames
     from deepmorph_detect.overlay import draw_overlay
+    from deepmorph_detect.synthesis import disagreement
     from deepmorph_detect.tracking import SequenceLocator
 
     m = DeepMorphModel.load(model)
@@ -136,10 +137,8 @@ def decode(
             if d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             elif d.get("morph_check") == "contradicted":
-                status = (
-                    f"NOT VERIFIED (the CRC passed, but the photo shows {d['bits_contradicted']} of its"
-                    " code bits flipped)"
-                )
+                why = disagreement(d["bits_contradicted"], d["weakest_bits_support"])
+                status = f"NOT VERIFIED (the CRC passed, but {why})"
             where = ""
             if "pose" in d:
                 t = d["pose"]["tvec"]

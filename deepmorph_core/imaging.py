@@ -19,6 +19,7 @@ from torch import Tensor
 from deepmorph_core.errors import DeepMorphError
 
 MAX_IMAGE_PIXELS = 80_000_000
+MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -37,7 +38,7 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
     """Read an image file as ``(H, W, 3)`` uint8 BGR (gray expanded, transparency on white).
 
     Raises:
-        DeepMorphError: missing, empty, corrupt, too large or non-image files.
+        DeepMorphError: missing, empty, corrupt, too large, too small or non-image files.
     """
     path = Path(path)
     if not path.is_file():
@@ -50,6 +51,11 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
         raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
         raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
+    if min(img.shape[:2]) < MIN_IMAGE_SIDE:
+        raise DeepMorphError(
+            f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too small to hold a drawing"
+            f" (at least {MIN_IMAGE_SIDE} pixels each way)"
+        )
     if img.dtype == np.uint16:
         img = (img // 257).astype(np.uint8)
     elif img.dtype != np.uint8:

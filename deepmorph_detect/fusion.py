@@ -94,9 +94,12 @@ class FrameFuser:
             if self.check is not None and tr.image is not None and tr.last.homography is not None:
                 checked = self.check(tr.image, tr.last.homography, fused)
             entry["morph_check"] = checked.status
-            entry.pop("morph_fit", None)  # the last frame's own check, not the fused payload's
+            for key in ("morph_fit", "bits_contradicted", "weakest_bits_support"):
+                entry.pop(key, None)  # the last frame's own check, not the fused payload's
             if checked.fit is not None:
                 entry["morph_fit"] = round(checked.fit.gain, 4)
+            if checked.bits is not None:
+                entry.update(checked.bits.to_json())
             entry.update(checked.result.to_json())
             entry["bit_probabilities"] = [round(float(p), 4) for p in probs]
             entry["frames"] = len(tr.frames)

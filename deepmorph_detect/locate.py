@@ -37,7 +37,14 @@ import torch.nn.functional as F
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.codemodel import DeepMorphModel, Detection
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import align_to_frame, flatten_illumination, ink_mask, normalise_contrast, to_gray
+from deepmorph_core.imaging import (
+    MIN_IMAGE_SIDE,
+    align_to_frame,
+    flatten_illumination,
+    ink_mask,
+    normalise_contrast,
+    to_gray,
+)
 from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference, normalise_input
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine, refine_at, warp_to_template
@@ -240,7 +247,7 @@ class Located(Detection):
         if self.morph is not None:
             out["morph_fit"] = round(self.morph.gain, 4)
         if self.bits is not None:
-            out["bits_contradicted"] = self.bits.contradicted
+            out.update(self.bits.to_json())
         out["pose_aligned_to"] = "decoded morph" if self.aligned_to_morph else "unmorphed drawing"
         if self.corners is not None:
             out["corners"] = np.round(self.corners, 2).tolist()
@@ -399,8 +406,10 @@ class Locator:
         """The photo as gray, its camera (the default one when none is given) and its pyramid."""
         gray = to_gray(image)
         h, w = gray.shape
-        if h < 16 or w < 16:
-            raise DeepMorphError(f"image of {w}x{h} pixels is too small to hold a drawing")
+        if min(h, w) < MIN_IMAGE_SIDE:
+            raise DeepMorphError(
+                f"image of {w}x{h} pixels is too small to hold a drawing (at least {MIN_IMAGE_SIDE} pixels each way)"
+            )
         return gray, camera or Camera.default(w, h), ImagePyramid(gray)
 
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:

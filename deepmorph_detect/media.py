@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.imaging import MIN_IMAGE_SIDE
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm"}
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv"}
@@ -78,3 +79,9 @@ def check_video(path: Path) -> None:
         cap.release()
     if not ok or frame is None:
         raise DeepMorphError(f"{path}: not a video OpenCV can read (corrupt, or an unsupported codec)")
+    if min(frame.shape[:2]) < MIN_IMAGE_SIDE:
+        h, w = frame.shape[:2]
+        raise DeepMorphError(
+            f"{path}: frames of {w}x{h} pixels are too small to hold a drawing"
+            f" (at least {MIN_IMAGE_SIDE} pixels each way)"
+        )

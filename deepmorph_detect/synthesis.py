@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -98,6 +99,28 @@ class BitEvidence:
         contradicted, and its weakest bits still supported (:attr:`weakest_sum` at least
         :data:`MIN_WEAKEST_SUM`)."""
         return self.contradicted <= MAX_CONTRADICTED and self.weakest_sum >= MIN_WEAKEST_SUM
+
+    def to_json(self) -> dict[str, Any]:
+        """The per-bit check's fields of a detection's JSON (``docs/detection.md``)."""
+        return {"bits_contradicted": self.contradicted, "weakest_bits_support": round(self.weakest_sum, 3)}
+
+    @property
+    def reason(self) -> str:
+        """Why :attr:`agrees` is false, in words (empty when it is true)."""
+        return disagreement(self.contradicted, self.weakest_sum)
+
+
+def disagreement(contradicted: int, weakest_sum: float) -> str:
+    """Which half of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
+    too many bits shown flipped, or its weakest bits barely shown."""
+    if contradicted > MAX_CONTRADICTED:
+        return f"the photo shows {contradicted} of its code bits flipped"
+    if weakest_sum < MIN_WEAKEST_SUM:
+        return (
+            f"the photo barely shows its {WEAKEST_BITS} weakest code bits "
+            f"(support {weakest_sum:.2f}, at least {MIN_WEAKEST_SUM} needed)"
+        )
+    return ""
 
 
 class MorphSynthesis:
@@ -235,5 +258,6 @@ __all__ = [
     "WEAKEST_BITS",
     "BitEvidence",
     "MorphSynthesis",
+    "disagreement",
     "morph_template",
 ]

@@ -291,7 +291,16 @@ def test_cli_bad_inputs_are_one_clear_error(tmp_path: Path) -> None:
     (tmp_path / "notes.png").write_text("not an image")
     (tmp_path / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"\x00" * 64)
     (tmp_path / "empty").mkdir()
+    cv2.imwrite(str(tmp_path / "tiny.png"), np.full((1, 1), 255, np.uint8))
+    cv2.imwrite(str(tmp_path / "blank.png"), np.full((480, 640), 255, np.uint8))
+    writer = cv2.VideoWriter(str(tmp_path / "tiny.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (8, 8))
+    for _ in range(3):
+        writer.write(np.full((8, 8, 3), 200, np.uint8))
+    writer.release()
     cases = [
+        # checked before any work: the blank photo's result is not printed and then lost
+        ([str(tmp_path / "blank.png"), str(tmp_path / "tiny.png")], "tiny.png: 1x1 pixels is too small"),
+        ([str(tmp_path / "tiny.avi")], "tiny.avi: frames of 8x8 pixels are too small"),
         ([str(tmp_path / "notes.png")], "not an image"),
         ([str(tmp_path / "clip.mp4")], "not a video"),
         ([str(tmp_path / "empty")], "no image files"),

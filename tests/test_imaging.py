@@ -85,10 +85,14 @@ def test_read_image_errors(tmp_path) -> None:
     empty.write_bytes(b"")
     with pytest.raises(DeepMorphError, match="empty file"):
         read_image(empty)
+    tiny = tmp_path / "tiny.png"
+    save_gray(np.linspace(0, 1, 64).reshape(8, 8), tiny)
+    with pytest.raises(DeepMorphError, match=r"tiny.png: 8x8 pixels is too small to hold a drawing"):
+        read_image(tiny)
     ok = tmp_path / "ok.png"
-    save_gray(np.linspace(0, 1, 64).reshape(8, 8), ok)
+    save_gray(np.linspace(0, 1, 320).reshape(16, 20), ok)
     img = read_image(ok)
-    assert img.shape == (8, 8) and img.dtype == np.float32 and 0 <= img.min() and img.max() <= 1
+    assert img.shape == (16, 20) and img.dtype == np.float32 and 0 <= img.min() and img.max() <= 1
 
 
 def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:

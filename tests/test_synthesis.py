@@ -17,10 +17,11 @@ from deepmorph_core.codec import PayloadCodec, random_payloads
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.imaging import to_gray
 from deepmorph_core.render import render_svg
-from deepmorph_detect.locate import Locator
+from deepmorph_detect.fusion import FrameFuser
+from deepmorph_detect.locate import Locator, PayloadCheck
 from deepmorph_detect.refine import ImagePyramid
 from deepmorph_detect.scenes import SceneMaker
-from deepmorph_detect.synthesis import MAX_CONTRADICTED, MIN_WEAKEST_SUM, WEAKEST_BITS, BitEvidence
+from deepmorph_detect.synthesis import MAX_CONTRADICTED, MIN_WEAKEST_SUM, WEAKEST_BITS, BitEvidence, disagreement
 
 runner = CliRunner()
 PHOTOS = Path(__file__).parent / "data" / "photos"
@@ -103,7 +104,10 @@ def test_the_locator_reads_by_synthesis_when_no_view_passes_the_crc(
     (det,) = locator.locate(scene.image, camera=scene.camera)
     assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
     assert det.morph_check == "passed" and det.bits is not None and det.bits.agrees  # always checked bit by bit
-    assert det.to_json()["bits_contradicted"] == det.bits.contradicted
+    data = det.to_json()
+    assert data["bits_contradicted"] == det.bits.contradicted
+    assert data["weakest_bits_support"] == pytest.approx(det.bits.weakest_sum, abs=1e-3)
+    assert data["weakest_bits_support"] >= MIN_WEAKEST_SUM
 
 
 def test_a_near_miss_that_passes_the_crc_and_the_morph_check_is_contradicted(
@@ -157,6 +161,41 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert said.contradicted <= MAX_CONTRADICTED  # the count alone would pass it
     assert said.weakest_sum == pytest.approx(-0.74 - 0.08 + 0.14 + 0.24 + 0.34, abs=1e-5)
     assert not said.agrees and WEAKEST_BITS == 5 and said.weakest_sum < MIN_WEAKEST_SUM
+    # and the reason given is the half of the rule that failed, not a count of flipped bits
+    assert said.reason == "the photo barely shows its 5 weakest code bits (support -0.10, at least 0.5 needed)"
+    assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
+    assert disagreement(3, 2.0) == "the photo shows 3 of its code bits flipped"
+
+
+def test_a_fused_payload_reports_its_own_per_bit_check(model: DeepMorphModel, locator: Locator) -> None:
+    """A sequence's entry carries the check of the payload fused over its frames, not the last
+    frame's: its morph fit and per-bit fields are replaced, or dropped when that check has none."""
+    scene = SceneMaker(model, severity="medium", seed=14).make(drawings=1)
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    last_frame_bits = BitEvidence(np.zeros(38, np.uint8), np.ones(38, np.float32), 0.9, 1.0)
+    det = replace(det, bits=last_frame_bits)
+    assert det.to_json()["bits_contradicted"] == 0
+    vague = np.ones(38, np.float32)
+    vague[[1, 2, 3]] = -0.5
+    fused_bits = BitEvidence(np.zeros(38, np.uint8), vague, 0.8, 1.0)
+    verdicts = {
+        "contradicted": lambda image, H, fused: PayloadCheck(
+            replace(fused, ok=False), None, "contradicted", fused_bits
+        ),
+        "failed": lambda image, H, fused: PayloadCheck(replace(fused, ok=False), None, "failed"),
+    }
+    for status, check in verdicts.items():
+        fuser = FrameFuser(model.codec, check)
+        fuser.add("f00", [det], scene.image)
+        (entry,) = fuser.results()
+        assert entry["morph_check"] == status and entry["ok"] is False and "morph_fit" not in entry
+        if status == "contradicted":
+            assert entry["bits_contradicted"] == 3 and entry["weakest_bits_support"] == pytest.approx(-1.5 + 2)
+            assert disagreement(entry["bits_contradicted"], entry["weakest_bits_support"]).startswith(
+                "the photo shows 3"
+            )
+        else:
+            assert "bits_contradicted" not in entry and "weakest_bits_support" not in entry
 
 
 def test_a_steeply_tilted_blurred_print_gives_no_wrong_payload(locator: Locator) -> None:
