@@ -22,9 +22,9 @@ from rich.text import Text
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write
+from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
 from deepmorph_core.plugins import default_registry
-from deepmorph_core.render import overlay, render_svg_ink, save_gray, save_rgb
+from deepmorph_core.render import image_format, overlay, render_svg_ink, save_gray, save_rgb
 
 app = typer.Typer(
     name="deepmorph",
@@ -225,8 +225,7 @@ def morph(
     """Write a morph of a drawing (inside its bounds) as a new SVG."""
     if not random:
         raise DeepMorphError("nothing to do: pass --random (payloads are encoded with 'deepmorph encode')")
-    if out_path.resolve() == svg.resolve():
-        raise DeepMorphError(f"{out_path}: refusing to overwrite the input drawing")
+    refuse_to_overwrite(out_path, "--out", [("input drawing", svg)])
     md = _load(svg, move, shift, scale, rotate)
     if md.n_variables == 0:
         raise DeepMorphError(f"{svg}: the drawing has 0 variables; add dm: bounds or pass --move 0.5")
@@ -247,6 +246,8 @@ def render(
     ] = None,
 ) -> None:
     """Render a drawing with the real renderer (resvg) or the soft rasterizer."""
+    refuse_to_overwrite(out_path, "--out", [("input drawing", svg), ("overlay's base drawing", overlay_base)])
+    image_format(out_path)
     ink = _render_ink(svg, size, soft)
     if overlay_base is None:
         save_gray(1.0 - ink, out_path)
@@ -451,6 +452,10 @@ def encode(
     from deepmorph_core.codec import format_payload, parse_payload
     from deepmorph_core.codemodel import DeepMorphModel
 
+    refuse_to_overwrite(out_path, "--out", [("model file", model)])
+    if png is not None:
+        refuse_to_overwrite(png, "--png", [("model file", model), ("SVG given with --out", out_path)])
+        image_format(png)
     m = DeepMorphModel.load(model)
     bits = parse_payload(payload, m.codec.spec.payload_bits)
     svg_text = m.encode(bits)

@@ -12,7 +12,7 @@ import typer
 
 from deepmorph_core.cli import JsonOpt, ModelArg, SeedOpt, app, err, friendly, out, progress_bar
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write
+from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
 
 
 def _progress(name: str):  # noqa: ANN202 - a rich Progress
@@ -41,6 +41,31 @@ def _readable_frames(files: list[Path], skipped: list[dict[str, str]]) -> Iterat
         except DeepMorphError as exc:
             err.print(f"warning: skipped frame {exc}", markup=False, highlight=False)
             skipped.append({"frame": path.name, "error": str(exc)})
+
+
+def _overlay_targets(overlay: Path | None, inputs: list[Path], model: Path) -> dict[Path, Path]:
+    """Where ``--overlay`` puts each input's annotated image: the file itself for one input,
+    else ``<folder>/<input name>.overlay.png``. Checked before any work: no target may replace
+    an input or the model, and no two inputs may share one (the first would be lost)."""
+    if overlay is None:
+        return {}
+    if len(inputs) > 1 and overlay.suffix:
+        raise DeepMorphError(f"--overlay {overlay}: with several inputs, give a folder for the annotated images")
+    targets = {p: overlay if len(inputs) == 1 and overlay.suffix else overlay / f"{p.stem}.overlay.png" for p in inputs}
+    claimed: dict[Path, Path] = {}
+    for path, target in targets.items():
+        refuse_to_overwrite(target, "--overlay", [("model file", model), *(("input", p) for p in inputs)])
+        first = claimed.setdefault(target.resolve(), path)
+        if first != path:
+            raise DeepMorphError(
+                f"--overlay {overlay}: {first} and {path} would both be annotated as {target}; rename one"
+            )
+    if len(inputs) == 1 and overlay.suffix:
+        import cv2
+
+        if not cv2.haveImageWriter(str(overlay)):
+            raise DeepMorphError(f"--overlay {overlay}: cannot write this image format (use .png or .jpg)")
+    return targets
 
 
 @app.command()
@@ -87,17 +112,15 @@ def decode(
             jobs.append(("video", path, None))
         else:
             jobs.append(("image", path, read_image_bgr(path)))
-    if overlay is not None and len(jobs) > 1 and overlay.suffix:
-        raise DeepMorphError(f"--overlay {overlay}: with several inputs, give a folder for the annotated images")
+    targets = _overlay_targets(overlay, [path for _, path, _ in jobs], model)
     locator = Locator(m)
     soft = not hard_only
     results: list[dict[str, Any]] = []
 
     def save_overlay(path: Path, image: Any, dets: list[Any]) -> None:
-        if overlay is None:
+        target = targets.get(path)
+        if target is None:
             return
-        target = overlay if len(jobs) == 1 and overlay.suffix else overlay / f"{path.stem}.overlay.png"
-        target.parent.mkdir(parents=True, exist_ok=True)
         ok, buf = cv2.imencode(target.suffix or ".png", draw_overlay(image, dets))
         if not ok:
             raise DeepMorphError(f"--overlay {target}: cannot write this image format")

@@ -17,7 +17,7 @@ from torch import Tensor
 
 from deepmorph_core.api import MorphableDrawing
 from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
-from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
+from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, parse_payload
 from deepmorph_core.errors import DeepMorphError, SvgError
 from deepmorph_core.imaging import align_to_frame, render_moments, to_gray
 from deepmorph_core.model import Decoder, DecoderConfig, Encoder
@@ -175,9 +175,12 @@ class DeepMorphModel:
         with torch.no_grad():
             return self.drawing.values_from_unit(self.encoder(code_bits.float()))
 
-    def encode(self, payload: np.ndarray) -> str:
-        """The morphed SVG document carrying ``payload`` (``(payload_bits,)`` 0/1)."""
-        code = self.codec.encode(np.asarray(payload, dtype=np.uint8))
+    def encode(self, payload: np.ndarray | str) -> str:
+        """The morphed SVG document carrying ``payload``: ``(payload_bits,)`` 0/1, or text as
+        ``deepmorph encode --payload`` takes it (hex ``0x...`` or a string of binary digits)."""
+        if isinstance(payload, str):
+            payload = parse_payload(payload, self.codec.spec.payload_bits)
+        code = self.codec.encode(np.asarray(payload))  # checked there: 0/1 only, no silent casts
         values = self.morph_values(torch.from_numpy(code.astype(np.float32))[None])
         return self.drawing.to_svg(values[0])
 

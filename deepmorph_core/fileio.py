@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 from deepmorph_core.errors import DeepMorphError
@@ -35,3 +36,25 @@ def atomic_write(path: str | Path, data: bytes) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name the same file (the same path resolved, or one linked to the other)."""
+    a, b = Path(a), Path(b)
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
+
+
+def refuse_to_overwrite(target: str | Path, option: str, inputs: Iterable[tuple[str, str | Path | None]]) -> None:
+    """One clear error, before any work, when the output ``target`` (given with ``option``) would
+    replace one of a command's inputs (``inputs``: pairs of what it is and its path): the model
+    file or the photo it names would be lost.
+
+    Raises:
+        DeepMorphError: ``target`` is one of ``inputs``.
+    """
+    for what, path in inputs:
+        if path is not None and same_file(target, path):
+            raise DeepMorphError(f"{option} {target}: refusing to overwrite the {what} ({path})")

@@ -19,6 +19,8 @@ from torch import Tensor
 from deepmorph_core.errors import DeepMorphError
 
 MAX_IMAGE_PIXELS = 80_000_000
+# float images a little outside [0, 1] (noise, rounding) are clipped; beyond this they are on another scale
+FLOAT_RANGE_SLACK = 2.0
 MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
 
 
@@ -69,25 +71,40 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
-    """Any ``(H, W)``, ``(H, W, 1|3|4)`` uint8/uint16/float image to float32 gray in ``[0, 1]``."""
+    """Any ``(H, W)`` or ``(H, W, 1|3|4)`` (BGR or BGRA) image to float32 gray in ``[0, 1]``.
+
+    Pixels may be uint8 (0-255), uint16 (0-65535), bool, or float in ``[0, 1]``; a float image
+    on another scale (0-255, say) is an error rather than a silently white or black image.
+
+    Raises:
+        DeepMorphError: another shape, another pixel type, non-finite or out-of-range floats.
+    """
     img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.ndim == 3:
-        img = img[..., :3]
-        if img.dtype == np.uint8:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-        else:
-            img = img.astype(np.float32).mean(-1)
-    if img.ndim != 2:
+    if img.ndim == 3 and img.shape[2] not in (1, 3, 4):
+        raise DeepMorphError(f"expected 1, 3 (BGR) or 4 (BGRA) channels, got an image of shape {img.shape}")
+    if img.ndim not in (2, 3):
         raise DeepMorphError(f"expected a 2-D image or an image with channels, got shape {img.shape}")
     if img.dtype == np.uint8:
-        return img.astype(np.float32) / 255.0
-    if img.dtype == np.uint16:
-        return img.astype(np.float32) / 65535.0
-    out = img.astype(np.float32)
-    if not np.isfinite(out).all():
-        raise DeepMorphError("image has non-finite values")
+        if img.ndim == 3 and img.shape[2] > 1:  # photos: gray levels as OpenCV rounds them
+            img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_BGR2GRAY)
+        out = img.astype(np.float32) / 255.0
+    elif img.dtype == np.uint16:
+        out = img.astype(np.float32) / 65535.0
+    elif img.dtype == np.bool_:
+        out = img.astype(np.float32)
+    elif np.issubdtype(img.dtype, np.floating):
+        out = img.astype(np.float32)
+        if not np.isfinite(out).all():
+            raise DeepMorphError("image has non-finite values")
+        lo, hi = float(out.min(initial=0.0)), float(out.max(initial=0.0))
+        if hi > FLOAT_RANGE_SLACK or lo < 1.0 - FLOAT_RANGE_SLACK:
+            raise DeepMorphError(
+                f"float pixels must lie in [0, 1], this image's lie in [{lo:g}, {hi:g}] (divide by 255, or pass uint8)"
+            )
+    else:
+        raise DeepMorphError(f"{img.dtype} pixels are not supported: pass uint8, uint16, or float in [0, 1]")
+    if out.ndim == 3:
+        out = out[..., 0] if out.shape[2] == 1 else cv2.cvtColor(np.ascontiguousarray(out[..., :3]), cv2.COLOR_BGR2GRAY)
     return np.clip(out, 0.0, 1.0)
 
 

@@ -15,6 +15,7 @@ import resvg_py
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
 
 
 def render_svg(svg_text: str, width: int) -> np.ndarray:
@@ -51,13 +52,30 @@ def save_rgb(image: np.ndarray, path: str | Path) -> None:
     _save(Image.fromarray(arr, "RGB"), path)
 
 
-def _save(img: Image.Image, path: str | Path, dpi: int | None = None) -> None:
+def image_format(path: str | Path) -> str:
+    """The image format Pillow writes for ``path``'s extension (check it before any work).
+
+    Raises:
+        DeepMorphError: an extension no image format has.
+    """
     path = Path(path)
+    fmt = Image.registered_extensions().get(path.suffix.lower())
+    if fmt is None:
+        raise DeepMorphError(f"{path}: cannot write image: unknown file extension {path.suffix!r} (use .png)")
+    return fmt
+
+
+def _save(img: Image.Image, path: str | Path, dpi: int | None = None) -> None:
+    """Encode in memory, then write atomically: a failed write never leaves half an image (or
+    half of the file it replaces)."""
+    path = Path(path)
+    fmt = image_format(path)
+    buf = io.BytesIO()
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        img.save(path, **({"dpi": (dpi, dpi)} if dpi else {}))
+        img.save(buf, format=fmt, **({"dpi": (dpi, dpi)} if dpi else {}))
     except (OSError, ValueError) as exc:
         raise DeepMorphError(f"{path}: cannot write image: {exc}") from None
+    atomic_write(path, buf.getvalue())
 
 
 def overlay(base_ink: np.ndarray, morph_ink: np.ndarray) -> np.ndarray:

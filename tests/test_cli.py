@@ -121,3 +121,47 @@ def test_unsupported_curves_without_plugin(tmp_path: Path) -> None:
 def test_usage_errors_exit_2() -> None:
     assert run("render", BUNDLED_DRAWING).exit_code == 2  # --out missing
     assert run("inspect", "--scale", "a,b", BUNDLED_DRAWING).exit_code == 1
+
+
+def test_no_output_replaces_an_input(tmp_path: Path) -> None:
+    """The model, the drawing or a photo named as an output is one clear error before any work,
+    and the file is left as it was (an encode over the model once replaced it with an SVG)."""
+    import shutil
+
+    import cv2
+
+    from deepmorph_core.api import BUNDLED_MODEL
+
+    model = tmp_path / "ghost.dmm"
+    shutil.copy(BUNDLED_MODEL, model)
+    drawing = tmp_path / "ghost.svg"
+    shutil.copy(BUNDLED_DRAWING, drawing)
+    photo = tmp_path / "photo.png"
+    cv2.imwrite(str(photo), np.full((120, 160), 255, np.uint8))
+    (tmp_path / "b").mkdir()
+    twin = tmp_path / "b" / "photo.png"
+    shutil.copy(photo, twin)
+    before = {p: p.read_bytes() for p in (model, drawing, photo)}
+    enc = ["encode", model, "--payload", "0xA1B2C3"]
+    cases = [
+        ([*enc, "--out", model], "--out", "refusing to overwrite the model file"),
+        ([*enc, "--out", tmp_path / "code.svg", "--png", model], "--png", "refusing to overwrite the model file"),
+        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.svg"], "--png", "SVG given with --out"),
+        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.xyz"], "c.xyz", "unknown file extension"),
+        (["render", drawing, "--out", drawing], "--out", "refusing to overwrite the input drawing"),
+        (["decode", model, photo, "--overlay", tmp_path / "ann.xyz"], "--overlay", "cannot write this image format"),
+        (["morph", drawing, "--random", "--out", drawing], "--out", "refusing to overwrite the input drawing"),
+        (["decode", model, photo, "--overlay", photo], "--overlay", "refusing to overwrite the input"),
+        (["decode", model, photo, "--overlay", model], "--overlay", "refusing to overwrite the model file"),
+        (["decode", model, photo, twin, "--overlay", tmp_path / "ann"], "--overlay", "would both be annotated"),
+    ]
+    for args, option, message in cases:
+        res = run(*args)
+        text = " ".join(res.output.split())
+        assert res.exit_code == 1 and option in text and message in text, text
+        assert "Traceback" not in text
+        assert {p: p.read_bytes() for p in before} == before
+    assert not (tmp_path / "ann").exists() and not (tmp_path / "c.svg").exists()  # nothing was done
+    # a writable --png next to the SVG is written whole
+    res = run(*enc, "--out", tmp_path / "code.svg", "--png", tmp_path / "code.png")
+    assert res.exit_code == 0 and Image.open(tmp_path / "code.png").size[0] == 591

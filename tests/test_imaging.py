@@ -17,6 +17,7 @@ from deepmorph_core.imaging import (
     mask_moments,
     read_image,
     render_moments,
+    to_gray,
 )
 from deepmorph_core.render import render_svg, save_gray
 
@@ -93,6 +94,28 @@ def test_read_image_errors(tmp_path) -> None:
     save_gray(np.linspace(0, 1, 320).reshape(16, 20), ok)
     img = read_image(ok)
     assert img.shape == (16, 20) and img.dtype == np.float32 and 0 <= img.min() and img.max() <= 1
+
+
+def test_to_gray_takes_every_usual_pixel_type_and_refuses_the_rest() -> None:
+    bgr = np.random.default_rng(0).integers(0, 256, (40, 50, 3), dtype=np.uint8)
+    gray = to_gray(bgr)
+    assert gray.dtype == np.float32 and gray.shape == (40, 50)
+    same = [np.dstack([bgr, np.full((40, 50), 255, np.uint8)]), bgr.astype(np.uint16) * 257, bgr / 255.0]
+    for image in same:  # BGRA, 16-bit (was clipped to white) and float BGR give the same gray
+        assert np.abs(to_gray(image) - gray).max() < 1 / 255
+    assert np.array_equal(to_gray(bgr[..., :1]), bgr[..., 0] / np.float32(255))
+    assert np.array_equal(to_gray(bgr[..., 0] > 127), (bgr[..., 0] > 127).astype(np.float32))
+    assert to_gray(np.full((20, 20), 1.2)).max() == 1.0  # noise just past white is clipped
+    refused = {
+        "lie in \\[0, 255\\] \\(divide by 255": bgr.astype(np.float64),  # a 0-255 float photo was all white
+        "expected 1, 3 \\(BGR\\) or 4": bgr[..., :2],
+        "int64 pixels are not supported": bgr.astype(np.int64),
+        "non-finite": np.full((20, 20), np.nan, np.float32),
+        "2-D image": np.zeros(100, np.uint8),
+    }
+    for message, image in refused.items():
+        with pytest.raises(DeepMorphError, match=message):
+            to_gray(image)
 
 
 def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:

@@ -168,6 +168,19 @@ def test_encode_real_render_decode_round_trip(trained: Path, tmp_path: Path) -> 
     assert ok >= 15, f"only {ok}/20 payloads recovered"
 
 
+def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(trained: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    bits = [1, 0, 1, 1]  # the trained model carries 4 payload bits
+    assert m.encode("0xB") == m.encode("1011") == m.encode(np.array(bits)) == m.encode(np.array(bits, bool))
+    for payload, message in [
+        ("0xA1B2C3", "has 6 hex digits"),
+        (np.full(4, 0.6), "only 0 and 1"),  # cast to uint8 this was 0000, silently
+        (np.ones(5, np.uint8), r"shape \(4,\)"),
+    ]:
+        with pytest.raises(DeepMorphError, match=message):
+            m.encode(payload)
+
+
 def test_blank_image_has_no_detection(trained: Path) -> None:
     m = DeepMorphModel.load(trained)
     assert m.decode_image(np.ones((100, 100), np.float32)) == []
