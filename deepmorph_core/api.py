@@ -15,6 +15,7 @@ The CLI is a thin layer over this module.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -187,6 +188,20 @@ def load_model(path: str | Path):
     return DeepMorphModel.load(path)
 
 
+def capacity_warning(code_bits: int, n_variables: int, label: str) -> str | None:
+    """Why a payload is unlikely to be read, when its code has more bits than the drawing has
+    variables: each code bit needs a variable of its own (or a group of look-alike ones) to be
+    read reliably; with fewer, variables carry bits as levels the decoder does not separate
+    (measured: the 48-bit ghost and the 24-bit Feather camera recover 0 % of payloads; README)."""
+    if code_bits <= n_variables:
+        return None
+    return (
+        f"{label}: the code has {code_bits} bits but the drawing only {n_variables} variables; each code bit"
+        " needs a variable of its own to be read reliably, so expect most payloads to fail. Use fewer"
+        " payload bits (or --ecc-t 0), or let more of the drawing morph (dm: bounds, --move)."
+    )
+
+
 def train_model(
     svg: str | Path,
     out: str | Path,
@@ -199,6 +214,7 @@ def train_model(
     resume: bool = False,
     overwrite: bool = False,
     on_start: Any = None,
+    on_warning: Any = None,
 ):
     """Train (or resume) a model for a drawing and write its bundle.
 
@@ -211,6 +227,8 @@ def train_model(
         resume: continue the checkpoint at ``out``.
         overwrite: replace an existing bundle at ``out`` instead of refusing.
         on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback (progress bars).
+        on_warning: ``on_warning(text)`` for a warning before training starts (default:
+            :func:`warnings.warn`), such as :func:`capacity_warning`'s.
 
     Returns:
         A :class:`deepmorph_core.train.TrainingRecordSummary`.
@@ -264,6 +282,9 @@ def train_model(
             )
     except ValidationError as exc:
         raise DeepMorphError(f"training settings: {format_validation_error(exc).replace('dm:', '--')}") from None
+    warning = None if resume else capacity_warning(model.codec.spec.code_bits, model.drawing.n_variables, label)
+    if warning:
+        (on_warning or (lambda text: warnings.warn(text, stacklevel=3)))(warning)
     trainer = Trainer(model, config, out)
     on_log = on_start(config.steps, model.meta.record.step) if on_start else None
     return trainer.run(on_log)

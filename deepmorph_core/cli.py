@@ -345,6 +345,7 @@ def train(
                 "small_prints": small_prints,
             },
             on_start=on_start,
+            on_warning=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
         )
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
@@ -486,7 +487,12 @@ def demo(
     from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_core.render import render_svg
 
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise DeepMorphError(f"--out {out_dir}: exists and is not a folder; the demo writes its files into a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DeepMorphError(f"--out {out_dir}: cannot create the folder: {exc.strerror or exc}") from None
     if retrain or not BUNDLED_MODEL.is_file():
         out.print(f"training a model for {BUNDLED_DRAWING.name} ({steps} steps) ...")
         summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps})

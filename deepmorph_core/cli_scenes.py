@@ -193,11 +193,12 @@ def synth(
 ) -> None:
     """Make labelled synthetic photos of printed drawings (the capture simulator)."""
     from deepmorph_core.codemodel import DeepMorphModel
-    from deepmorph_detect.benchmark import write_scenes
+    from deepmorph_detect.benchmark import check_scene_folder, write_scenes
     from deepmorph_detect.scenes import SCENE_SEVERITIES
 
     if severity not in SCENE_SEVERITIES:
         raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(SCENE_SEVERITIES)}")
+    check_scene_folder(out_dir)
     m = DeepMorphModel.load(model)
     dims = _size(size)
     progress = _progress("synth")
@@ -218,6 +219,8 @@ def bench_scenes_cmd(
     threads: Annotated[int, typer.Option("--threads", min=1, help="CPU threads (speed is per this many).")] = 1,
 ) -> None:
     """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
+    if report_path is not None:
+        refuse_to_overwrite(report_path, "--out", [("model file", model), ("scene index", scenes / "index.json")])
     import cv2
     import torch
 

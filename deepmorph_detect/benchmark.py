@@ -32,6 +32,16 @@ from deepmorph_detect.locate import Located, Locator
 from deepmorph_detect.scenes import ARUCO_DICT, Placement, SceneMaker
 
 
+def check_scene_folder(out: Path) -> None:
+    """Refuse, before any work, a place :func:`write_scenes` cannot fill without loss: a file,
+    or a folder that already holds scenes (a second set would replace some of the first and
+    leave the rest stale)."""
+    if out.exists() and not out.is_dir():
+        raise DeepMorphError(f"{out}: exists and is not a folder; scenes are written into a folder")
+    if out.is_dir() and ((out / "index.json").exists() or next(out.glob("scene_*"), None) is not None):
+        raise DeepMorphError(f"{out}: already holds scenes; write to a new folder, or remove them first")
+
+
 def write_scenes(
     model: DeepMorphModel,
     out: Path,
@@ -49,8 +59,17 @@ def write_scenes(
 
     ``empty_fraction`` of the scenes hold no drawing of the model (only distractors and
     markers): the negatives for false-accept counts.
+
+    Raises:
+        DeepMorphError: ``out`` is a file, or a folder that already holds scenes (checked before
+            any work: a second set would replace some of the first and leave the rest stale).
     """
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(out)
+    check_scene_folder(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DeepMorphError(f"{out}: cannot create the folder: {exc.strerror or exc}") from None
     maker = SceneMaker(model, size, severity, seed=seed)
     rng = np.random.default_rng([seed, 7])
     names = []
@@ -346,5 +365,6 @@ __all__ = [
     "morph_check_rates",
     "read_scenes",
     "tracking_rates",
+    "check_scene_folder",
     "write_scenes",
 ]

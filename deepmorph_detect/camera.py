@@ -96,6 +96,17 @@ def parse_camera(spec: str) -> Camera:
     return Camera(fx, fy, cx, cy)
 
 
+def _read_matrix(node: cv2.FileNode, path: Path, key: str) -> np.ndarray | None:
+    """A matrix node of a calibration file; OpenCV asserts on a malformed one (its data not
+    ``rows x cols`` numbers), which becomes one clear error."""
+    try:
+        return node.mat()
+    except (cv2.error, SystemError):
+        raise DeepMorphError(
+            f"{path}: {key} is not a well-formed matrix (its data must be rows x cols numbers)"
+        ) from None
+
+
 def load_calibration(path: str | Path) -> Camera:
     """Read an OpenCV calibration file (see :func:`parse_camera`)."""
     path = Path(path)
@@ -112,7 +123,7 @@ def load_calibration(path: str | Path) -> Camera:
         for key in ("camera_matrix", "K", "cameraMatrix"):
             node = fs.getNode(key)
             if not node.empty():
-                matrix = node.mat()
+                matrix = _read_matrix(node, path, key)
                 break
         if matrix is None or matrix.shape != (3, 3):
             raise DeepMorphError(f"{path}: no 3x3 camera_matrix in the calibration file")
@@ -120,7 +131,7 @@ def load_calibration(path: str | Path) -> Camera:
         for key in ("distortion_coefficients", "dist_coeffs", "D", "distCoeffs"):
             node = fs.getNode(key)
             if not node.empty():
-                d = node.mat()
+                d = _read_matrix(node, path, key)
                 if d is not None:
                     dist = tuple(float(v) for v in np.asarray(d).ravel())
                 break

@@ -27,6 +27,7 @@ from torch import Tensor
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import same_file
 from deepmorph_core.train import interrupted
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input
 from deepmorph_detect.scenes import Placement, SceneMaker
@@ -313,8 +314,15 @@ def train_detector(
     """Add a trained detector to the bundle at ``model_path``, writing ``out``.
 
     With ``resume``, ``model_path`` is an interrupted checkpoint and its stored configuration
-    is used (``config`` must then be ``None`` or equal).
+    is used (``config`` must then be ``None`` or equal). Without it, ``out`` must be new or the
+    model itself (the detector added in place): another existing file is refused before any
+    work, as ``deepmorph train`` refuses one.
     """
+    if not resume and Path(out).exists() and not same_file(out, model_path):
+        raise DeepMorphError(
+            f"{out}: already exists; choose another --out, the model itself to add the detector in place,"
+            " or pass --resume to continue an interrupted run there"
+        )
     model = DeepMorphModel.load(model_path)
     if resume:
         meta = model.meta.detector

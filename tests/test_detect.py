@@ -71,6 +71,11 @@ def test_camera_calibration_file(tmp_path: Path) -> None:
         parse_camera(str(broken))
     with pytest.raises(DeepMorphError, match="no such calibration file"):
         parse_camera(str(tmp_path / "missing.yml"))
+    # a matrix whose data is not rows x cols numbers: OpenCV asserts while reading it
+    short = tmp_path / "short.yaml"
+    short.write_text("%YAML:1.0\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1, 0 ]\n")
+    with pytest.raises(DeepMorphError, match="short.yaml: camera_matrix is not a well-formed matrix"):
+        parse_camera(str(short))
 
 
 def test_pnp_recovers_a_known_pose() -> None:
@@ -346,6 +351,15 @@ def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
     assert {"deepmorph", "aruco"} <= set(report["pose"]) and report["speed_ms"]["qr_detect_and_decode_median"] > 0
     res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path)])
     assert res.exit_code == 1 and "not a scene folder" in res.output
+    # a second set is not written over the first (it would replace some scenes, leave others
+    # stale), nor into a file; the first set is left whole
+    before = {p.name: p.read_bytes() for p in (tmp_path / "s").iterdir()}
+    for target, message in [(tmp_path / "s", "already holds scenes"), (BUNDLED_MODEL, "is not a folder")]:
+        res = runner.invoke(app, ["synth", str(BUNDLED_MODEL), "--n", "2", "--out", str(target)])
+        assert res.exit_code == 1 and message in res.output and "Traceback" not in res.output, res.output
+    assert {p.name: p.read_bytes() for p in (tmp_path / "s").iterdir()} == before
+    res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path / "s"), "--out", str(BUNDLED_MODEL)])
+    assert res.exit_code == 1 and "refusing to overwrite the model file" in " ".join(res.output.split())
 
 
 def test_morph_check_rates_on_a_scene_folder(model: DeepMorphModel, tmp_path: Path) -> None:

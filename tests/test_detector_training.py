@@ -89,6 +89,14 @@ def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
         assert torch.equal(val, b.decoder.state_dict()[key])
 
 
+def test_an_existing_file_other_than_the_model_is_not_replaced(tmp_path: Path) -> None:
+    drawing = tmp_path / "ghost.svg"
+    drawing.write_text("<svg/>")
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(drawing), "--steps", "1"])
+    assert res.exit_code == 1 and "already exists" in " ".join(res.output.split()), res.output
+    assert drawing.read_text() == "<svg/>"
+
+
 def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(BUNDLED_MODEL), "--resume"])
     assert res.exit_code == 1 and "no interrupted detector training" in res.output

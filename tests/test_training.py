@@ -11,7 +11,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from deepmorph_core.api import BUNDLED_MODEL, train_model
+from deepmorph_core.api import BUNDLED_MODEL, capacity_warning, train_model
 from deepmorph_core.cli import app
 from deepmorph_core.codec import random_payloads
 from deepmorph_core.codemodel import DeepMorphModel
@@ -181,6 +181,18 @@ def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(t
             m.encode(payload)
 
 
+def test_training_warns_when_the_code_outnumbers_the_variables(tiny_svg: Path, tmp_path: Path) -> None:
+    """26 variables cannot carry a 24-bit payload's 32+ code bits (README: how many variables a
+    payload needs): the user is told before the run, not after minutes of training."""
+    base = ["train", str(tiny_svg), "--steps", "1", "--width", "32", "--batch", "2", "--threads", "1"]
+    res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
+    text = " ".join(res.stderr.split())
+    assert res.exit_code == 0 and "warning:" in text and "but the drawing only 26 variables" in text, text
+    res = runner.invoke(app, [*base, "--payload-bits", "8", "--out", str(tmp_path / "small.dmm")])
+    assert res.exit_code == 0 and "warning" not in res.stderr
+    assert capacity_warning(26, 26, "d.svg") is None and "27 bits" in capacity_warning(27, 26, "d.svg")
+
+
 def test_blank_image_has_no_detection(trained: Path) -> None:
     m = DeepMorphModel.load(trained)
     assert m.decode_image(np.ones((100, 100), np.float32)) == []
@@ -271,6 +283,8 @@ def test_demo_runs_end_to_end_on_the_bundled_model(tmp_path: Path) -> None:
         assert (tmp_path / "demo" / name).is_file(), name
     assert result.stdout.count("decoded") + result.stdout.count("no drawing found") == 3
     assert "WRONG" not in result.stdout  # a wrong payload must never pass the integrity check
+    res = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo" / "code.svg")])
+    assert res.exit_code == 1 and "is not a folder" in res.output and "Traceback" not in res.output
 
 
 def test_train_refuses_missing_or_broken_drawings(tmp_path: Path) -> None:
