@@ -96,7 +96,7 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         out = img.astype(np.float32)
         if not np.isfinite(out).all():
             raise DeepMorphError("image has non-finite values")
-        lo, hi = float(out.min(initial=0.0)), float(out.max(initial=0.0))
+        lo, hi = (float(out.min()), float(out.max())) if out.size else (0.0, 0.0)
         if hi > FLOAT_RANGE_SLACK or lo < 1.0 - FLOAT_RANGE_SLACK:
             raise DeepMorphError(
                 f"float pixels must lie in [0, 1], this image's lie in [{lo:g}, {hi:g}] (divide by 255, or pass uint8)"

@@ -108,6 +108,7 @@ def test_to_gray_takes_every_usual_pixel_type_and_refuses_the_rest() -> None:
     assert to_gray(np.full((20, 20), 1.2)).max() == 1.0  # noise just past white is clipped
     refused = {
         "lie in \\[0, 255\\] \\(divide by 255": bgr.astype(np.float64),  # a 0-255 float photo was all white
+        "lie in \\[12, 200\\]": np.linspace(12, 200, 400).reshape(20, 20),
         "expected 1, 3 \\(BGR\\) or 4": bgr[..., :2],
         "int64 pixels are not supported": bgr.astype(np.int64),
         "non-finite": np.full((20, 20), np.nan, np.float32),
