@@ -11,7 +11,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from deepmorph_core.api import BUNDLED_MODEL, capacity_warning, train_model
+from deepmorph_core.api import BUNDLED_MODEL, INVISIBLE, MorphableDrawing, capacity_warning, train_model
 from deepmorph_core.cli import app
 from deepmorph_core.codec import random_payloads
 from deepmorph_core.codemodel import DeepMorphModel
@@ -181,16 +181,29 @@ def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(t
             m.encode(payload)
 
 
-def test_training_warns_when_the_code_outnumbers_the_variables(tiny_svg: Path, tmp_path: Path) -> None:
+def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg: Path, tmp_path: Path) -> None:
     """26 variables cannot carry a 24-bit payload's 32+ code bits (README: how many variables a
     payload needs): the user is told before the run, not after minutes of training."""
     base = ["train", str(tiny_svg), "--steps", "1", "--width", "32", "--batch", "2", "--threads", "1"]
     res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
     text = " ".join(res.stderr.split())
-    assert res.exit_code == 0 and "warning:" in text and "but the drawing only 26 variables" in text, text
+    assert res.exit_code == 0 and "warning:" in text and "but the drawing only 26 visible variables" in text, text
     res = runner.invoke(app, [*base, "--payload-bits", "8", "--out", str(tmp_path / "small.dmm")])
     assert res.exit_code == 0 and "warning" not in res.stderr
-    assert capacity_warning(26, 26, "d.svg") is None and "27 bits" in capacity_warning(27, 26, "d.svg")
+
+
+def test_variables_a_renderer_does_not_show_do_not_count() -> None:
+    """Feather package: 40 variables at 2 %, but 6 move points along the straight lines through
+    them (0.00-0.03 of the median change); it read 40 % of 24-bit payloads (README). cpu: 40,
+    all visible (the weakest, pins pushed into the outline, at 0.4)."""
+    feather = Path(__file__).parent / "data" / "feather"
+    package = MorphableDrawing.load(feather / "package.svg", move=0.48).visibility()
+    cpu = MorphableDrawing.load(feather / "cpu.svg", move=0.48).visibility()
+    assert len(package) == len(cpu) == 40 and (package <= INVISIBLE).sum() == 6 and (cpu <= INVISIBLE).sum() == 0
+    assert np.median(cpu) == pytest.approx(1.0) and cpu.min() > 0.3
+    warning = capacity_warning(38, package, "package.svg")  # 24 bits, CRC-8, t = 1
+    assert warning is not None and "only 34 visible variables (6 of its 40 variables change nothing" in warning
+    assert capacity_warning(38, cpu, "cpu.svg") is None and capacity_warning(34, package, "package.svg") is None
 
 
 def test_blank_image_has_no_detection(trained: Path) -> None:
