@@ -8,12 +8,15 @@ scalings (a morph moves the ink a little) are what training's geometric augmenta
 
 from __future__ import annotations
 
+import io
+import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
+from PIL import Image
 from torch import Tensor
 
 from deepmorph_core.errors import DeepMorphError
@@ -21,6 +24,7 @@ from deepmorph_core.errors import DeepMorphError
 MAX_IMAGE_PIXELS = 80_000_000
 # float images a little outside [0, 1] (noise, rounding) are clipped; beyond this they are on another scale
 FLOAT_RANGE_SLACK = 2.0
+EXIF_ORIENTATION = 0x0112  # the EXIF tag of how a viewer turns the stored pixels
 MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
 
 
@@ -48,11 +52,15 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
     data = np.fromfile(path, dtype=np.uint8)
     if data.size == 0:
         raise DeepMorphError(f"{path}: empty file, not an image")
+    size, orientation = _peek_header(data, path)
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:  # refused before it is decoded
+        raise DeepMorphError(f"{path}: {size[0]}x{size[1]} pixels is too large to decode")
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
         raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
+    img = _upright(img, orientation)
     if min(img.shape[:2]) < MIN_IMAGE_SIDE:
         raise DeepMorphError(
             f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too small to hold a drawing"
@@ -68,6 +76,43 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
         alpha = img[..., 3:4].astype(np.float32) / 255.0
         return (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
     return np.ascontiguousarray(img[..., :3])
+
+
+def _peek_header(data: np.ndarray, path: Path) -> tuple[tuple[int, int] | None, int]:
+    """``((width, height), EXIF orientation)`` from an image file's header, without decoding
+    its pixels (Pillow opens lazily); ``(None, 1)`` where Pillow cannot tell, and then OpenCV's
+    decoder alone judges the file.
+
+    Raises:
+        DeepMorphError: a header beyond Pillow's own bomb limit (far more than
+            :data:`MAX_IMAGE_PIXELS`), before any pixel is decoded.
+    """
+    try:
+        with warnings.catch_warnings():  # the size is judged by the caller, not by Pillow's warning
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data.tobytes())) as img:
+                return img.size, int(img.getexif().get(EXIF_ORIENTATION, 1) or 1)
+    except Image.DecompressionBombError:
+        raise DeepMorphError(f"{path}: its header claims far too many pixels to decode") from None
+    except Exception:  # not a format Pillow knows, or a header it cannot parse: OpenCV decides
+        return None, 1
+
+
+def _upright(img: np.ndarray, orientation: int) -> np.ndarray:
+    """The image as a viewer shows it, following its EXIF orientation (phone cameras store
+    pixels as the sensor saw them and the turn in this tag); keypoints, boxes, overlays and the
+    pose are then in the frame the user sees, where a calibration for it applies."""
+    turns = {
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1],
+        5: lambda a: np.swapaxes(a, 0, 1),
+        6: lambda a: np.rot90(a, -1),
+        7: lambda a: np.rot90(np.swapaxes(a, 0, 1), 2),
+        8: lambda a: np.rot90(a, 1),
+    }
+    turn = turns.get(orientation)
+    return img if turn is None else np.ascontiguousarray(turn(img))
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:

@@ -527,3 +527,24 @@ def test_a_morph_fit_that_loses_at_once_is_checked_again_longer(
     monkeypatch.setattr(locate_module, "refine_at", lambda *a, **k: losing(*a, **k, always=True))
     (det,) = [d for d in locator.locate(scene.image) if _matches(d, truth)]
     assert det.morph_check == "failed" and not det.result.ok
+
+
+def test_a_phone_photo_is_decoded_as_it_is_shown(model: DeepMorphModel, tmp_path: Path) -> None:
+    """Phones store the sensor's pixels and the turn in the EXIF orientation tag: corners,
+    keypoints and the pose must come out in the frame a viewer shows (where a calibration for
+    that frame applies), not the stored one."""
+    from PIL import Image
+
+    scene = SceneMaker(model, severity="easy", seed=14).make(drawings=1)
+    truth = scene.placements[0]
+    stored = np.rot90(scene.image, 1)  # the sensor's pixels: the scene turned a quarter left
+    exif = Image.Exif()
+    exif[0x0112] = 6  # "turn a quarter right to show"
+    Image.fromarray(np.ascontiguousarray(stored[..., ::-1])).save(
+        tmp_path / "phone.jpg", exif=exif.tobytes(), quality=95
+    )
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "phone.jpg"), "--json"])
+    assert res.exit_code == 0, res.output
+    (det,) = json.loads(res.output)[0]["detections"]
+    assert det["ok"] and det["payload"]["bits"] == "".join(map(str, truth.payload))
+    assert np.abs(np.array(det["corners"]) - truth.corners).max() < 2.0

@@ -156,3 +156,33 @@ def test_paper_preprocess_binarises_masks_and_blurs(ghost) -> None:
     assert out[solid].max() < 0.05 and out[paper].min() > 0.95
     assert out[2:6, 2:6].min() == 1.0  # masked out
     assert paper_preprocess(grey)[2:6, 2:6].max() < 0.5  # without the region, the speck stays ink
+
+
+def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(tmp_path) -> None:
+    import struct
+    import zlib
+
+    import cv2
+    from PIL import Image
+
+    from deepmorph_core.imaging import read_image_bgr
+
+    pixels = np.random.default_rng(0).integers(0, 256, (60, 90, 3), dtype=np.uint8)
+    for orientation in range(1, 9):
+        path = tmp_path / f"o{orientation}.jpg"
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        Image.fromarray(pixels).save(path, exif=exif.tobytes(), quality=95)
+        # OpenCV's own reader turns by the tag too (but drops alpha and 16 bits, which we keep)
+        assert np.array_equal(read_image_bgr(path), cv2.imread(str(path))), orientation
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    for side, message in [(30000, "claims far too many pixels"), (9500, "9500x9500 pixels is too large")]:
+        rows = zlib.compress(b"\x00" * (side + 1) * 8)  # a few rows of a huge gray image: 10 KB on disk
+        header = struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)
+        bomb = tmp_path / f"bomb{side}.png"
+        bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", rows) + chunk(b"IEND", b""))
+        with pytest.raises(DeepMorphError, match=message):
+            read_image_bgr(bomb)
