@@ -43,6 +43,16 @@ def _readable_frames(files: list[Path], skipped: list[dict[str, str]]) -> Iterat
             skipped.append({"frame": path.name, "error": str(exc)})
 
 
+def _fits_camera(camera: Any, path: Path, size: tuple[int, int]) -> None:
+    """Check, before any work, that ``--camera`` describes an input of ``size`` (naming it)."""
+    if camera is None:
+        return
+    try:
+        camera.for_image(*size)
+    except DeepMorphError as exc:
+        raise DeepMorphError(f"{path}: {exc}") from None
+
+
 def _overlay_targets(overlay: Path | None, inputs: list[Path], model: Path) -> dict[Path, Path]:
     """Where ``--overlay`` puts each input's annotated image: the file itself for one input,
     else ``<folder>/<input name>.overlay.png``. Checked before any work: no target may replace
@@ -108,10 +118,12 @@ def decode(
         if path.is_dir():
             jobs.append(("folder", path, folder_frames(path)))
         elif is_video(path):
-            check_video(path)
+            _fits_camera(cam, path, check_video(path))
             jobs.append(("video", path, None))
         else:
-            jobs.append(("image", path, read_image_bgr(path)))
+            image = read_image_bgr(path)
+            _fits_camera(cam, path, (image.shape[1], image.shape[0]))
+            jobs.append(("image", path, image))
     targets = _overlay_targets(overlay, [path for _, path, _ in jobs], model)
     locator = Locator(m)
     soft = not hard_only
@@ -138,7 +150,12 @@ def decode(
         frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
         last = None
         for label, frame in frames:
-            dets = follow(frame, camera=cam, soft=soft)
+            try:
+                dets = follow(frame, camera=cam, soft=soft)
+            except DeepMorphError as exc:  # a frame of another size than the calibration's, say
+                err.print(f"warning: skipped frame {label}: {exc}", markup=False, highlight=False)
+                skipped.append({"frame": label, "error": str(exc)})
+                continue
             fuser.add(label, dets, frame)
             last = (frame, dets)
         if last is None:  # a folder none of whose files is an image

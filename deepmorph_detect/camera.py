@@ -12,7 +12,7 @@ centre; every pose computed that way says so (``camera.assumed``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,7 @@ import numpy as np
 from deepmorph_core.errors import DeepMorphError
 
 DEFAULT_HFOV_DEG = 65.0
+ASPECT_TOLERANCE = 0.01  # a calibration's image shape and the photo's may differ this much (rounding)
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,7 @@ class Camera:
     cy: float
     dist: tuple[float, ...] = ()
     assumed: bool = False
+    size: tuple[int, int] | None = None  # (width, height) of the images it was calibrated on, when known
 
     @property
     def matrix(self) -> np.ndarray:
@@ -50,12 +52,43 @@ class Camera:
         f = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
         return cls(f, f, width / 2, height / 2, assumed=True)
 
+    def for_image(self, width: int, height: int) -> Camera:
+        """These intrinsics for a ``width`` x ``height`` image.
+
+        A calibration made at another resolution of the same frame (a video's full-size frames,
+        say, and a downscaled photo) is scaled to it; one of another aspect ratio (a crop, or a
+        photo turned a quarter) is an error, as is a principal point outside the image: either
+        way the pose would be silently wrong.
+
+        Raises:
+            DeepMorphError: the intrinsics cannot describe this image.
+        """
+        cam = self
+        if self.size is not None and self.size != (width, height):
+            cw, ch = self.size
+            if abs(width / height - cw / ch) > ASPECT_TOLERANCE * cw / ch:
+                raise DeepMorphError(
+                    f"the camera calibration is for {cw}x{ch} images, this one is {width}x{height}"
+                    " (another shape: a crop, or turned a quarter?); calibrate for this frame"
+                )
+            s = width / cw
+            cam = replace(self, fx=self.fx * s, fy=self.fy * s, cx=self.cx * s, cy=self.cy * s, size=(width, height))
+        if not (0 <= cam.cx <= width and 0 <= cam.cy <= height):
+            raise DeepMorphError(
+                f"the camera's principal point ({cam.cx:g}, {cam.cy:g}) lies outside this {width}x{height}"
+                " image: intrinsics for another image size? (a calibration file that records"
+                " image_width and image_height is scaled to the image)"
+            )
+        return cam
+
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy, "assumed": self.assumed}
         if self.assumed:
             out["note"] = f"no calibration given: assumed {DEFAULT_HFOV_DEG:g} deg horizontal field of view"
         if self.dist:
             out["dist"] = list(self.dist)
+        if self.size is not None:
+            out["image_size"] = list(self.size)
         return out
 
 
@@ -127,6 +160,7 @@ def load_calibration(path: str | Path) -> Camera:
                 break
         if matrix is None or matrix.shape != (3, 3):
             raise DeepMorphError(f"{path}: no 3x3 camera_matrix in the calibration file")
+        size = _image_size(fs, path)
         dist: tuple[float, ...] = ()
         for key in ("distortion_coefficients", "dist_coeffs", "D", "distCoeffs"):
             node = fs.getNode(key)
@@ -142,7 +176,18 @@ def load_calibration(path: str | Path) -> Camera:
         raise DeepMorphError(f"{path}: camera_matrix must have positive focal lengths and finite values")
     if dist and len(dist) not in (4, 5, 8, 12, 14):
         raise DeepMorphError(f"{path}: {len(dist)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
-    return Camera(float(m[0, 0]), float(m[1, 1]), float(m[0, 2]), float(m[1, 2]), dist)
+    return Camera(float(m[0, 0]), float(m[1, 1]), float(m[0, 2]), float(m[1, 2]), dist, size=size)
+
+
+def _image_size(fs: cv2.FileStorage, path: Path) -> tuple[int, int] | None:
+    """``(image_width, image_height)`` as OpenCV's calibration tools record them, if present."""
+    w, h = fs.getNode("image_width"), fs.getNode("image_height")
+    if w.empty() or h.empty():
+        return None
+    width, height = w.real(), h.real()
+    if not (width >= 1 and height >= 1 and float(width).is_integer() and float(height).is_integer()):
+        raise DeepMorphError(f"{path}: image_width and image_height must be whole numbers of pixels")
+    return int(width), int(height)
 
 
 def solve_pose(camera: Camera, object_points: np.ndarray, image_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -410,7 +410,7 @@ class Locator:
             raise DeepMorphError(
                 f"image of {w}x{h} pixels is too small to hold a drawing (at least {MIN_IMAGE_SIDE} pixels each way)"
             )
-        return gray, camera or Camera.default(w, h), ImagePyramid(gray)
+        return gray, camera.for_image(w, h) if camera is not None else Camera.default(w, h), ImagePyramid(gray)
 
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.

@@ -68,8 +68,9 @@ def video_frames(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray]]
 __all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "check_video", "folder_frames", "is_video", "video_frames"]
 
 
-def check_video(path: Path) -> None:
-    """Fail early (before any work) when a video cannot be opened or has no readable frame."""
+def check_video(path: Path) -> tuple[int, int]:
+    """Fail early (before any work) when a video cannot be opened or has no readable frame;
+    the ``(width, height)`` of its frames."""
     if not path.is_file():
         raise DeepMorphError(f"{path}: no such video file")
     cap = cv2.VideoCapture(str(path))
@@ -85,3 +86,4 @@ def check_video(path: Path) -> None:
             f"{path}: frames of {w}x{h} pixels are too small to hold a drawing"
             f" (at least {MIN_IMAGE_SIDE} pixels each way)"
         )
+    return frame.shape[1], frame.shape[0]

@@ -548,3 +548,38 @@ def test_a_phone_photo_is_decoded_as_it_is_shown(model: DeepMorphModel, tmp_path
     (det,) = json.loads(res.output)[0]["detections"]
     assert det["ok"] and det["payload"]["bits"] == "".join(map(str, truth.payload))
     assert np.abs(np.array(det["corners"]) - truth.corners).max() < 2.0
+
+
+def test_a_calibration_is_scaled_to_the_image_or_refused(tmp_path: Path) -> None:
+    """A calibration records the image size it was made at (OpenCV writes image_width and
+    image_height): a photo of the same shape at another resolution gets scaled intrinsics;
+    another shape (a crop, a turned photo) or a principal point off the image is an error,
+    not a silently wrong pose."""
+    path = tmp_path / "calib.yaml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 1280)
+    fs.write("image_height", 960)
+    fs.write("camera_matrix", np.array([[1000.0, 0, 650], [0, 1002, 470], [0, 0, 1]]))
+    fs.release()
+    cam = parse_camera(str(path))
+    assert cam.size == (1280, 960) and cam.for_image(1280, 960) == cam
+    half = cam.for_image(640, 480)
+    assert (half.fx, half.fy, half.cx, half.cy, half.size) == (500, 501, 325, 235, (640, 480))
+    for size in [(480, 640), (640, 400)]:
+        with pytest.raises(DeepMorphError, match="calibration is for 1280x960 images"):
+            cam.for_image(*size)
+    with pytest.raises(DeepMorphError, match="principal point"):
+        parse_camera("500,500,900,240").for_image(640, 480)
+
+    scene = SceneMaker(DeepMorphModel.load(BUNDLED_MODEL), severity="easy", seed=14).make(drawings=1)
+    photo = tmp_path / "photo.png"
+    cv2.imwrite(str(photo), scene.image)  # 640x480
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(photo), "--camera", str(path), "--json"])
+    assert res.exit_code == 0, res.output
+    (det,) = json.loads(res.output)[0]["detections"]
+    assert det["pose"]["camera"]["fx"] == 500 and det["pose"]["camera"]["image_size"] == [640, 480]
+    turned = tmp_path / "turned.png"
+    cv2.imwrite(str(turned), np.rot90(scene.image).copy())  # 480x640
+    res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(photo), str(turned), "--camera", str(path)])
+    text = " ".join(res.output.split())
+    assert res.exit_code == 1 and "turned.png: the camera calibration is for 1280x960 images" in text, text
