@@ -22,7 +22,7 @@ from rich.text import Text
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
+from deepmorph_core.fileio import atomic_write, output_folder, refuse_to_overwrite
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.render import image_format, overlay, render_svg_ink, save_gray, save_rgb
 
@@ -487,12 +487,7 @@ def demo(
     from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_core.render import render_svg
 
-    if out_dir.exists() and not out_dir.is_dir():
-        raise DeepMorphError(f"--out {out_dir}: exists and is not a folder; the demo writes its files into a folder")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise DeepMorphError(f"--out {out_dir}: cannot create the folder: {exc.strerror or exc}") from None
+    output_folder(out_dir, f"--out {out_dir}")
     if retrain or not BUNDLED_MODEL.is_file():
         out.print(f"training a model for {BUNDLED_DRAWING.name} ({steps} steps) ...")
         summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps})

@@ -38,6 +38,28 @@ def atomic_write(path: str | Path, data: bytes) -> None:
         raise
 
 
+def refuse_non_folder(path: str | Path, label: str | None = None) -> None:
+    """One clear error when ``path`` exists but is not a folder (``label`` names it, default
+    the path), before any work goes into what would be written there."""
+    if Path(path).exists() and not Path(path).is_dir():
+        raise DeepMorphError(f"{label or path}: exists and is not a folder")
+
+
+def output_folder(path: str | Path, label: str | None = None) -> Path:
+    """``path`` as a folder to write into, created when missing.
+
+    Raises:
+        DeepMorphError: it is a file, or cannot be created.
+    """
+    path = Path(path)
+    refuse_non_folder(path, label)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DeepMorphError(f"{label or path}: cannot create the folder: {exc.strerror or exc}") from None
+    return path
+
+
 def same_file(a: str | Path, b: str | Path) -> bool:
     """Whether two paths name the same file (the same path resolved, or one linked to the other)."""
     a, b = Path(a), Path(b)

@@ -25,7 +25,7 @@ import numpy as np
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write
+from deepmorph_core.fileio import atomic_write, output_folder, refuse_non_folder
 from deepmorph_core.imaging import read_image_bgr
 from deepmorph_detect.camera import Camera, rotation_error_deg, solve_pose, translation_error
 from deepmorph_detect.locate import Located, Locator
@@ -36,8 +36,7 @@ def check_scene_folder(out: Path) -> None:
     """Refuse, before any work, a place :func:`write_scenes` cannot fill without loss: a file,
     or a folder that already holds scenes (a second set would replace some of the first and
     leave the rest stale)."""
-    if out.exists() and not out.is_dir():
-        raise DeepMorphError(f"{out}: exists and is not a folder; scenes are written into a folder")
+    refuse_non_folder(out)
     if out.is_dir() and ((out / "index.json").exists() or next(out.glob("scene_*"), None) is not None):
         raise DeepMorphError(f"{out}: already holds scenes; write to a new folder, or remove them first")
 
@@ -64,12 +63,8 @@ def write_scenes(
         DeepMorphError: ``out`` is a file, or a folder that already holds scenes (checked before
             any work: a second set would replace some of the first and leave the rest stale).
     """
-    out = Path(out)
-    check_scene_folder(out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise DeepMorphError(f"{out}: cannot create the folder: {exc.strerror or exc}") from None
+    check_scene_folder(Path(out))
+    out = output_folder(out)
     maker = SceneMaker(model, size, severity, seed=seed)
     rng = np.random.default_rng([seed, 7])
     names = []
