@@ -26,6 +26,7 @@ import numpy as np
 from deepmorph_core.render import render_svg
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.icalign import InverseECC
+from deepmorph_detect.inkstart import ink_starts
 
 LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
@@ -66,6 +67,15 @@ class Template:
     def coarse_blurred(self) -> np.ndarray:
         """The coarsest level, blurred as candidates are before their corner order is scored."""
         return cv2.GaussianBlur(self.images[min(self.images)], (5, 5), 0)
+
+    @functools.cached_property
+    def ink_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean ``(2,)`` and covariance ``(2, 2)`` of the drawing's ink in SVG units (finest level)."""
+        finest = max(self.images)
+        ys, xs = np.nonzero(self.images[finest] < 0.5)
+        points = np.stack([xs, ys, np.ones_like(xs)], 0).astype(np.float64)
+        svg = (self.to_svg_units(finest) @ points)[:2].T
+        return svg.mean(0), np.cov(svg.T)
 
     def solver(self, width: int, smooth: int) -> InverseECC:
         """The inverse-compositional ECC solver for the level at ``width`` (made once)."""
@@ -239,7 +249,8 @@ def refine(
         accept: the correlation a caller accepts. When the quick path ends below it, wider
             searches follow, each only if the one before also fell short: every other corner
             order carried through all levels, then the best few of :func:`outline_sweep` by
-            plain correlation. What they find must reach ``accept`` plus
+            plain correlation, then the best few starts from the print's ink moments
+            (:func:`~deepmorph_detect.inkstart.ink_starts`). What they find must reach ``accept`` plus
             :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is returned. ``None``:
             the quick path only.
 
@@ -293,6 +304,17 @@ def refine(
     # the outline itself is off: turned or scaled starts, the best few by plain correlation
     swept = _plain_scores(pyramid, outline_sweep(homography, template), template, levels[0])
     for start, H, crop in swept[:SWEEP_TRIES]:
+        if start < min_start:
+            break
+        step = from_outline(H, crop)
+        best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+    if good(best):
+        return best
+    # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
+    # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
+    quad = project(homography, viewbox_corners(template.viewbox))
+    starts = ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS)
+    for start, H, crop in _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]:
         if start < min_start:
             break
         step = from_outline(H, crop)

@@ -583,3 +583,65 @@ def test_a_calibration_is_scaled_to_the_image_or_refused(tmp_path: Path) -> None
     res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(photo), str(turned), "--camera", str(path)])
     text = " ".join(res.output.split())
     assert res.exit_code == 1 and "turned.png: the camera calibration is for 1280x960 images" in text, text
+
+
+def _steep_print(locator: Locator, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A 480x360 photo of one print seen steeply from the side (a thin parallelogram), over
+    stripes and blobs, and the drawing frame's true corners in it."""
+    from deepmorph_core.render import render_svg
+
+    md = locator.model.drawing
+    drawing = render_svg(md.to_svg(md.neutral_values()[0]), 160)
+    paper = np.pad(drawing, 30, constant_values=1.0)  # white margin around the frame
+    side = paper.shape[1]
+    rng = np.random.default_rng(seed)
+    photo = np.full((360, 480), 0.45, np.float32)
+    for x in range(0, 480, 24):
+        photo[:, x : x + 6] = 0.25  # dark stripes: clutter near the print
+    photo = cv2.GaussianBlur(photo + rng.normal(0, 0.03, photo.shape).astype(np.float32), (3, 3), 0)
+    # paper square -> a parallelogram with sides of 300 and 150 px (foreshortened by half, as
+    # at 60 degrees from head-on) and sheared by 0.9 across (a steep perspective), at 35 degrees
+    a = np.deg2rad(35)
+    along, across = np.array([np.cos(a), np.sin(a)]), np.array([-np.sin(a), np.cos(a)])
+    centre = np.array([240.0, 180.0])
+    A = np.stack([along * 300 / side + across * 0.9 * 150 / side, across * 150 / side], 1)
+    M = np.hstack([A, (centre - A @ np.array([side / 2, side / 2]))[:, None]])
+    mask = cv2.warpAffine(np.ones_like(paper), M, (480, 360))
+    seen = cv2.warpAffine(paper, M, (480, 360))
+    photo = np.where(mask > 0.5, seen * 0.9 + 0.05, photo).astype(np.float32)
+    frame = viewbox_corners(locator.viewbox)
+    scale = 160 / locator.viewbox[2]
+    corners = (np.asarray(frame) - np.array(locator.viewbox[:2])) * scale + 30
+    return np.clip(photo, 0, 1), corners @ A.T + M[:, 2]
+
+
+def test_an_outline_of_the_wrong_shear_is_found_from_the_prints_ink(
+    locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A print seen steeply from the side, outlined by the detector as an upright square of
+    the right centre and area (medium scenes: the misses left after the outline sweep): no
+    turn or scale of that square fits, the starts from the print's ink moments do."""
+    import deepmorph_detect.refine as refine_module
+    from deepmorph_detect.inkstart import ink_starts, print_ink
+
+    photo, truth = _steep_print(locator)
+    centre, half = truth.mean(0), 0.5 * np.sqrt(cv2.contourArea(truth.astype(np.float32)))
+    square = centre + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+    start = locator._homography(square)
+    close = 0.06 * np.linalg.norm(truth[1] - truth[0])
+
+    def err(found) -> float:
+        if found is None or found.correlation < locator.min_correlation:
+            return np.inf
+        return float(np.linalg.norm(project(found.homography, viewbox_corners(locator.viewbox)) - truth, axis=1).mean())
+
+    pyramid = ImagePyramid(photo)
+    found = refine(pyramid, start, locator.template, orders=4, accept=locator.min_correlation)
+    assert err(found) < close, (err(found), close)
+    monkeypatch.setattr(refine_module, "ink_starts", lambda *a, **k: [])
+    without = refine(pyramid, start, locator.template, orders=4, accept=locator.min_correlation)
+    assert err(without) > close
+    # no paper, no ink: no starts
+    blank = np.full((120, 160), 0.5, np.float32)
+    assert print_ink(blank, square * 0.3) is None
+    assert ink_starts(blank, square * 0.3, locator.template.ink_moments, 8) == []
