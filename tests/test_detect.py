@@ -645,3 +645,19 @@ def test_an_outline_of_the_wrong_shear_is_found_from_the_prints_ink(
     blank = np.full((120, 160), 0.5, np.float32)
     assert print_ink(blank, square * 0.3) is None
     assert ink_starts(blank, square * 0.3, locator.template.ink_moments, 8) == []
+
+
+def test_another_icon_that_barely_aligns_and_does_not_read_is_not_reported(locator: Locator) -> None:
+    """A photo without the ghost: the Feather smile's face aligns to it at 0.56, just over the
+    bar (1 photo in 4000 without the drawing). No payload reads there, so it is not reported:
+    an unread drawing must align :data:`UNREAD_MARGIN` better."""
+    from deepmorph_detect.locate import MIN_CORRELATION, UNREAD_MARGIN
+
+    image = cv2.imread(str(Path(__file__).parent / "data" / "photos" / "smile_not_ghost.png"))
+    gray = to_gray(image)
+    pyramid = ImagePyramid(gray)
+    assert locator._verify(pyramid, locator.detector.detect(gray), gray) == []
+    aligned = locator._verify(pyramid, locator._whole_frame(gray))  # the ink of the whole photo
+    assert [round(a.correlation, 2) for _, a, _ in aligned] == [0.56]  # what the fixture is for
+    assert MIN_CORRELATION <= aligned[0][1].correlation < MIN_CORRELATION + UNREAD_MARGIN
+    assert locator.locate(image) == []
