@@ -250,9 +250,9 @@ def refine(
             searches follow, each only if the one before also fell short: every other corner
             order carried through all levels, then the best few of :func:`outline_sweep` by
             plain correlation, then the best few starts from the print's ink moments
-            (:func:`~deepmorph_detect.inkstart.ink_starts`). What they find must reach ``accept`` plus
-            :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is returned. ``None``:
-            the quick path only.
+            (:func:`~deepmorph_detect.inkstart.ink_starts`). What they find must reach
+            ``accept`` plus :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is
+            returned. ``None``: the quick path only.
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -291,6 +291,16 @@ def refine(
     def good(a: Alignment | None) -> bool:
         return a is not None and a.correlation >= bar
 
+    def best_few(starts: list[np.ndarray], best: Alignment | None) -> Alignment | None:
+        """``best``, or better: the :data:`SWEEP_TRIES` best of ``starts`` by plain correlation,
+        each solved from its outline and carried through all levels."""
+        for start, H, crop in _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]:
+            if start < min_start:
+                break
+            step = from_outline(H, crop)
+            best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+        return best
+
     # of the 22 drawings the detector proposed but alignment missed in 400 scenes (medium and
     # hard), 7 were found this way: the detector's corner order was a quarter turn off, and
     # plain correlation ranked the right order third or fourth
@@ -301,24 +311,14 @@ def refine(
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
         return best
-    # the outline itself is off: turned or scaled starts, the best few by plain correlation
-    swept = _plain_scores(pyramid, outline_sweep(homography, template), template, levels[0])
-    for start, H, crop in swept[:SWEEP_TRIES]:
-        if start < min_start:
-            break
-        step = from_outline(H, crop)
-        best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+    # the outline itself is off: turned or scaled starts
+    best = best_few(outline_sweep(homography, template), best)
     if good(best):
         return best
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
     # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
     quad = project(homography, viewbox_corners(template.viewbox))
-    starts = ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS)
-    for start, H, crop in _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]:
-        if start < min_start:
-            break
-        step = from_outline(H, crop)
-        best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+    best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
     return best if good(best) else quick
 
 

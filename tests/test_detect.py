@@ -587,7 +587,7 @@ def test_a_calibration_is_scaled_to_the_image_or_refused(tmp_path: Path) -> None
 
 def _steep_print(locator: Locator, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """A 480x360 photo of one print seen steeply from the side (a thin parallelogram), over
-    stripes and blobs, and the drawing frame's true corners in it."""
+    dark stripes, and the drawing frame's true corners in it."""
     from deepmorph_core.render import render_svg
 
     md = locator.model.drawing
