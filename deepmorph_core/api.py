@@ -216,7 +216,8 @@ def capacity_warning(code_bits: int, visibility: np.ndarray, label: str) -> str 
     read reliably; with fewer, bits share variables as levels the decoder does not separate,
     or land on variables no renderer shows. Measured (README, 24 bits, 38 code bits): the
     Feather ``camera`` has 26 variables, 0 % read; ``package`` has 40, 6 of them invisible,
-    40 % read under medium corruption; ``cpu`` has 40, all visible, 93.5 %."""
+    40 % read under medium corruption; ``cpu`` has 40, all visible, 93.5 %; ``codesandbox``
+    has 54, 48 visible, 97.4 % (its weakest visible variables carry the bits that fail)."""
     visible = int((np.asarray(visibility) > INVISIBLE).sum())
     if code_bits <= visible:
         return None
