@@ -266,6 +266,7 @@ def train_model(
     from deepmorph_core.bounds import format_validation_error
     from deepmorph_core.codec import choose_codec
     from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.model import DecoderConfig
     from deepmorph_core.raster import RasterSettings
     from deepmorph_core.train import TrainConfig, Trainer, build_augment
 
@@ -306,6 +307,7 @@ def train_model(
                 {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
                 augment.config.model_dump(),
                 config.model_dump(),
+                decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer),
                 label=label,
             )
     except ValidationError as exc:

@@ -306,6 +306,13 @@ def train(
             "--encoder-init", help="Encoder start: spread (each bit drives its own variables) or random (the paper's)."
         ),
     ] = "spread",
+    spatial_transformer: Annotated[
+        bool,
+        typer.Option(
+            "--spatial-transformer/--no-spatial-transformer",
+            help="Learn a homography in front of the decoder that undoes leftover perspective.",
+        ),
+    ] = True,
     device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
     threads: ThreadsOpt = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
@@ -339,6 +346,7 @@ def train(
                 "severity": severity,
                 "seed": seed,
                 "encoder_init": encoder_init,
+                "spatial_transformer": spatial_transformer,
                 "device": device,
                 "threads": threads,
                 "hard_fraction": hard_fraction,
@@ -368,6 +376,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     table.add_column("value", overflow="fold")
     codec = data["codec"]
     rec = data["record"]
+    dec = data["decoder"]
     rows = [
         ("drawing", data["drawing"]),
         ("payload bits", str(data["payload_bits"])),
@@ -377,6 +386,11 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         ),
         ("variables N_v", str(data["n_variables"])),
         ("image size", "x".join(map(str, data["image_size"][::-1]))),
+        (
+            "decoder",
+            f"{'spatial transformer, then ' if dec['spatial_transformer'] else ''}CNN "
+            f"(stem {dec['stem']}, channels {list(dec['channels'])}, head {dec['hidden']})",
+        ),
         ("bounds defaults", json.dumps(data["bounds_defaults"]) or "-"),
         (
             "training",

@@ -240,6 +240,7 @@ class DeepMorphModel:
             "codec": {**m.codec.model_dump(), "ecc_bits": m.codec.ecc_bits},
             "n_variables": m.n_variables,
             "image_size": list(self.image_size),
+            "decoder": m.decoder.model_dump(),
             "bounds_defaults": m.bounds_defaults,
             "augment": m.augment,
             "train": m.train,

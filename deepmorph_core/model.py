@@ -13,6 +13,8 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor, nn
 
+from deepmorph_core.spatial import SpatialTransformer
+
 
 class Encoder(nn.Module):
     """Bits to encoder outputs in ``(0, 1)``: ``sigmoid(A (2b - 1))``.
@@ -128,6 +130,9 @@ class DecoderConfig(BaseModel):
             a pixel or two; a stride-2 first layer sees that only half as well.
         channels: output channels of each stride-2 convolution.
         hidden: width of the first fully connected layer.
+        spatial_transformer: resample each image through a learned homography before reading
+            it (:class:`~deepmorph_core.spatial.SpatialTransformer`). Off in bundles written
+            before it existed.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -135,6 +140,7 @@ class DecoderConfig(BaseModel):
     stem: int = Field(default=16, ge=0, le=256)
     channels: tuple[int, ...] = Field(default=(32, 48, 64, 64), min_length=2, max_length=6)
     hidden: int = Field(default=128, ge=8, le=2048)
+    spatial_transformer: bool = False
 
 
 class Decoder(nn.Module):
@@ -149,6 +155,7 @@ class Decoder(nn.Module):
     def __init__(self, code_bits: int, image_size: tuple[int, int], config: DecoderConfig | None = None):
         super().__init__()
         cfg = config or DecoderConfig()
+        self.align = SpatialTransformer(image_size) if cfg.spatial_transformer else None
         layers: list[nn.Module] = []
         c_in = 1
         if cfg.stem:
@@ -175,5 +182,7 @@ class Decoder(nn.Module):
             raise ValueError(
                 f"decoder expects (B, 1, {self.image_size[0]}, {self.image_size[1]}), got {tuple(images.shape)}"
             )
+        if self.align is not None:
+            images = self.align(images)
         # centre intensities so that white paper is +0.5 and black ink -0.5
         return self.head(self.features(images - 0.5))

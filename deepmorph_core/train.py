@@ -69,6 +69,9 @@ class TrainConfig(BaseModel):
             variables at full range (:func:`deepmorph_core.model.spread_weights`; on the bundled
             ghost, bit errors under medium corruption fall from about 4 % to 0.5 %).
             ``random``: the paper's dense random matrix.
+        spatial_transformer: put a learned homography in front of the decoder
+            (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
+            perspective and turn that framing by ink moments leaves (``docs/training.md``).
         freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
             :func:`tune_decoder` runs on a trained bundle.
@@ -93,6 +96,7 @@ class TrainConfig(BaseModel):
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
     curriculum: float = Field(default=0.5, ge=0, le=1)
     encoder_init: Literal["spread", "random"] = "spread"
+    spatial_transformer: bool = True
     freeze_encoder: bool = False
     seed: int = 0
     device: Literal["cpu", "cuda"] = "cpu"
@@ -263,14 +267,15 @@ class Trainer:
 
     def images(self, bits: Tensor, train_encoder: bool) -> Tensor:
         """Decoder inputs for code bits: soft renders, part real renders, corrupted."""
+        k = round(self.cfg.hard_fraction * bits.shape[0])
         with torch.set_grad_enabled(train_encoder):
             unit = self.model.encoder(bits)
             values = self.model.drawing.values_from_unit(unit)
-            images = 1.0 - self.raster(values)
-        k = round(self.cfg.hard_fraction * bits.shape[0])
+            # the first k rows are drawn by the real renderer only (the soft raster would be thrown away)
+            soft = values[k:]
+            images = 1.0 - self.raster(soft) if len(soft) else values.new_empty((0, 1, *self.model.image_size))
         if k:
-            hard = real_renders(self.model, values[:k])
-            images = torch.cat([hard, images[k:]], 0)
+            images = torch.cat([real_renders(self.model, values[:k]), images], 0)
         images = canonicalize(images, render_moments(images), self.target, self.model.image_size)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
