@@ -280,7 +280,8 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
 
 def bundle_path(models_dir: Path, cell: dict[str, Any], args: argparse.Namespace) -> Path:
     stem = cell["drawing"].stem
-    return models_dir / f"{stem}-p{cell['payload_bits']}-s{args.steps}-b{args.batch}-seed{args.seed}.dmm"
+    extra = ("" if args.width == 96 else f"-w{args.width}") + ("" if args.spatial_transformer else "-nost")
+    return models_dir / f"{stem}-p{cell['payload_bits']}-s{args.steps}-b{args.batch}{extra}-seed{args.seed}.dmm"
 
 
 def run_cell(cell: dict[str, Any], args: argparse.Namespace, unrelated: list, models_dir: Path) -> dict[str, Any]:
@@ -304,11 +305,20 @@ def run_cell(cell: dict[str, Any], args: argparse.Namespace, unrelated: list, mo
             print(f"[{label}] {path} was trained on another version of the drawing: training again", flush=True)
         elif not model.meta.record.finished:
             print(f"[{label}] {path} is an unfinished checkpoint: training again", flush=True)
+        elif model.meta.decoder.spatial_transformer != args.spatial_transformer or model.width != args.width:
+            print(f"[{label}] {path} has another decoder (transformer or width): training again", flush=True)
         else:
             reused = True
     if not reused:
         bounds = {"move": cell["move"]} if cell["move"] is not None else None
-        train = {"steps": args.steps, "batch": args.batch, "seed": args.seed, "threads": args.threads}
+        train = {
+            "steps": args.steps,
+            "batch": args.batch,
+            "seed": args.seed,
+            "threads": args.threads,
+            "width": args.width,
+            "spatial_transformer": args.spatial_transformer,
+        }
         print(f"[{label}] training {args.steps} steps -> {path}", flush=True)
         t0 = time.perf_counter()
         train_model(
@@ -425,6 +435,13 @@ def main() -> None:
     ap.add_argument("--move-share", type=float, default=0.02, help="default --move as a share of the viewBox width")
     ap.add_argument("--steps", type=int, default=1500)
     ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--width", type=int, default=96, help="decoder image width in pixels")
+    ap.add_argument(
+        "--no-spatial-transformer",
+        dest="spatial_transformer",
+        action="store_false",
+        help="train decoders without the spatial transformer (as before 2026-11-22)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--samples", type=int, default=200, help="random payloads per cell")
@@ -461,6 +478,8 @@ def main() -> None:
         "settings": {
             "steps": args.steps,
             "batch": args.batch,
+            "width": args.width,
+            "spatial_transformer": args.spatial_transformer,
             "seed": args.seed,
             "threads": threads,
             "samples": args.samples,

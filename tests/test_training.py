@@ -192,6 +192,22 @@ def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg:
     assert res.exit_code == 0 and "warning" not in res.stderr
 
 
+def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_path: Path) -> None:
+    """New trainings put the spatial transformer in front of the decoder; the flag leaves it out,
+    and ``info`` says which decoder a bundle has."""
+    base = ["train", str(tiny_svg), "--steps", "2", "--width", "32", "--batch", "2", "--threads", "1"]
+    for flag, expected in (([], True), (["--no-spatial-transformer"], False)):
+        out = tmp_path / f"m{expected}.dmm"
+        res = runner.invoke(app, [*base, *flag, "--payload-bits", "4", "--out", str(out)])
+        assert res.exit_code == 0, res.output
+        model = DeepMorphModel.load(out)
+        assert model.meta.decoder.spatial_transformer is expected and (model.decoder.align is not None) is expected
+        info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
+        assert info["decoder"]["spatial_transformer"] is expected
+        shown = " ".join(runner.invoke(app, ["info", str(out)]).stdout.split())
+        assert ("spatial transformer, then CNN" in shown) is expected, shown
+
+
 def test_variables_a_renderer_does_not_show_do_not_count() -> None:
     """Feather package: 40 variables at 2 %, but 6 move points along the straight lines through
     them (0.00-0.03 of the median change); it read 40 % of 24-bit payloads (README). cpu: 40,
