@@ -288,7 +288,12 @@ def train_model(
             if model.meta.record.finished:
                 raise DeepMorphError(f"{out}: training already finished; nothing to resume")
             config = TrainConfig(
-                **{**model.meta.train, **{k: v for k, v in overrides.items() if k in ("steps", "threads")}}
+                **{
+                    **model.meta.train,
+                    # the checkpoint's decoder decides (one from before the transformer has none)
+                    "spatial_transformer": model.meta.decoder.spatial_transformer,
+                    **{k: v for k, v in overrides.items() if k in ("steps", "threads")},
+                }
             )
         else:
             if out.exists() and not overwrite:

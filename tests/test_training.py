@@ -208,6 +208,31 @@ def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_pat
         assert ("spatial transformer, then CNN" in shown) is expected, shown
 
 
+def test_resume_keeps_the_checkpoints_decoder(tiny_svg: Path, tmp_path: Path) -> None:
+    """A checkpoint without the transformer (``--no-spatial-transformer``, or one written before
+    it existed) resumes without it, whatever the new default is."""
+    out = tmp_path / "plain.dmm"
+    cfg = {**FAST, "steps": 20, "checkpoint_every": 5, "spatial_transformer": False}
+
+    def stop_at_10(total: int, done: int):
+        def on_log(m):
+            if m.step == 10:
+                raise KeyboardInterrupt
+
+        return on_log
+
+    with pytest.raises(Interrupted):
+        train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_10)
+    checkpoint = DeepMorphModel.load(out)
+    del checkpoint.meta.train["spatial_transformer"]  # as written before the transformer existed
+    checkpoint.save(out, extra=checkpoint.extra_tensors)
+    train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, resume=True)
+    done = DeepMorphModel.load(out)
+    assert done.meta.record.finished and done.meta.record.step == 20
+    assert done.meta.decoder.spatial_transformer is False and done.decoder.align is None
+    assert done.meta.train.get("spatial_transformer", False) is False
+
+
 def test_variables_a_renderer_does_not_show_do_not_count() -> None:
     """Feather package: 40 variables at 2 %, but 6 move points along the straight lines through
     them (0.00-0.03 of the median change); it read 40 % of 24-bit payloads (README). cpu: 40,
