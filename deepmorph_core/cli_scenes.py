@@ -271,12 +271,19 @@ def train_detector_cmd(
     seed: SeedOpt = 0,
     threads: Annotated[int, typer.Option("--threads", min=1, help="torch threads of the training process.")] = 1,
     workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
+    width: Annotated[
+        int, typer.Option("--width", min=8, max=256, help="Channel width of the network (16: about half the time).")
+    ] = 32,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
 ) -> None:
     """Train the detector of a model on synthetic scenes and store it in the bundle."""
     from deepmorph_detect.training import DetectorConfig, train_detector
 
-    config = None if resume else DetectorConfig(steps=steps, batch=batch, seed=seed, threads=threads, workers=workers)
+    config = (
+        None
+        if resume
+        else DetectorConfig(steps=steps, batch=batch, seed=seed, threads=threads, workers=workers, width=width)
+    )
     progress = _progress("detector")
     with progress:
         task = progress.add_task("", total=steps)

@@ -100,3 +100,22 @@ def test_an_existing_file_other_than_the_model_is_not_replaced(tmp_path: Path) -
 def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(BUNDLED_MODEL), "--resume"])
     assert res.exit_code == 1 and "no interrupted detector training" in res.output
+
+
+def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: Path) -> None:
+    """``--width`` picks the detector's channel width; the bundle records it, and the locator
+    builds the network at that width from the bundle alone."""
+    out = tmp_path / "slim.dmm"
+    args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--width", "8"]
+    res = runner.invoke(app, [*args, "--workers", "0"])
+    assert res.exit_code == 0, res.output
+    model = DeepMorphModel.load(out)
+    assert model.meta.detector.config["width"] == 8
+    assert model.detector_state["detector.stem.0.0.weight"].shape[0] == 4  # width // 2 channels
+    from deepmorph_detect.locate import CentreNetDetector
+
+    detector = CentreNetDetector.from_model(model)
+    image = SceneMaker(model, (320, 240), "easy", seed=1).make(drawings=1).image
+    assert isinstance(detector.detect(image), list)
+    res = runner.invoke(app, [*args[:-2], "--width", "4"])
+    assert res.exit_code != 0 and "--width" in res.output
