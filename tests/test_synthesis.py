@@ -150,6 +150,34 @@ def test_a_near_miss_that_passes_the_crc_and_the_morph_check_is_contradicted(
     assert res.exit_code == 0 and "code bits flipped" in " ".join(res.output.split()), res.output
 
 
+def test_a_collision_read_without_corrections_but_unsure_is_checked_bit_by_bit(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A misread that lands on a valid code word needs no corrections, but its wrong bits pull
+    its confidence down: below ``CHECK_BELOW_CONFIDENCE`` it is checked bit by bit and caught,
+    while a confident reading without corrections is not checked (about 50 ms saved)."""
+    from deepmorph_detect.locate import CHECK_BELOW_CONFIDENCE
+
+    scene = SceneMaker(model, severity="medium", seed=4).make(drawings=1)
+    truth = scene.placements[0]
+    pyramid = ImagePyramid(to_gray(scene.image))
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    near = next(
+        p for p in _near_payloads(truth.payload) if (f := locator.fit_morph(pyramid, det.homography, p)) and f.confirms
+    )
+    real_decode = model.codec.decode
+    reading = replace(real_decode(det.probabilities, soft=False), payload=near, ok=True, corrected_bits=0)
+
+    unsure = locator.check_payload(pyramid, det.homography, replace(reading, confidence=CHECK_BELOW_CONFIDENCE - 0.05))
+    assert unsure.status == "contradicted" and not unsure.result.ok and unsure.bits.contradicted > MAX_CONTRADICTED
+    sure = locator.check_payload(pyramid, det.homography, replace(reading, confidence=0.995))
+    assert sure.status == "passed" and sure.bits is None  # the morph check alone, as before
+    # the true payload read as unsurely passes the same check
+    right = replace(reading, payload=truth.payload, confidence=CHECK_BELOW_CONFIDENCE - 0.05)
+    checked = locator.check_payload(pyramid, det.homography, right)
+    assert checked.status == "passed" and checked.bits is not None and checked.bits.agrees
+
+
 def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     """Two bits contradicted is allowed; not when several more are barely supported (the
     evidence on a blurred, steeply tilted print is noise of about +-0.6)."""
@@ -208,6 +236,18 @@ def test_a_steeply_tilted_blurred_print_gives_no_wrong_payload(locator: Locator)
     payload = "".join(map(str, det.result.payload))
     assert not det.result.ok or payload == truth, f"wrong payload {payload} reported ok ({det.morph_check})"
     assert det.result.ok and det.morph_check == "passed"  # and the right one is read
+
+
+def test_an_unsure_reading_that_needed_no_corrections_gives_no_wrong_payload(locator: Locator) -> None:
+    """Regression: a hard-severity capture (tests/data/photos/README.md) whose first look read a
+    CRC collision, 4 payload bits off, without corrections (so the per-bit check did not run)
+    that passed the morph check. Its confidence is low, so the per-bit check now runs."""
+    truth = "100110101010100010111010"
+    image = cv2.imread(str(PHOTOS / "confident_looking_collision.jpg"))
+    (det,) = locator.locate(image)
+    payload = "".join(map(str, det.result.payload))
+    assert not det.result.ok or payload == truth, f"wrong payload {payload} reported ok ({det.morph_check})"
+    assert det.morph_check == "contradicted" and det.bits is not None and det.bits.contradicted > MAX_CONTRADICTED
 
 
 def test_the_per_bit_evidence_is_corrected_where_the_soft_rasterizer_misdraws_a_bit(
