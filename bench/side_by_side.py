@@ -39,7 +39,7 @@ def main() -> None:
 
     from deepmorph_core.api import BUNDLED_MODEL
     from deepmorph_core.codemodel import DeepMorphModel
-    from deepmorph_detect.benchmark import _corner_error, _match
+    from deepmorph_detect.benchmark import _corner_error, matched_detections
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import SceneMaker
 
@@ -83,9 +83,7 @@ def main() -> None:
                 dets, ms = timed(locators[k].locate, scene.image, scene.camera)
                 s = stats[k]
                 s["ms"].append(ms)
-                for d in dets:
-                    p = _match(d.corners, truth)
-                    right = p is not None and np.array_equal(d.result.payload, p.payload)
+                for d, p, right in matched_detections(dets, truth):
                     s["found"] += p is not None
                     s["read"] += bool(d.result.ok and right)
                     s["wrong_ok"] += bool(d.result.ok and not right)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -125,6 +126,21 @@ def _match(det_corners: np.ndarray, truths: list[Placement]) -> Placement | None
     return None
 
 
+def matched_detections(
+    dets: list[Located], drawings: list[Placement]
+) -> Iterator[tuple[Located, Placement | None, bool]]:
+    """Each detection with the drawing it found (``None``: a false detection, or a second one of
+    a drawing already found) and whether its payload is that drawing's."""
+    matched: set[int] = set()
+    for det in dets:
+        p = _match(det.corners, drawings)
+        if p is None or id(p) in matched:
+            yield det, None, False
+            continue
+        matched.add(id(p))
+        yield det, p, p.payload is not None and np.array_equal(det.result.payload, p.payload)
+
+
 def aruco_detector() -> cv2.aruco.ArucoDetector:
     """OpenCV's ArUco detector for DICT_6X6_250 with sub-pixel corner refinement."""
     params = cv2.aruco.DetectorParameters()
@@ -154,16 +170,12 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
         dets: list[Located] = locator.locate(image, camera=cam)
         t_ours.append(time.perf_counter() - t0)
         stats["detections"] += len(dets)
-        matched: set[int] = set()
-        for det in dets:
-            p = _match(det.corners, drawings)
-            if p is None or id(p) in matched:
+        for det, p, right in matched_detections(dets, drawings):
+            if p is None:
                 stats["false_detections"] += 1
                 stats["wrong_ok"] += bool(det.result.ok)
                 continue
-            matched.add(id(p))
             stats["found"] += 1
-            right = p.payload is not None and np.array_equal(det.result.payload, p.payload)
             stats["decoded"] += bool(det.result.ok and right)
             stats["wrong_ok"] += bool(det.result.ok and not right)
             rot.append(rotation_error_deg(det.rvec, p.rvec))
@@ -357,6 +369,7 @@ __all__ = [
     "aruco_detector",
     "bench_scenes",
     "format_report",
+    "matched_detections",
     "morph_check_rates",
     "read_scenes",
     "tracking_rates",

@@ -188,9 +188,9 @@ def _coarse_step(
 
     On prints the fast solve almost always gets there (302 of 654 coarse solves in 300 medium
     scenes, about one per print); what falls back is mostly clutter and other drawings.
-    Side by side on 900 scenes (medium seeds 9811/9831, hard seed 9832) and 1000 without the
+    Side by side on 900 scenes (medium seeds 9811/9831, hard seed 9832) and 1300 without the
     drawing: the same prints found and read, with the same corners, no detection without the
-    drawing either way, and the median photo 0.92x-0.95x the time (``docs/detection.md``).
+    drawing either way, and the median photo 0.91x-0.95x the time (``docs/detection.md``).
     """
     fast = _ecc_step(pyramid, H, template, width, iterations, smooth, crop)
     if fast is not None and fast[1] >= COARSE_FAST_BAR:

@@ -16,9 +16,9 @@ evidence of one bit hardly depends on the others.
 Two uses (:class:`~deepmorph_detect.locate.Locator`):
 
 * :meth:`MorphSynthesis.evidence` -- a per-bit morph check for a payload that passed the CRC
-  only after corrections, or with low confidence. A wrong code word differs from the true one in six bits or more, most
-  of them contradicted. The morph check of the whole drawing (one correlation) passes such near
-  misses about half the time.
+  only after corrections, or with low confidence. A wrong code word differs from the true one
+  in six bits or more, most of them contradicted. The morph check of the whole drawing (one
+  correlation) passes such near misses about half the time.
 * :meth:`MorphSynthesis.read` -- the last look at a drawing no view of which passes the CRC:
   the CNN's log-odds plus the evidence decide every bit again.
 
