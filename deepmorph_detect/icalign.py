@@ -23,8 +23,23 @@ below a bar is done again by OpenCV's forward-additive ECC
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
+
+
+@functools.lru_cache(maxsize=16)
+def _unit_coordinates(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel x and y of an ``(h, w)`` image, raveled, centred and scaled to about [-1, 1]
+    (read-only: shared by every solver of that size)."""
+    s = max(w, h) / 2.0
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    x = ((xs - (w - 1) / 2.0) / s).ravel()
+    y = ((ys - (h - 1) / 2.0) / s).ravel()
+    x.flags.writeable = False
+    y.flags.writeable = False
+    return x, y
 
 
 class InverseECC:
@@ -47,20 +62,29 @@ class InverseECC:
         cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
         self._to_unit = np.array([[1 / s, 0, -cx / s], [0, 1 / s, -cy / s], [0, 0, 1]])
         self._from_unit = np.linalg.inv(self._to_unit)
-        gx = (cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=1) * (0.5 * s)).ravel()
-        gy = (cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=1) * (0.5 * s)).ravel()
-        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-        x, y = ((xs - cx) / s).ravel(), ((ys - cy) / s).ravel()
-        radial = gx * x + gy * y
+        gx = (cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=1) * np.float32(0.5 * s)).ravel()
+        gy = (cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=1) * np.float32(0.5 * s)).ravel()
+        x, y = _unit_coordinates(h, w)
         # d(template)/d(parameters) at the identity warp, one row per parameter
-        steepest = np.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y])
-        self._steepest = np.ascontiguousarray(steepest, dtype=np.float32)
+        steepest = np.empty((8, h * w), dtype=np.float32)
+        np.multiply(gx, x, out=steepest[0])
+        np.multiply(gx, y, out=steepest[1])
+        steepest[2] = gx
+        np.multiply(gy, x, out=steepest[3])
+        np.multiply(gy, y, out=steepest[4])
+        steepest[5] = gy
+        radial = steepest[0] + steepest[4]  # gx * x + gy * y
+        np.multiply(radial, -x, out=steepest[6])
+        np.multiply(radial, -y, out=steepest[7])
+        self._steepest = steepest
         zero_mean = (t - t.mean()).ravel()
-        self._template = zero_mean.astype(np.float32)
-        self._template_norm2 = float(zero_mean @ zero_mean)
-        sd64 = self._steepest.astype(np.float64)
-        self._hessian_inv = np.linalg.inv(sd64 @ sd64.T)
-        self._template_proj = sd64 @ zero_mean.astype(np.float64)
+        self._template = zero_mean
+        zm64 = zero_mean.astype(np.float64)
+        self._template_norm2 = float(zm64 @ zm64)
+        # products in single precision (each a sum of h * w terms of one sign pattern; their
+        # relative error, about 1e-6, is far below what the solve resolves), inverted in double
+        self._hessian_inv = np.linalg.inv((steepest @ steepest.T).astype(np.float64))
+        self._template_proj = (steepest @ zero_mean).astype(np.float64)
         self._template_proj_h = self._hessian_inv @ self._template_proj
         self._lambda_num = self._template_norm2 - float(self._template_proj @ self._template_proj_h)
 

@@ -38,6 +38,7 @@ import torch.nn.functional as F
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.codemodel import DeepMorphModel, Detection
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fastrender import template_renderer
 from deepmorph_core.imaging import (
     MIN_IMAGE_SIDE,
     align_to_frame,
@@ -284,7 +285,11 @@ class Locator:
         self.min_correlation = min_correlation
         md = model.drawing
         self.viewbox = md.drawing.viewbox
-        self.template = Template.from_svg(md.to_svg(md.neutral_values()[0]), self.viewbox)
+        unmorphed = md.to_svg(md.neutral_values()[0])
+        # Skia when it draws this drawing as resvg does: the morph check renders a morph per
+        # payload read, and resvg's PNG round trip made that the slowest stage of a frame
+        self.renderer_name, self.renderer = template_renderer(unmorphed, self.viewbox, LEVELS)
+        self.template = Template.from_svg(unmorphed, self.viewbox, LEVELS, self.renderer)
         self.to_frame = viewbox_to_frame(self.viewbox)  # SVG units -> pose frame
         self.frame_corners = viewbox_corners(self.viewbox)
         # where the unmorphed drawing's ink lies in the finest template (whole-frame framing)
@@ -297,7 +302,9 @@ class Locator:
         depth = cv2.distanceTransform((self.template.images[finest] < 0.5).astype(np.uint8), cv2.DIST_L2, 3)
         self._ink_thickness = 2.0 * float(depth.max()) * model.width * RECTIFY_WIDTH_FACTOR / finest
         self._morphed: OrderedDict[bytes, Template] = OrderedDict()
-        self.synthesis = MorphSynthesis(model, self.template)
+        # the decoder with its batch norms folded in: about 15 % less time per reading
+        self._decoder = fused_for_inference(model.decoder)
+        self.synthesis = MorphSynthesis(model, self.template, renderer=self.renderer)
 
     # -- candidates -----------------------------------------------------------------------
 
@@ -337,7 +344,7 @@ class Locator:
         key = code.tobytes()
         template = self._morphed.get(key)
         if template is None:
-            template = morph_template(self.model, self.viewbox, code, MORPH_WIDTH)
+            template = morph_template(self.model, self.viewbox, code, MORPH_WIDTH, self.renderer)
             self._morphed[key] = template
             if len(self._morphed) > MORPH_CACHE:
                 self._morphed.popitem(last=False)
@@ -585,7 +592,9 @@ class Locator:
         aligned = align_to_frame(view, model.image_size, model.canonical_moments())
         if aligned is None:
             return None
-        probs = model.probabilities(torch.from_numpy(aligned[0])[None, None])[0].numpy()
+        with torch.inference_mode():
+            logits = self._decoder(torch.from_numpy(aligned[0])[None, None])
+        probs = torch.sigmoid(logits)[0].numpy()
         return model.codec.decode(probs, soft=soft), probs
 
     def _looks(

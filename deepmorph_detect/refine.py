@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from deepmorph_core.render import render_svg
+from deepmorph_core.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.icalign import InverseECC
 from deepmorph_detect.inkstart import ink_starts
@@ -61,10 +61,15 @@ class Template:
 
     @classmethod
     def from_svg(
-        cls, svg: str, viewbox: tuple[float, float, float, float], levels: tuple[int, ...] = LEVELS
+        cls,
+        svg: str,
+        viewbox: tuple[float, float, float, float],
+        levels: tuple[int, ...] = LEVELS,
+        renderer: Renderer = render_svg_resvg,
     ) -> Template:
-        """``svg`` rendered by the real renderer at each width in ``levels``."""
-        return cls(viewbox, {w: render_svg(svg, w) for w in levels})
+        """``svg`` rendered at each width in ``levels`` by ``renderer`` (resvg unless given;
+        :func:`~deepmorph_core.fastrender.template_renderer` picks one for a drawing)."""
+        return cls(viewbox, {w: renderer(svg, w, viewbox) for w in levels})
 
     @functools.cached_property
     def coarse_blurred(self) -> np.ndarray:

@@ -40,8 +40,8 @@ import numpy as np
 import torch
 
 from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.fastrender import Renderer, render_svg_resvg
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
-from deepmorph_core.render import render_svg
 from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (96 read fewer small prints, slower)
@@ -130,11 +130,15 @@ def disagreement(contradicted: int, weakest_sum: float) -> str:
 class MorphSynthesis:
     """Renders a model's morphs with the soft rasterizer and compares them with photos."""
 
-    def __init__(self, model: DeepMorphModel, template: Template, width: int = SYNTH_WIDTH) -> None:
-        """``template`` is the unmorphed drawing (its viewBox frames the rectified photo)."""
+    def __init__(
+        self, model: DeepMorphModel, template: Template, width: int = SYNTH_WIDTH, renderer: Renderer = render_svg_resvg
+    ) -> None:
+        """``template`` is the unmorphed drawing (its viewBox frames the rectified photo);
+        ``renderer`` is the real renderer of its morphs (the one that rendered ``template``)."""
         self.model = model
         self.template = template
         self.width = width
+        self.renderer = renderer
         settings = RasterSettings(**{**model.meta.raster, "width": width})
         self.rasterizer = SoftRasterizer(model.drawing.space, settings)
         self._variants: OrderedDict[bytes, np.ndarray] = OrderedDict()
@@ -152,7 +156,7 @@ class MorphSynthesis:
             values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
             with torch.no_grad():
                 soft = 1.0 - self.rasterizer(values)[:, 0].numpy()
-            real = render_svg(self.model.drawing.to_svg(values[0]), soft.shape[2])
+            real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[2], self.template.viewbox)
             if real.shape != soft.shape[1:]:
                 real = cv2.resize(real, soft.shape[:0:-1], interpolation=cv2.INTER_AREA)
             renders = np.concatenate([soft, real[None]])
@@ -252,7 +256,7 @@ class MorphSynthesis:
         bits = (p > 0.5).astype(np.uint8)
         soft = p
         width = max(self.template.images)
-        soft_morph = morph_template(self.model, self.template.viewbox, p, width)
+        soft_morph = morph_template(self.model, self.template.viewbox, p, width, self.renderer)
         # OpenCV's ECC: the faster inverse-compositional solve, against this blurry soft morph,
         # left 2 of 100 hard prints unread that this reads
         aligned = refine_at(pyramid, homography, soft_morph, width, ALIGN_ITERATIONS, wide_basin=True)
@@ -271,12 +275,17 @@ class MorphSynthesis:
 
 
 def morph_template(
-    model: DeepMorphModel, viewbox: tuple[float, float, float, float], code_bits: np.ndarray, width: int
+    model: DeepMorphModel,
+    viewbox: tuple[float, float, float, float],
+    code_bits: np.ndarray,
+    width: int,
+    renderer: Renderer = render_svg_resvg,
 ) -> Template:
-    """The drawing morphed by ``(N_b,)`` code bits, rendered by the real renderer at ``width``.
-    Soft bits (between 0 and 1) give a morph between the two values of each uncertain bit."""
+    """The drawing morphed by ``(N_b,)`` code bits, rendered by a real renderer (``renderer``,
+    resvg unless given) at ``width``. Soft bits (between 0 and 1) give a morph between the two
+    values of each uncertain bit."""
     values = model.morph_values(torch.from_numpy(np.asarray(code_bits, dtype=np.float32))[None])[0]
-    return Template.from_svg(model.drawing.to_svg(values), viewbox, (width,))
+    return Template.from_svg(model.drawing.to_svg(values), viewbox, (width,), renderer)
 
 
 __all__ = [

@@ -1,0 +1,104 @@
+"""A second real renderer, Skia, for the renders that decoding makes on every photo.
+
+resvg (:mod:`deepmorph_core.render`) is the reference renderer: scenes are printed with it and
+the tests check against it. Through its Python wheel every render comes back PNG-encoded, and
+encoding and decoding the PNG is most of the cost: 3.1 ms for the ghost at 128 px. Decoding a
+photo renders the drawing morphed with the payload it read (the morph check,
+:meth:`~deepmorph_detect.locate.Locator.fit_morph`), and that render was the largest single
+stage of a decoded frame. Skia (``skia-python``: Chrome's 2D engine and its SVG module) draws
+the same document straight into memory in about 0.2 ms.
+
+A renderer that draws a document differently from resvg would shift what the photo is
+compared with. :func:`template_renderer` therefore renders the drawing itself with both at
+load, and keeps Skia only when the two agree (:data:`MAX_MEAN_DIFFERENCE`); otherwise resvg
+renders every template. The morph check compares two renders by one renderer, so either way
+it compares like with like.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import cv2
+import numpy as np
+import skia
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.render import render_svg
+
+# (svg text, width in pixels, viewBox (x, y, w, h)) -> (h, w) float32, 1 = white paper
+Renderer = Callable[[str, int, tuple[float, float, float, float]], np.ndarray]
+
+# Skia is kept for a drawing when its renders differ from resvg's by at most this much on
+# average (intensity in [0, 1]), at every width checked. The ghost differs by 0.004 at 128 px
+# (anti-aliasing along the edges); a misread document (a missing element) differs by far more.
+MAX_MEAN_DIFFERENCE = 0.015
+
+
+def render_svg_skia(svg_text: str, width: int, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """Render SVG text with Skia on white paper, ``width`` pixels across its viewBox.
+
+    Returns:
+        ``(H, W)`` float32 intensity in ``[0, 1]`` (1 = white), ``H`` from the viewBox's aspect.
+
+    Raises:
+        DeepMorphError: Skia cannot read the document.
+    """
+    dom = skia.SVGDOM.MakeFromStream(skia.MemoryStream(svg_text.encode("utf-8"), True))
+    if dom is None:
+        raise DeepMorphError("the SVG renderer (Skia) refused the drawing")
+    _, _, vw, vh = viewbox
+    size = dom.containerSize()
+    if size.width() <= 0 or size.height() <= 0:  # no width/height: the viewBox is the size
+        dom.setContainerSize(skia.Size(vw, vh))
+        size = dom.containerSize()
+    height = max(1, round(width * vh / vw))
+    rgba = np.empty((height, width, 4), dtype=np.uint8)
+    canvas = skia.Surface(rgba).getCanvas()
+    canvas.clear(skia.ColorWHITE)
+    canvas.scale(width / size.width(), width / size.width())
+    dom.render(canvas)
+    del canvas
+    # the weights of resvg's path through Pillow's "L" (ITU-R 601-2 luma)
+    return cv2.cvtColor(rgba, cv2.COLOR_RGBA2GRAY).astype(np.float32) / 255.0
+
+
+def render_svg_resvg(svg_text: str, width: int, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """:func:`~deepmorph_core.render.render_svg` with the :data:`Renderer` signature."""
+    return render_svg(svg_text, width)
+
+
+def renders_alike(svg_text: str, viewbox: tuple[float, float, float, float], widths: tuple[int, ...]) -> float:
+    """The largest mean absolute difference between Skia's and resvg's renders of ``svg_text``
+    over ``widths`` (``inf`` when Skia cannot read it or the sizes differ)."""
+    worst = 0.0
+    for width in widths:
+        reference = render_svg(svg_text, width)
+        try:
+            fast = render_svg_skia(svg_text, width, viewbox)
+        except DeepMorphError:
+            return float("inf")
+        if fast.shape != reference.shape:
+            return float("inf")
+        worst = max(worst, float(np.abs(fast - reference).mean()))
+    return worst
+
+
+def template_renderer(
+    svg_text: str, viewbox: tuple[float, float, float, float], widths: tuple[int, ...]
+) -> tuple[str, Renderer]:
+    """The renderer for a drawing's templates and its name: Skia when it renders ``svg_text``
+    like resvg at each of ``widths`` (:data:`MAX_MEAN_DIFFERENCE`), else resvg."""
+    if renders_alike(svg_text, viewbox, widths) <= MAX_MEAN_DIFFERENCE:
+        return "skia", render_svg_skia
+    return "resvg", render_svg_resvg
+
+
+__all__ = [
+    "MAX_MEAN_DIFFERENCE",
+    "Renderer",
+    "render_svg_resvg",
+    "render_svg_skia",
+    "renders_alike",
+    "template_renderer",
+]
