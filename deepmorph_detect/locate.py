@@ -57,6 +57,9 @@ MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this dr
 # vouches for it (another icon with a face aligned at 0.56 in 1 of 4000 photos without the
 # drawing; the lowest unread true print in 600 hard scenes aligned at 0.60)
 UNREAD_MARGIN = 0.05
+# a detector outline aligned in the photo below this is aligned in flat light too, and the better
+# kept: a print cut by a sharp shadow aligned at 0.58 with its corners 7 px off, bent to the edge
+WEAK_ALIGNMENT = 0.65
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
 MORPH_WIDTH = LEVELS[-1]  # template width of the alignment to the decoded morph
 MIN_MORPH_GAIN = 0.0  # the decoded morph must correlate better than the unmorphed drawing by more
@@ -550,9 +553,16 @@ class Locator:
             if H0 is None:  # a detector's outline: its turn and size may be off, search wider
                 start = self._homography(cand["corners"])
                 alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
-                if not self._accepts(alignment) and gray is not None:
+                if gray is not None and not self._accepts(alignment):
                     seen_in = self._in_flat_light(gray, cand["corners"])
                     alignment = refine(seen_in, start, self.template, orders=4, accept=self.min_correlation)
+                elif gray is not None and alignment.correlation < WEAK_ALIGNMENT:
+                    # a shadow edge across the print can bend the alignment and still leave it
+                    # above the bar: the flat-light one is kept when it correlates better
+                    flat = self._in_flat_light(gray, cand["corners"])
+                    in_flat = refine(flat, start, self.template, orders=4, accept=self.min_correlation)
+                    if self._accepts(in_flat) and in_flat.correlation > alignment.correlation:
+                        seen_in, alignment = flat, in_flat
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
                 alignment = refine(pyramid, H0, self.template)
             if not self._accepts(alignment) or self._seen(alignment.homography, [a.homography for _, a, _ in kept]):
@@ -768,6 +778,7 @@ __all__ = [
     "MIN_MORPH_GAIN",
     "TRACK_ITERATIONS",
     "UNREAD_MARGIN",
+    "WEAK_ALIGNMENT",
     "CentreNetDetector",
     "Located",
     "Locator",

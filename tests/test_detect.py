@@ -32,7 +32,7 @@ from deepmorph_detect.camera import (
     translation_error,
     viewbox_corners,
 )
-from deepmorph_detect.locate import Locator
+from deepmorph_detect.locate import WEAK_ALIGNMENT, Locator
 from deepmorph_detect.refine import ImagePyramid, refine
 from deepmorph_detect.scenes import Placement, SceneMaker
 
@@ -403,8 +403,8 @@ def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
     model: DeepMorphModel, locator: Locator, seed: int
 ) -> None:
     """A shadow edge through the middle of a print (half of it 50 % darker): ECC in the photo
-    bends to the edge or diverges; with the light divided out around the detector's outline
-    the print is found, read and placed."""
+    bends to the edge (corners several pixels off, at a weak correlation) or diverges; with the
+    light divided out around the detector's outline the print is found, read and placed."""
     scene = SceneMaker(model, severity="easy", seed=seed).make(drawings=1)
     truth = scene.placements[0]
     centre = truth.corners.mean(0)
@@ -416,7 +416,10 @@ def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
         photo = np.clip(scene.image * shade[..., None], 0, 255).astype(np.uint8)
         gray = to_gray(photo)
         assert locator.detector.detect(gray), "the detector outlines the print"
-        assert locator._verify(ImagePyramid(gray), locator.detector.detect(gray)) == []  # the photo alone: missed
+        # the photo alone: missed, or bent to the shadow's edge
+        for _, alignment, _ in locator._verify(ImagePyramid(gray), locator.detector.detect(gray)):
+            assert alignment.correlation < WEAK_ALIGNMENT
+            assert np.abs(project(alignment.homography, locator.frame_corners) - truth.corners).max() > 3.0
         (det,) = locator.locate(photo, camera=scene.camera)
         assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
         assert np.abs(det.corners - truth.corners).max() < 2.0
