@@ -38,7 +38,7 @@ def main() -> None:
     from deepmorph_detect.benchmark import _match, read_scenes, write_scenes
     from deepmorph_detect.camera import project
     from deepmorph_detect.locate import RECTIFY_WIDTH_FACTOR, Locator
-    from deepmorph_detect.refine import ImagePyramid
+    from deepmorph_detect.refine import ImagePyramid, warp_to_template
 
     locator = Locator(model)
     md = model.drawing
@@ -65,12 +65,13 @@ def main() -> None:
                 pyramid = ImagePyramid(gray)
                 drawings = [p for p in truth["placements"] if p.kind == "drawing"]
                 candidates = locator.detector.detect(gray) if locator.detector is not None else []
-                for _, alignment in locator._verify(pyramid, candidates):
+                for _, alignment, seen_in in locator._verify(pyramid, candidates):
                     p = _match(project(alignment.homography, locator.frame_corners), drawings)
                     if p is None:
                         continue
                     code = model.codec.encode(p.payload)
-                    view = locator.rectify(pyramid, alignment.homography)
+                    # one width for every view, which the paper's region mask is drawn at
+                    view = warp_to_template(seen_in, alignment.homography, locator.template, width)
                     for name, prepare in ways.items():
                         s = stats[name]
                         s["payloads"] += 1
