@@ -355,9 +355,9 @@ def align_to_frame(
 
 def canonicalize_one(gray: np.ndarray, moments: np.ndarray, target: Tensor, size: tuple[int, int]) -> np.ndarray:
     """:func:`canonicalize` of one ``(h, w)`` float32 image by OpenCV: the same map (a scale
-    and a shift) and the same bilinear sampling with white beyond the edges, in a quarter of the time. It
-    differs by about 1e-4 in intensity on average and by up to 0.02 on the steepest edges
-    (OpenCV rounds sample positions to 1/32 pixel).
+    and a shift) and the same bilinear sampling with white beyond the edges, in a quarter of the
+    time. It differs by about 1e-4 in intensity on average and by up to 0.02 on the steepest
+    edges (OpenCV rounds sample positions to 1/32 pixel).
 
     Args:
         moments: ``(4,)`` cx, cy, sx, sy of the ink in ``gray``'s pixels.

@@ -305,7 +305,7 @@ class Locator:
         depth = cv2.distanceTransform((self.template.images[finest] < 0.5).astype(np.uint8), cv2.DIST_L2, 3)
         self._ink_thickness = 2.0 * float(depth.max()) * model.width * RECTIFY_WIDTH_FACTOR / finest
         self._morphed: OrderedDict[bytes, Template] = OrderedDict()
-        # the decoder with its batch norms folded in: about 15 % less time per reading
+        # the decoder with its batch norms folded in: about 15 % less time in it per reading
         self._decoder = fused_for_inference(model.decoder)
         self.synthesis = MorphSynthesis(model, self.template, renderer=self.renderer)
 
