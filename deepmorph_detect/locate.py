@@ -553,15 +553,14 @@ class Locator:
             if H0 is None:  # a detector's outline: its turn and size may be off, search wider
                 start = self._homography(cand["corners"])
                 alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
-                if gray is not None and not self._accepts(alignment):
-                    seen_in = self._in_flat_light(gray, cand["corners"])
-                    alignment = refine(seen_in, start, self.template, orders=4, accept=self.min_correlation)
-                elif gray is not None and alignment.correlation < WEAK_ALIGNMENT:
-                    # a shadow edge across the print can bend the alignment and still leave it
-                    # above the bar: the flat-light one is kept when it correlates better
+                missed = not self._accepts(alignment)
+                # a shadow edge across the print can make the alignment fail, or bend it and
+                # still leave it above the bar: then it is aligned in flat light too, and that
+                # one is kept when the photo's failed or correlates worse
+                if gray is not None and (missed or alignment.correlation < WEAK_ALIGNMENT):
                     flat = self._in_flat_light(gray, cand["corners"])
                     in_flat = refine(flat, start, self.template, orders=4, accept=self.min_correlation)
-                    if self._accepts(in_flat) and in_flat.correlation > alignment.correlation:
+                    if missed or (self._accepts(in_flat) and in_flat.correlation > alignment.correlation):
                         seen_in, alignment = flat, in_flat
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
                 alignment = refine(pyramid, H0, self.template)

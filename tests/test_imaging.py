@@ -12,6 +12,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import (
     align_to_frame,
     canonicalize,
+    canonicalize_one,
     flatten_illumination,
     ink_moments,
     mask_moments,
@@ -34,6 +35,20 @@ def test_canonical_frame_is_a_fixed_point(ghost) -> None:
     target = render_moments(img)[0]
     framed = canonicalize(img, render_moments(img), target, (96, 96))
     assert (framed - img).abs().mean() < 0.01
+
+
+def test_one_image_framing_matches_the_batched_one(ghost) -> None:
+    """Decoding frames one view by OpenCV's warpAffine, training a batch by torch's grid_sample:
+    the same map and sampling, shrunk, enlarged, shifted past the edge (white beyond it)."""
+    _, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    for moments in ([48.3, 47.1, 20.0, 18.5], [150.2, 140.7, 61.0, 55.3], [10.4, 90.6, 14.0, 16.0]):
+        m = np.array(moments)
+        expected = canonicalize(torch.from_numpy(base)[None, None], torch.from_numpy(m)[None], target, (96, 96))
+        got = canonicalize_one(base, m, target, (96, 96))
+        assert got.shape == (96, 96) and got.dtype == np.float32
+        assert np.abs(got - expected[0, 0].numpy()).mean() < 1e-3
+        assert np.abs(got - expected[0, 0].numpy()).max() < 0.05
 
 
 def test_one_mask_moments_match_the_batched_ones(ghost) -> None:
