@@ -231,6 +231,11 @@ class MorphSpace:
             self._points_cache[key] = cached
         return cached
 
+    def _base_points_np(self, index: int) -> np.ndarray:
+        """A primitive's unmorphed control points as float64 NumPy, made once: decoding a photo
+        writes a morph per payload read, and rebuilding them was a fifth of that."""
+        return self._base_points(index, torch.float64, torch.device("cpu")).numpy()
+
     # -- writing back ---------------------------------------------------------------------
 
     def write_svg(self, values: Tensor) -> str:
@@ -254,7 +259,7 @@ class MorphSpace:
             morph = _element_morph(ext[aff], prim.centre)
             if not delta.any() and morph.is_identity:
                 continue
-            points = prim.primitive.control_points().numpy() + delta
+            points = self._base_points_np(prim.index) + delta
             prim.primitive.write(twin[prim.element], points, morph)
         return etree.tostring(tree, encoding="unicode")
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.capture import simulate_photo
@@ -14,8 +16,10 @@ from deepmorph_core.imaging import (
     canonicalize,
     canonicalize_one,
     flatten_illumination,
+    ink_mask,
     ink_moments,
     mask_moments,
+    percentiles,
     read_image,
     render_moments,
     to_gray,
@@ -201,3 +205,40 @@ def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(t
         bomb.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", rows) + chunk(b"IEND", b""))
         with pytest.raises(DeepMorphError, match=message):
             read_image_bgr(bomb)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    shape=st.tuples(st.integers(1, 40), st.integers(1, 40)),
+    dtype=st.sampled_from([np.float32, np.float64, np.uint8]),
+    qs=st.lists(st.floats(0, 100), min_size=1, max_size=4),
+    seed=st.integers(0, 2**32 - 1),
+    levels=st.sampled_from([0, 2, 256]),
+)
+def test_percentiles_are_numpys_to_the_last_bit(shape, dtype, qs, seed, levels) -> None:
+    """The framing of every reading takes its contrast from these: any difference from
+    np.percentile would shift what the decoder sees."""
+    rng = np.random.default_rng(seed)
+    values = rng.random(shape)
+    if levels:  # ties, as in 8-bit photos and flat paper
+        values = np.round(values * (levels - 1)) / max(levels - 1, 1)
+    values = (values * 255).astype(dtype) if dtype == np.uint8 else values.astype(dtype)
+    ours, theirs = percentiles(values, tuple(qs)), np.percentile(values, qs)
+    assert ours.dtype == theirs.dtype
+    assert np.array_equal(ours, theirs)
+
+
+def test_ink_mask_drops_a_light_border_shadow_and_keeps_dark_border_ink(ghost) -> None:
+    _, base = ghost
+    view = np.pad(base, 20, constant_values=1.0)
+    plain_mask, plain_box = ink_mask(view)
+    shadowed = view.copy()
+    shadowed[:, :8] = 0.45  # a grey band along the edge: lighter than the ink inside
+    mask, box = ink_mask(shadowed)
+    # the band moves Otsu's threshold a little (a pixel of anti-aliasing), but is not ink
+    assert box[0] > 8 and np.abs(np.subtract(box, plain_box)).max() <= 1
+    assert (mask & plain_mask).sum() >= 0.95 * max(mask.sum(), plain_mask.sum())
+    inked = view.copy()
+    inked[40:60, :6] = 0.0  # as dark as the ink: a stroke running off the edge is kept
+    _, box = ink_mask(inked)
+    assert box[0] == 0 and box[2] == plain_box[2]
