@@ -254,9 +254,8 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
         # A border component is a desk or a shadow when it is clearly lighter than the ink
         # inside; strokes of a drawing that runs to the edge of a render are kept.
         ink_level = float(np.median(gray[_label_set(labels, n, inner)]))
-        keep = inner + [i for i in border if float(np.median(gray[labels == i])) <= ink_level + 0.2]
-    elif inner:
-        keep = inner
+        border = [i for i in border if float(np.median(gray[labels == i])) <= ink_level + 0.2]
+    keep = inner + border
     if not keep:
         return None
     x0 = min(stats[i, cv2.CC_STAT_LEFT] for i in keep)

@@ -1,0 +1,130 @@
+"""Two photo chains on the same scenes, in one run: the loop shared by ``side_by_side.py`` (two
+bundles) and ``checkouts.py`` (two checkouts of the code).
+
+Each script supplies ``locate(k, image, camera) -> (ms, detections)`` for ``k`` in ``"a"``,
+``"b"`` (detections with ``corners`` and ``result.payload``/``result.ok``, as
+:func:`~deepmorph_detect.benchmark.matched_detections` reads them); this module makes the
+scenes, calls both in alternating order with QR's ``detectAndDecode`` timed between them,
+scores them, runs the scenes without the drawing, and prints and writes the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from _common import RESULTS, environment, table, write_json
+
+Locate = Callable[[str, Any, Any], tuple[float, list[Any]]]
+CHAINS = ("a", "b")
+
+
+def add_scene_arguments(ap: argparse.ArgumentParser, out_name: str) -> None:
+    """The options both scripts take: scenes per severity, negatives, threads, seed, output."""
+    ap.add_argument("--n", type=int, default=200, help="scenes per severity")
+    ap.add_argument("--severities", default="medium,hard")
+    ap.add_argument("--negatives", type=int, default=300, help="scenes without the drawing")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / out_name)
+
+
+def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[str, Any], list[tuple]]:
+    """Both chains on ``args.n`` scenes per severity and ``args.negatives`` without the drawing.
+
+    Returns:
+        The report (``severities`` and ``negatives``) and the table's rows.
+    """
+    import cv2
+    import numpy as np
+
+    from deepmorph_detect.benchmark import _corner_error, matched_detections
+    from deepmorph_detect.scenes import SceneMaker
+
+    qr = cv2.QRCodeDetector()
+    qr_frames = [
+        SceneMaker(model, (640, 480), "medium", seed=99 + i)
+        .make(drawings=0, qr="https://deepmorph.example/0xA1B2C3")
+        .image
+        for i in range(20)
+    ]
+    warm = SceneMaker(model, (640, 480), "medium", seed=args.seed + 500)
+    for _ in range(3):  # first calls allocate and load; keep them out of the timings
+        scene = warm.make(drawings=1)
+        for k in CHAINS:
+            locate(k, scene.image, scene.camera)
+        qr.detectAndDecode(qr_frames[0])
+
+    report: dict[str, Any] = {"severities": {}}
+    rows: list[tuple] = []
+    for sev in args.severities.split(","):
+        maker = SceneMaker(model, (640, 480), sev, seed=args.seed)
+        stats = {k: {"found": 0, "read": 0, "wrong_ok": 0, "ms": [], "corner": []} for k in CHAINS}
+        differ, qr_ms = 0, []
+        for i in range(args.n):
+            scene = maker.make(drawings=1, distractors=1, aruco=True)
+            truth = [p for p in scene.placements if p.kind == "drawing"]
+            outcome = {}
+            for k in CHAINS if i % 2 == 0 else CHAINS[::-1]:
+                ms, found = locate(k, scene.image, scene.camera)
+                s = stats[k]
+                s["ms"].append(ms)
+                seen = []
+                for d, p, right in matched_detections(found, truth):
+                    s["found"] += p is not None
+                    s["read"] += bool(d.result.ok and right)
+                    s["wrong_ok"] += bool(d.result.ok and not right)
+                    if d.result.ok and right:
+                        s["corner"].append(_corner_error(d.corners, p.corners))
+                    seen.append((p is not None, bool(d.result.ok), bytes(np.asarray(d.result.payload, np.uint8))))
+                outcome[k] = sorted(seen)
+            differ += outcome["a"] != outcome["b"]
+            t0 = time.perf_counter()
+            qr.detectAndDecode(qr_frames[i % len(qr_frames)])
+            qr_ms.append(1000 * (time.perf_counter() - t0))
+        qr_med = float(np.median(qr_ms))
+        a_med = float(np.median(stats["a"]["ms"]))
+        sev_report: dict[str, Any] = {"scenes": args.n, "qr_ms_median": round(qr_med, 2), "scenes_differing": differ}
+        for k, s in stats.items():
+            med, mean = float(np.median(s["ms"])), float(np.mean(s["ms"]))
+            corner = round(float(np.median(s["corner"])), 3) if s["corner"] else None
+            sev_report[k] = {
+                "found": s["found"],
+                "read": s["read"],
+                "wrong_ok": s["wrong_ok"],
+                "corner_px_median": corner,
+                "ms_median": round(med, 2),
+                "ms_mean": round(mean, 2),
+                "x_qr": round(med / qr_med, 3),
+                "x_a": round(med / a_med, 3),
+            }
+            found, read = f"{s['found']}/{args.n}", f"{s['read']}/{args.n}"
+            rows.append((sev, k, found, read, s["wrong_ok"], corner, round(med, 2), round(mean, 1), round(qr_med, 2),
+                         f"{med / qr_med:.2f}x", f"{med / a_med:.2f}x", differ if k == "b" else ""))  # fmt: skip
+        report["severities"][sev] = sev_report
+        print(f"{sev}: done", flush=True)
+
+    maker = SceneMaker(model, (640, 480), "medium", seed=args.seed + 1000)
+    negatives = {k: {"images": args.negatives, "detections": 0, "wrong_ok": 0} for k in CHAINS}
+    for i in range(args.negatives):
+        scene = maker.make(drawings=0, distractors=1 + i % 3, aruco=i % 2 == 0)
+        for k in CHAINS:
+            _, found = locate(k, scene.image, scene.camera)
+            negatives[k]["detections"] += len(found)
+            negatives[k]["wrong_ok"] += sum(bool(d.result.ok) for d in found)
+    report["negatives"] = negatives
+    return report, rows
+
+
+def print_report(report: dict[str, Any], rows: list[tuple], names: dict[str, str], label: str, out: Path) -> None:
+    """The table, the negatives per chain (``names``: what each chain is), and the JSON at ``out``."""
+    report["environment"] = environment()
+    headers = ["severity", label, "found", "read", "wrong ok", "corner px", "ms median", "ms mean", "QR ms"]
+    print(table(headers + ["x QR", "x a", "scenes differing"], rows))
+    for k in CHAINS:
+        found, images = report["negatives"][k]["detections"], report["negatives"][k]["images"]
+        print(f"{k} ({names[k]}): {found} detections on {images} scenes without the drawing")
+    print(f"wrote {write_json(out, report)}")
