@@ -15,7 +15,7 @@ from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.train import Interrupted
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference
 from deepmorph_detect.scenes import SceneMaker
-from deepmorph_detect.training import DetectorConfig, DetectorTrainer, quad_loss, targets_for
+from deepmorph_detect.training import DetectorConfig, DetectorTrainer, SceneBatches, quad_loss, targets_for
 
 runner = CliRunner()
 
@@ -61,6 +61,29 @@ def _config(steps: int) -> DetectorConfig:
     return DetectorConfig(
         steps=steps, batch=2, width=8, workers=0, threads=1, checkpoint_every=100, log_every=1, seed=4
     )
+
+
+def test_scene_workers_make_each_step_once_and_in_order() -> None:
+    """With scene-making workers the loader gives the batches it gives without them: each step
+    once, in order, also from a resumed start (each worker used to make every step, so
+    ``--workers 2`` trained on every batch twice)."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    cfg = DetectorConfig(steps=5, batch=1, width=8, workers=2, threads=1, seed=3)
+
+    def images(workers: int) -> list[torch.Tensor]:
+        loader = torch.utils.data.DataLoader(
+            SceneBatches(model, cfg, 1, 5),
+            batch_size=None,
+            num_workers=workers,
+            multiprocessing_context="fork" if workers else None,
+        )
+        return [batch[0] for batch in loader]
+
+    alone, shared = images(0), images(2)
+    assert len(alone) == len(shared) == 4
+    for a, b in zip(alone, shared):
+        assert torch.equal(a, b)
+    assert not torch.equal(alone[0], alone[1])
 
 
 def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
