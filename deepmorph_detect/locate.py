@@ -555,9 +555,11 @@ class Locator:
                 alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
                 missed = not self._accepts(alignment)
                 # a shadow edge across the print can make the alignment fail, or bend it and
-                # still leave it above the bar: then it is aligned in flat light too, and that
-                # one is kept when the photo's failed or correlates worse
-                if gray is not None and (missed or alignment.correlation < WEAK_ALIGNMENT):
+                # still leave it above the bar, or leave only a wider search's start to align
+                # (a tilted, blurred print reached 0.74 so and 0.87 in flat light): then it is
+                # aligned in flat light too, and that one is kept when the photo's failed or
+                # correlates worse
+                if gray is not None and (missed or alignment.correlation < WEAK_ALIGNMENT or alignment.searched):
                     flat = self._in_flat_light(gray, cand["corners"])
                     in_flat = refine(flat, start, self.template, orders=4, accept=self.min_correlation)
                     if missed or (self._accepts(in_flat) and in_flat.correlation > alignment.correlation):

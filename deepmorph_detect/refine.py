@@ -18,7 +18,7 @@ fraction of a pixel.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -107,11 +107,13 @@ class Template:
 @dataclass
 class Alignment:
     """A refined homography (SVG units -> image pixels), the correlation it reached, and the
-    template width it was reached at."""
+    template width it was reached at; ``searched`` when :func:`refine`'s wider searches reached
+    it (the outline it started from did not align as it was)."""
 
     homography: np.ndarray
     correlation: float
     width: int = 0
+    searched: bool = False
 
 
 class ImagePyramid:
@@ -319,6 +321,9 @@ def refine(
     def good(a: Alignment | None) -> bool:
         return a is not None and a.correlation >= bar
 
+    def searched(a: Alignment) -> Alignment:
+        return a if a is quick else replace(a, searched=True)
+
     def best_few(starts: list[np.ndarray], best: Alignment | None) -> Alignment | None:
         """``best``, or better: the :data:`SWEEP_TRIES` best of ``starts`` by plain correlation,
         each solved from its outline and carried through all levels."""
@@ -338,16 +343,16 @@ def refine(
         step = coarse[i] if i < len(coarse) else from_outline(H, crop)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
-        return best
+        return searched(best)
     # the outline itself is off: turned or scaled starts
     best = best_few(outline_sweep(homography, template), best)
     if good(best):
-        return best
+        return searched(best)
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
     # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
     quad = project(homography, viewbox_corners(template.viewbox))
     best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
-    return best if good(best) else quick
+    return searched(best) if good(best) else quick
 
 
 def _plain_scores(
