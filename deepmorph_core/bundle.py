@@ -56,6 +56,9 @@ class DetectorMeta(BaseModel):
 
     config: dict[str, Any]
     record: TrainingRecord
+    # the runs a fine-tuned detector started from (``train-detector --fine-tune``), oldest first,
+    # each ``{"config": ..., "record": ...}`` as above
+    earlier: list[dict[str, Any]] = Field(default_factory=list)
 
 
 class BundleMeta(BaseModel):

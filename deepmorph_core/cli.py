@@ -411,7 +411,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
                 "detector",
                 f"{drec['step']}/{drec['total_steps']} steps, {drec['elapsed_s']:.0f} s "
                 f"({'finished' if drec['finished'] else 'checkpoint (resume to finish)'}), "
-                f"{json.dumps(drec['metrics'])}",
+                + "".join(f"fine-tuned after {e['record']['step']} steps, " for e in reversed(det.get("earlier", [])))
+                + f"{json.dumps(drec['metrics'])}",
             )
         )
     for run in data["tuning"]:

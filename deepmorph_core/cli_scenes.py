@@ -274,6 +274,15 @@ def train_detector_cmd(
     width: Annotated[
         int, typer.Option("--width", min=8, max=256, help="Channel width of the network (16: about half the time).")
     ] = 32,
+    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 2e-3,
+    fine_tune: Annotated[
+        bool,
+        typer.Option(
+            "--fine-tune",
+            help="Start from the model's trained detector (same --width) instead of from scratch;"
+            " use another --seed for new scenes and a lower --lr.",
+        ),
+    ] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
 ) -> None:
     """Train the detector of a model on synthetic scenes and store it in the bundle."""
@@ -282,7 +291,16 @@ def train_detector_cmd(
     config = (
         None
         if resume
-        else DetectorConfig(steps=steps, batch=batch, seed=seed, threads=threads, workers=workers, width=width)
+        else DetectorConfig(
+            steps=steps,
+            batch=batch,
+            seed=seed,
+            threads=threads,
+            workers=workers,
+            width=width,
+            lr=lr,
+            fine_tune=fine_tune,
+        )
     )
     progress = _progress("detector")
     with progress:

@@ -40,8 +40,10 @@ class DetectorConfig(BaseModel):
         steps, batch, lr: optimisation (Adam, cosine decay to 5 %).
         width: channel width of the network.
         seed: scenes and initialisation.
-        threads: torch threads of the training process (scenes are made in one worker).
+        threads: torch threads of the training process.
         workers: scene-making processes (0: in the training process).
+        fine_tune: start from the detector already in the bundle (same width) instead of from
+            scratch; the runs it came from are kept in the bundle (``DetectorMeta.earlier``).
         checkpoint_every, log_every: in steps.
     """
 
@@ -54,6 +56,7 @@ class DetectorConfig(BaseModel):
     seed: int = 0
     threads: int | None = Field(default=1, ge=1, le=256)
     workers: int = Field(default=1, ge=0, le=16)
+    fine_tune: bool = False
     checkpoint_every: int = Field(default=200, ge=1)
     log_every: int = Field(default=25, ge=1)
 
@@ -170,6 +173,16 @@ class DetectorTrainer:
         meta = model.meta.detector
         resuming = meta is not None and not meta.record.finished and "dtrain.step" in model.extra_tensors
         self.record = meta.record if resuming and meta else TrainingRecord(total_steps=config.steps)
+        self.earlier = list(meta.earlier) if meta is not None and (resuming or config.fine_tune) else []
+        if config.fine_tune and not resuming:
+            if meta is None or not meta.record.finished:
+                raise DeepMorphError("--fine-tune needs a model whose detector training has finished")
+            if int(meta.config.get("width", 32)) != config.width:
+                raise DeepMorphError(
+                    f"--fine-tune: the model's detector has width {meta.config.get('width', 32)}, not {config.width}"
+                )
+            self.net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+            self.earlier.append({"config": meta.config, "record": meta.record.model_dump()})
         self.record.total_steps = config.steps
         self.record.threads = torch.get_num_threads()
         if resuming:
@@ -187,7 +200,7 @@ class DetectorTrainer:
     def checkpoint(self) -> None:
         """Write the bundle with the detector (and optimiser state until finished)."""
         self.model.detector_state = {f"detector.{k}": v for k, v in self.net.state_dict().items()}
-        self.model.meta.detector = DetectorMeta(config=self.cfg.model_dump(), record=self.record)
+        self.model.meta.detector = DetectorMeta(config=self.cfg.model_dump(), record=self.record, earlier=self.earlier)
         extra: dict[str, Tensor] = {}
         if not self.record.finished:
             extra["dtrain.step"] = torch.tensor([self.record.step])

@@ -112,6 +112,30 @@ def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
         assert torch.equal(val, b.decoder.state_dict()[key])
 
 
+def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_path: Path) -> None:
+    """``--fine-tune`` trains the detector already in the bundle further (at a tiny learning
+    rate one step barely moves it, where a fresh start would replace it), records the run it
+    came from, and refuses another width with a clear error."""
+    base = tmp_path / "base.dmm"
+    DetectorTrainer(DeepMorphModel.load(BUNDLED_MODEL), _config(2), base).run()
+    tuned = tmp_path / "tuned.dmm"
+    args = ["train-detector", str(base), "--out", str(tuned), "--steps", "1", "--batch", "2", "--width", "8"]
+    res = runner.invoke(app, [*args, "--workers", "0", "--fine-tune", "--lr", "1e-6", "--seed", "5"])
+    assert res.exit_code == 0, res.output
+    before, after = DeepMorphModel.load(base), DeepMorphModel.load(tuned)
+    for key, val in before.detector_state.items():
+        if val.is_floating_point() and "running" not in key:
+            torch.testing.assert_close(after.detector_state[key], val, atol=1e-4, rtol=0)
+    assert after.meta.detector.config["fine_tune"] and after.meta.detector.record.step == 1
+    (earlier,) = after.meta.detector.earlier
+    assert earlier["record"]["step"] == 2 and earlier["config"]["seed"] == 4
+    res = runner.invoke(app, ["info", str(tuned)])
+    assert "fine-tuned after 2 steps" in " ".join(res.output.split()), res.output
+    wider = ["train-detector", str(base), "--out", str(tmp_path / "wider.dmm"), "--steps", "1", "--width", "16"]
+    res = runner.invoke(app, [*wider, "--workers", "0", "--fine-tune"])
+    assert res.exit_code == 1 and "width 8, not 16" in " ".join(res.output.split()), res.output
+
+
 def test_an_existing_file_other_than_the_model_is_not_replaced(tmp_path: Path) -> None:
     drawing = tmp_path / "ghost.svg"
     drawing.write_text("<svg/>")
