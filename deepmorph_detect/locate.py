@@ -48,7 +48,14 @@ from deepmorph_core.imaging import (
     to_gray,
 )
 from deepmorph_detect.camera import Camera, project, solve_pose, viewbox_corners, viewbox_to_frame
-from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference, normalise_input
+from deepmorph_detect.network import (
+    INPUT_SIZE,
+    STRIDE,
+    DetectorNet,
+    fused_for_inference,
+    normalise_input,
+    stored_weights,
+)
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine, refine_at, warp_to_template
 from deepmorph_detect.synthesis import BitEvidence, MorphSynthesis, morph_template
 
@@ -149,7 +156,7 @@ class CentreNetDetector:
         if model.meta.detector is None:
             return None
         net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
-        net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+        net.load_state_dict(stored_weights(model.detector_state))
         return cls(net)
 
     def detect(self, image: np.ndarray) -> list[dict[str, Any]]:

@@ -77,6 +77,12 @@ def fused_for_inference(net: nn.Module) -> nn.Module:
     return fused
 
 
+def stored_weights(detector_state: dict[str, Tensor]) -> dict[str, Tensor]:
+    """A bundle's ``detector.*`` tensors (``DeepMorphModel.detector_state``) as the network's
+    own state dict: the prefix the bundle files them under dropped."""
+    return {k.removeprefix("detector."): v for k, v in detector_state.items()}
+
+
 def normalise_input(gray: Tensor) -> Tensor:
     """Per-image standardisation of ``(B, 1, H, W)`` gray in ``[0, 1]`` (exposure-invariant)."""
     mean = gray.mean((1, 2, 3), keepdim=True)
@@ -95,4 +101,12 @@ def focal_loss(logits: Tensor, target: Tensor, alpha: float = 2.0, beta: float =
     return (pos_loss.sum() + neg_loss.sum()) / n
 
 
-__all__ = ["INPUT_SIZE", "STRIDE", "DetectorNet", "focal_loss", "fused_for_inference", "normalise_input"]
+__all__ = [
+    "INPUT_SIZE",
+    "STRIDE",
+    "DetectorNet",
+    "focal_loss",
+    "fused_for_inference",
+    "normalise_input",
+    "stored_weights",
+]

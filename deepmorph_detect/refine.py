@@ -322,7 +322,9 @@ def refine(
         return a is not None and a.correlation >= bar
 
     def searched(a: Alignment) -> Alignment:
-        return a if a is quick else replace(a, searched=True)
+        """``a`` marked as a wider search's (what ``good`` passes is never the quick path's:
+        that one ended below ``accept``)."""
+        return replace(a, searched=True)
 
     def best_few(starts: list[np.ndarray], best: Alignment | None) -> Alignment | None:
         """``best``, or better: the :data:`SWEEP_TRIES` best of ``starts`` by plain correlation,

@@ -29,7 +29,7 @@ from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import same_file
 from deepmorph_core.train import interrupted
-from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, SceneMaker
 
 
@@ -177,16 +177,15 @@ class DetectorTrainer:
         if config.fine_tune and not resuming:
             if meta is None or not meta.record.finished:
                 raise DeepMorphError("--fine-tune needs a model whose detector training has finished")
-            if int(meta.config.get("width", 32)) != config.width:
-                raise DeepMorphError(
-                    f"--fine-tune: the model's detector has width {meta.config.get('width', 32)}, not {config.width}"
-                )
-            self.net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+            stored_width = int(meta.config.get("width", 32))
+            if stored_width != config.width:
+                raise DeepMorphError(f"--fine-tune: the model's detector has width {stored_width}, not {config.width}")
+            self.net.load_state_dict(stored_weights(model.detector_state))
             self.earlier.append({"config": meta.config, "record": meta.record.model_dump()})
         self.record.total_steps = config.steps
         self.record.threads = torch.get_num_threads()
         if resuming:
-            self.net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+            self.net.load_state_dict(stored_weights(model.detector_state))
             sd = self.opt.state_dict()
             state: dict[int, dict[str, Any]] = {}
             for key, val in model.extra_tensors.items():

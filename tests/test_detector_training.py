@@ -13,7 +13,7 @@ from deepmorph_core.api import BUNDLED_MODEL
 from deepmorph_core.cli import app
 from deepmorph_core.codemodel import DeepMorphModel
 from deepmorph_core.train import Interrupted
-from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference, stored_weights
 from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.training import DetectorConfig, DetectorTrainer, SceneBatches, quad_loss, targets_for
 
@@ -46,7 +46,7 @@ def test_folding_batch_norms_keeps_the_detector_outputs() -> None:
     same heatmap and corners as the trained network, which itself is left as it was."""
     model = DeepMorphModel.load(BUNDLED_MODEL)
     net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
-    net.load_state_dict({k[9:]: v for k, v in model.detector_state.items()})
+    net.load_state_dict(stored_weights(model.detector_state))
     net.eval()
     fused = fused_for_inference(net)
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
