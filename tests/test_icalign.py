@@ -9,7 +9,7 @@ import pytest
 from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.render import render_svg
 from deepmorph_detect.camera import project, viewbox_corners
-from deepmorph_detect.icalign import InverseECC
+from deepmorph_detect.icalign import InverseECC, inverse3
 
 WIDTH = 128
 
@@ -116,3 +116,14 @@ def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
         err = np.abs(project(found.homography, corners) - project(truth, corners)).max()
         assert found.correlation > 0.95 and err < 0.3 * s, (print_px, found.correlation, err)
     assert calls == ({"inverse": 0, "opencv": 2} if wide_basin else {"inverse": 2, "opencv": 0})
+
+
+def test_inverse3_is_the_inverse_and_refuses_singular_matrices() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        m = rng.normal(size=(3, 3))
+        np.testing.assert_allclose(inverse3(m) @ m, np.eye(3), atol=1e-9)
+        np.testing.assert_allclose(inverse3(m), np.linalg.inv(m), rtol=1e-9, atol=1e-12)
+    for bad in (np.zeros((3, 3)), np.array([[1.0, 2, 3], [2, 4, 6], [0, 1, 1]]), np.full((3, 3), np.nan)):
+        with pytest.raises(np.linalg.LinAlgError):
+            inverse3(bad)
