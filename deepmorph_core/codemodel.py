@@ -175,6 +175,17 @@ class DeepMorphModel:
         with torch.no_grad():
             return self.drawing.values_from_unit(self.encoder(code_bits.float()))
 
+    def morph_values_one(self, code_bits: np.ndarray) -> np.ndarray:
+        """:meth:`morph_values` of one ``(N_b,)`` code word (or soft bits), in numpy float64:
+        ``(N_v,)``, the same numbers to float rounding, for the morph the photo chain renders
+        for each payload it checks."""
+        bits = np.asarray(code_bits, dtype=np.float64).reshape(-1)
+        weight = self.encoder.linear.weight.detach().numpy()  # (N_v, N_b), a view
+        if bits.shape[0] != weight.shape[1]:
+            raise ValueError(f"expected {weight.shape[1]} code bits, got shape {bits.shape}")
+        unit = 1.0 / (1.0 + np.exp(-(weight.astype(np.float64) @ (2.0 * bits - 1.0))))
+        return self.drawing.space.values_from_unit_one(unit)
+
     def encode(self, payload: np.ndarray | str) -> str:
         """The morphed SVG document carrying ``payload``: ``(payload_bits,)`` 0/1, or text as
         ``deepmorph encode --payload`` takes it (hex ``0x...`` or a string of binary digits)."""

@@ -16,9 +16,6 @@ from __future__ import annotations
 
 import copy
 import math
-import warnings
-from collections.abc import Callable
-from typing import Any
 
 import cv2
 import numpy as np
@@ -83,31 +80,6 @@ def fused_for_inference(net: nn.Module) -> nn.Module:
     return fused
 
 
-def frozen_for_cpu(net: nn.Module, example: Tensor, tolerance: float = 1e-3) -> Callable[..., Any]:
-    """``net`` (eval mode, batch norms folded) traced and frozen by TorchScript for inference:
-    oneDNN convolutions with their ReLUs fused and the feature maps kept in oneDNN's layout
-    from one layer to the next. The detector and the decoder run every frame; frozen, they take
-    0.85 and 0.75 of their eager time on one core (1.5 against 1.7 ms, 0.74 against 0.98).
-
-    The frozen graph is checked against ``net`` on ``example`` (and on ``example`` turned
-    upside down); where tracing fails, or the two differ by more than ``tolerance``, ``net``
-    itself is returned: the chain never depends on TorchScript to work.
-    """
-    checks = (example, example.flip(-2))
-    try:
-        with warnings.catch_warnings(), torch.inference_mode():
-            warnings.simplefilter("ignore")  # tracing warns about the decoder's input checks
-            frozen = torch.jit.optimize_for_inference(torch.jit.trace(net, example, check_trace=False))
-            for x in checks:
-                want, got = net(x), frozen(x)
-                pairs = zip(want, got) if isinstance(want, tuple) else [(want, got)]
-                if any((a - b).abs().max().item() > tolerance for a, b in pairs):
-                    return net
-    except Exception:  # noqa: BLE001 - any failure to freeze leaves the eager network in place
-        return net
-    return frozen
-
-
 def stored_weights(detector_state: dict[str, Tensor]) -> dict[str, Tensor]:
     """A bundle's ``detector.*`` tensors (``DeepMorphModel.detector_state``) as the network's
     own state dict: the prefix the bundle files them under dropped."""
@@ -147,7 +119,6 @@ __all__ = [
     "STRIDE",
     "DetectorNet",
     "focal_loss",
-    "frozen_for_cpu",
     "fused_for_inference",
     "normalise_input",
     "standardise",

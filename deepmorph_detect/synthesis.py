@@ -284,7 +284,7 @@ def morph_template(
     """The drawing morphed by ``(N_b,)`` code bits, rendered by a real renderer (``renderer``,
     resvg unless given) at ``width``. Soft bits (between 0 and 1) give a morph between the two
     values of each uncertain bit."""
-    values = model.morph_values(torch.from_numpy(np.asarray(code_bits, dtype=np.float32))[None])[0]
+    values = torch.from_numpy(model.morph_values_one(code_bits))
     return Template.from_svg(model.drawing.to_svg(values), viewbox, (width,), renderer)
 
 

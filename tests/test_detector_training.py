@@ -17,7 +17,6 @@ from deepmorph_detect.network import (
     INPUT_SIZE,
     STRIDE,
     DetectorNet,
-    frozen_for_cpu,
     fused_for_inference,
     normalise_input,
     standardise,
@@ -64,42 +63,6 @@ def test_folding_batch_norms_keeps_the_detector_outputs() -> None:
     with torch.no_grad():
         for a, b in zip(net(x), fused(x)):
             torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
-
-
-def test_frozen_networks_give_the_eager_outputs_and_fall_back_when_they_cannot() -> None:
-    model = DeepMorphModel.load(BUNDLED_MODEL)
-    net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
-    net.load_state_dict(stored_weights(model.detector_state))
-    eager = fused_for_inference(net)
-    example = torch.randn(1, 1, INPUT_SIZE[1], INPUT_SIZE[0], generator=torch.Generator().manual_seed(1))
-    frozen = frozen_for_cpu(eager, example)
-    assert isinstance(frozen, torch.jit.ScriptModule)
-    other = torch.randn(1, 1, INPUT_SIZE[1], INPUT_SIZE[0])  # not the input it was traced on
-    with torch.inference_mode():
-        for a, b in zip(eager(other), frozen(other)):
-            torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
-    decoder = fused_for_inference(model.decoder)
-    image = torch.rand(1, 1, *model.image_size)
-    frozen_decoder = frozen_for_cpu(decoder, image)
-    assert isinstance(frozen_decoder, torch.jit.ScriptModule)
-    with torch.inference_mode():
-        torch.testing.assert_close(frozen_decoder(image.flip(-1)), decoder(image.flip(-1)), rtol=1e-4, atol=1e-4)
-
-    class Untraceable(torch.nn.Module):  # returns a Python number: tracing refuses it
-        def forward(self, x: torch.Tensor) -> float:
-            return float(x.sum())
-
-    odd = Untraceable()
-    assert frozen_for_cpu(odd, example) is odd
-
-    class DependsOnData(torch.nn.Module):  # a trace records one branch: the check sees the other
-        def forward(self, x: torch.Tensor) -> torch.Tensor:
-            return x * 2 if x[0, 0, 0, 0] > 0 else -x
-
-    branchy = DependsOnData()
-    probe = example.clone()
-    probe[0, 0, 0, 0], probe[0, 0, -1, 0] = 1.0, -1.0  # flipped upside down, the branch changes
-    assert frozen_for_cpu(branchy, probe) is branchy
 
 
 def test_detector_input_is_standardised_as_the_network_was_trained() -> None:

@@ -501,3 +501,18 @@ def test_an_interrupted_tuning_writes_what_it_has(
         tune_decoder(trained, out, steps=50, threads=1)
     (run,) = DeepMorphModel.load(out).meta.tuning
     assert run["steps"] == 7 and not run["finished"]
+
+
+def test_one_code_word_gives_the_batched_morph_values() -> None:
+    """The photo chain's numpy path for one code word (hard or soft bits) matches the batched
+    torch path, and refuses a word of the wrong length."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    rng = np.random.default_rng(3)
+    n_b = model.codec.spec.code_bits
+    for bits in (rng.integers(0, 2, n_b).astype(np.float32), rng.random(n_b).astype(np.float32)):
+        batched = model.morph_values(torch.from_numpy(bits)[None])[0].double().numpy()
+        np.testing.assert_allclose(model.morph_values_one(bits), batched, atol=2e-6)
+    with pytest.raises(ValueError, match="code bits"):
+        model.morph_values_one(np.zeros(n_b + 1))
+    with pytest.raises(ValueError, match="variables"):
+        model.drawing.space.values_from_unit_one(np.zeros(3))
