@@ -202,6 +202,9 @@ class CentreNetDetector:
         return out
 
 
+_NEXT_CORNER = np.array([1, 2, 3, 0])
+
+
 def plausible_outline(quad: np.ndarray, frame: np.ndarray) -> bool:
     """Whether ``quad`` (the drawing's frame corners in the photo) can be a print seen from the
     front: convex, and turning the same way as ``frame``. ECC on clutter can converge to a
@@ -209,8 +212,8 @@ def plausible_outline(quad: np.ndarray, frame: np.ndarray) -> bool:
     """
 
     def turns(q: np.ndarray) -> np.ndarray:
-        edges = np.roll(q, -1, axis=0) - q
-        nxt = np.roll(edges, -1, axis=0)
+        edges = q[_NEXT_CORNER] - q  # np.roll(q, -1, axis=0) - q, without np.roll's overhead
+        nxt = edges[_NEXT_CORNER]
         return edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
 
     want = np.sign(turns(np.asarray(frame, np.float64)))

@@ -18,6 +18,7 @@ fraction of a pixel.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -138,7 +139,8 @@ def warp_to_template(pyramid: ImagePyramid, homography: np.ndarray, template: Te
     M = homography @ template.to_svg_units(width)  # template px -> image px
     corners = np.array([[0, 0, 1], [tw, 0, 1], [tw, th, 1], [0, th, 1]], dtype=np.float64) @ M.T
     xy = corners[:, :2] / corners[:, 2:3]
-    span = max(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[3]), 1e-6)
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = xy.tolist()
+    span = max(math.hypot(x1 - x0, y1 - y0), math.hypot(x2 - x3, y2 - y3), 1e-6)
     img, scale = pyramid.at_most(span / tw)
     S = np.diag([scale, scale, 1.0])
     return cv2.warpPerspective(
