@@ -136,6 +136,8 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         if img.ndim == 3 and img.shape[2] > 1:  # photos: gray levels as OpenCV rounds them
             img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_BGR2GRAY)
         out = img.astype(np.float32) / 255.0
+        if out.ndim == 2:  # k / 255 lies in [0, 1]: no clip (a copy of the frame) needed
+            return out
     elif img.dtype == np.uint16:
         out = img.astype(np.float32) / 65535.0
     elif img.dtype == np.bool_:
