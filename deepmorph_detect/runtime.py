@@ -31,6 +31,13 @@ from deepmorph_detect.network import STRIDE, DetectorNet
 
 OPSET = 17
 
+# what ONNX Runtime raises when it cannot load or run a graph (each derives from Exception alone)
+_RUNTIME_ERRORS: tuple[type[Exception], ...] = tuple(
+    getattr(ort.capi.onnxruntime_pybind11_state, name)
+    for name in ("Fail", "InvalidArgument", "InvalidGraph", "InvalidProtobuf", "NotImplemented", "RuntimeException")
+    if hasattr(ort.capi.onnxruntime_pybind11_state, name)
+)
+
 
 class Unsupported(ValueError):
     """The network holds a layer the graph builder does not know."""
@@ -189,7 +196,7 @@ def onnx_or_torch(
         fast = OnnxNetwork(build(), n_outputs)
         if all(agrees(w, fast(x), tolerance) for w, x in zip(want, (example, example.flip(-2)))):
             return fast
-    except (Unsupported, onnx.checker.ValidationError, ort.capi.onnxruntime_pybind11_state.Fail):
+    except (Unsupported, onnx.checker.ValidationError, *_RUNTIME_ERRORS):
         pass
     return net
 

@@ -101,6 +101,7 @@ def test_a_graph_that_disagrees_keeps_pytorch(model: DeepMorphModel) -> None:
     other = fused_for_inference(Decoder(model.codec.spec.code_bits, model.image_size).eval())
     example = torch.rand(1, 1, *model.image_size)
     assert onnx_or_torch(decoder, lambda: decoder_graph(other), example) is decoder
+    assert onnx_or_torch(decoder, lambda: b"not an ONNX model", example) is decoder  # ONNX Runtime refuses it
     assert isinstance(onnx_or_torch(decoder, lambda: decoder_graph(decoder), example), OnnxNetwork)
 
 
