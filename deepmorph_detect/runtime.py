@@ -11,8 +11,8 @@ The graphs are built here, layer by layer, from the trained weights (:func:`dete
 TorchScript-based ONNX exporter is deprecated and the newer one traces for seconds. Only the
 layer types these two networks use are known; a network with anything else (a decoder with a
 spatial transformer, say) raises :class:`Unsupported` and the caller keeps PyTorch.
-:class:`OnnxNetwork` checks its outputs against the PyTorch network's on two inputs before it
-is used, and the caller keeps PyTorch where they differ.
+:func:`onnx_or_torch` checks the graph's outputs against the PyTorch network's on two inputs
+before it is used, and keeps PyTorch where they differ or ONNX Runtime cannot run the graph.
 """
 
 from __future__ import annotations
