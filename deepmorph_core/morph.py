@@ -101,9 +101,6 @@ class MorphSpace:
             if self._prim_moves[p][k, 0] >= 0
         ]
         self._move_pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
-        # numpy copies for values_from_unit_one
-        self._lower_np, self._upper_np, self._offset_np = lo.numpy(), hi.numpy(), self._offset.numpy()
-        self._move_pairs_np = self._move_pairs.numpy()
         self._points_cache: dict[tuple[int, torch.dtype, torch.device], Tensor] = {}
         self._fix_none(nv)
 
@@ -171,15 +168,16 @@ class MorphSpace:
         unit = np.asarray(unit, dtype=np.float64).reshape(-1)
         if unit.shape[0] != self.n_variables:
             raise ValueError(f"expected {self.n_variables} variables, got shape {unit.shape}")
-        lo, hi = self._lower_np, self._upper_np
+        lo, hi = self.lower.numpy(), self.upper.numpy()  # float64 views of the bounds
         values = lo + (hi - lo) * unit
-        if len(self._move_pairs_np):
-            ix, iy = self._move_pairs_np[:, 0], self._move_pairs_np[:, 1]
+        pairs = self._move_pairs.numpy()
+        if len(pairs):
+            ix, iy = pairs[:, 0], pairs[:, 1]
             r = hi[ix]
             x, y = values[ix] / r, values[iy] / r
             values[ix] = r * x * np.sqrt(np.maximum(1 - y * y / 2, 0.0))
             values[iy] = r * y * np.sqrt(np.maximum(1 - x * x / 2, 0.0))
-        return values - self._offset_np
+        return values - self._offset.numpy()
 
     def neutral_unit(self, batch: int = 1, dtype: torch.dtype = torch.float32) -> Tensor:
         """Encoder outputs closest to "no morph" (0.5 for symmetric bounds).

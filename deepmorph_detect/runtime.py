@@ -189,12 +189,13 @@ def onnx_or_torch(
     makes, when it builds, loads and gives ``net``'s outputs on ``example`` and on ``example``
     upside down (within ``tolerance``); ``net`` itself otherwise. Either is called the same
     way, on a ``(1, 1, H, W)`` tensor of ``example``'s size."""
+    inputs = (example, example.flip(-2))
     try:
         with torch.inference_mode():
-            want = [net(x) for x in (example, example.flip(-2))]
+            want = [net(x) for x in inputs]
         n_outputs = len(want[0]) if isinstance(want[0], tuple) else 1
         fast = OnnxNetwork(build(), n_outputs)
-        if all(agrees(w, fast(x), tolerance) for w, x in zip(want, (example, example.flip(-2)))):
+        if all(agrees(w, fast(x), tolerance) for w, x in zip(want, inputs)):
             return fast
     except (Unsupported, onnx.checker.ValidationError, *_RUNTIME_ERRORS):
         pass
