@@ -249,10 +249,10 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
     u8 = np.clip(gray * 255, 0, 255).astype(np.uint8)
     blur = cv2.GaussianBlur(u8, (3, 3), 0.95)
     _, mask = cv2.threshold(blur, 0, 255, cv2.THRESH_BINARY_INV | cv2.THRESH_OTSU)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    H, W = gray.shape
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=component_label_type(H, W))
     if n <= 1:
         return None
-    H, W = gray.shape
     keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= max(4, H * W * 2e-5)]
 
     def touches_border(i: int) -> bool:
@@ -280,6 +280,14 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
     # components, grown by a pixel to undo the blur's shift of their edges).
     grown = cv2.dilate(selected.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     return grown & (gray < 0.5), (int(x0), int(y0), int(x1), int(y1))
+
+
+def component_label_type(height: int, width: int) -> int:
+    """The OpenCV label type for the 8-connected components of a ``height`` x ``width`` mask:
+    16 bits where they cannot run out, else 32. Two components never share a 2x2 block (its
+    pixels all touch), so there are at most one per block; 16-bit labels take half the time of
+    32-bit ones on the 192 px view every reading frames."""
+    return cv2.CV_16U if ((height + 1) // 2) * ((width + 1) // 2) < 65535 else cv2.CV_32S
 
 
 def _label_set(labels: np.ndarray, n: int, chosen: list[int]) -> np.ndarray:

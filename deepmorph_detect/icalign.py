@@ -18,7 +18,7 @@ more than 0.02) in 1.15 against 3.9 ms at 128 px. At the coarsest level, which s
 the detector's rough outline, a linearisation at the template has the narrower basin (on 133
 coarse solves, 7 that OpenCV took above 0.6 stayed below it), so a coarse solve that ends
 below a bar is done again by OpenCV's forward-additive ECC
-(:func:`~deepmorph_detect.refine._coarse_step`).
+(:func:`~deepmorph_detect.refine._coarse_steps`).
 """
 
 from __future__ import annotations

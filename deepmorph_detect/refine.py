@@ -43,7 +43,7 @@ SWEEP_SCALES = (0.85, 1.0, 1.15, 1.35, 1.6, 1.85)
 SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain correlation)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
 # a coarse solve by inverse composition that reaches this correlation is kept; below it, OpenCV's
-# wider-basin solve runs from the same start (:func:`_coarse_step`)
+# wider-basin solve runs from the same start (:func:`_coarse_steps`)
 COARSE_FAST_BAR = 0.7
 
 
@@ -187,24 +187,34 @@ def _ecc_step(
     return out / out[2, 2], float(rho)
 
 
-def _coarse_step(
-    pyramid: ImagePyramid, H: np.ndarray, template: Template, width: int, iterations: int, smooth: int, crop: np.ndarray
-) -> tuple[np.ndarray, float] | None:
-    """The coarsest level's solve from a detector's outline: by inverse composition first
-    (about 0.8 ms for 15 iterations at 48 px), and when that ends below
-    :data:`COARSE_FAST_BAR` or diverges, by OpenCV's forward-additive ECC from the same start
-    (about 2 ms), whose basin is wider.
+def _coarse_steps(
+    pyramid: ImagePyramid,
+    starts: list[tuple[np.ndarray, np.ndarray]],
+    template: Template,
+    width: int,
+    iterations: int,
+    smooth: int,
+) -> list[tuple[np.ndarray, float] | None]:
+    """The coarsest level's solves from a detector's outline in one or two corner orders
+    (``(homography, crop)`` each): by inverse composition (about 0.4 ms for 15 iterations at
+    48 px), and when none of them reaches :data:`COARSE_FAST_BAR`, each again by OpenCV's
+    forward-additive ECC from the same start (about 1.5 ms), whose basin is wider.
 
     On prints the fast solve almost always gets there (302 of 654 coarse solves in 300 medium
     scenes, about one per print); what falls back is mostly clutter and other drawings.
     Side by side on 900 scenes (medium seeds 9811/9831, hard seed 9832) and 1300 without the
     drawing: the same prints found and read, with the same corners, no detection without the
     drawing either way, and the median photo 0.91x-0.95x the time (``docs/detection.md``).
+
+    The runner-up order is not solved by OpenCV once an order clears the bar: a quarter turn
+    off correlates below the right turn's fast solve. Solving it anyway (as each order was
+    until then) cost 1.5 ms on about one hard photo in ten, for the same prints found and
+    read with the same corners in 400 scenes.
     """
-    fast = _ecc_step(pyramid, H, template, width, iterations, smooth, crop)
-    if fast is not None and fast[1] >= COARSE_FAST_BAR:
+    fast = [_ecc_step(pyramid, H, template, width, iterations, smooth, crop) for H, crop in starts]
+    if any(step is not None and step[1] >= COARSE_FAST_BAR for step in fast):
         return fast
-    return _ecc_step(pyramid, H, template, width, iterations, smooth, crop, wide_basin=True)
+    return [_ecc_step(pyramid, H, template, width, iterations, smooth, crop, wide_basin=True) for H, crop in starts]
 
 
 def refine_at(
@@ -295,8 +305,10 @@ def refine(
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
 
     def from_outline(H: np.ndarray, crop: np.ndarray) -> tuple[np.ndarray, float] | None:
-        """The coarsest level's solve from a start that may be several pixels off."""
-        return _coarse_step(pyramid, H, template, levels[0], its[0], 5, crop)
+        """A wider search's coarsest solve: by inverse composition only. Of 368 OpenCV solves
+        after it in the wider searches of 600 scenes, 2 reached a print, each found from
+        another start too; together they cost about 0.9 ms per photo (docs/detection.md)."""
+        return _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop)
 
     scored = _plain_scores(pyramid, starts, template, levels[0])
     coarse: list[tuple[np.ndarray, float] | None] = []
@@ -305,7 +317,7 @@ def refine(
         # the best two orders by plain correlation hold the right one almost always; ECC decides
         # between them at the coarsest level unless the best is ahead by a clear margin
         close = [r for r in scored[:2] if scored[0][0] - r[0] < ORDER_MARGIN]
-        coarse = [from_outline(H, crop) for _, H, crop in close]
+        coarse = _coarse_steps(pyramid, [(H, crop) for _, H, crop in close], template, levels[0], its[0], 5)
         chosen = max(range(len(coarse)), key=lambda i: -1.0 if coarse[i] is None else coarse[i][1])
         best = None if coarse[chosen] is None else _finish(pyramid, coarse[chosen], template, levels, its)
     elif accept is None:

@@ -127,3 +127,86 @@ def test_inverse3_is_the_inverse_and_refuses_singular_matrices() -> None:
     for bad in (np.zeros((3, 3)), np.array([[1.0, 2, 3], [2, 4, 6], [0, 1, 1]]), np.full((3, 3), np.nan)):
         with pytest.raises(np.linalg.LinAlgError):
             inverse3(bad)
+
+
+def _ghost_print(print_px: int = 160, margin: int = 60):
+    """The unmorphed ghost printed ``print_px`` wide on white paper, its template (both
+    levels), the frame's corners and the true homography (SVG units -> photo px)."""
+    from deepmorph_detect.refine import Template
+
+    md = MorphableDrawing.load(BUNDLED_DRAWING)
+    svg = md.to_svg(md.neutral_values()[0])
+    vx, vy, vw, _ = md.drawing.viewbox
+    photo = np.pad(render_svg(svg, print_px), margin, constant_values=1.0)
+    s = print_px / vw
+    truth = np.array([[s, 0, margin - s * vx], [0, s, margin - s * vy], [0, 0, 1.0]])
+    return photo, Template.from_svg(svg, md.drawing.viewbox), viewbox_corners(md.drawing.viewbox), truth
+
+
+def _count_opencv_solves(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
+    import deepmorph_detect.refine as refine_module
+
+    calls = {"opencv": 0}
+    real = cv2.findTransformECC
+
+    def spy(*args, **kwargs):
+        calls["opencv"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(refine_module.cv2, "findTransformECC", spy)
+    return calls
+
+
+def test_the_runner_up_corner_order_is_not_solved_by_opencv_once_one_order_aligns(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A detector outline a little off, in its right corner order and a quarter turn from it:
+    the right order's fast solve clears the bar, so neither takes OpenCV's slower solve, and
+    the right one wins."""
+    from deepmorph_detect.refine import COARSE_FAST_BAR, ImagePyramid, _coarse_steps, corner_orders, warp_to_template
+
+    photo, template, corners, truth = _ghost_print()
+    start = truth @ np.array([[1.03, 0.02, 1.0], [-0.02, 0.98, -0.8], [0, 0, 1.0]])
+    pyramid, width = ImagePyramid(photo), min(template.images)
+    right, turned = corner_orders(start, template)[:2]
+    calls = _count_opencv_solves(monkeypatch)
+    starts = [(H, warp_to_template(pyramid, H, template, width)) for H in (turned, right)]
+    steps = _coarse_steps(pyramid, starts, template, width, 15, 5)
+    assert calls["opencv"] == 0
+    assert steps[1] is not None and steps[1][1] >= COARSE_FAST_BAR
+    assert steps[0] is None or steps[0][1] < steps[1][1]
+    off = np.abs(project(start, corners) - project(truth, corners)).max()
+    err = np.abs(project(steps[1][0], corners) - project(truth, corners)).max()
+    assert err < 2.0 and err < off / 4, (err, off)  # under a pixel of the 48 px template
+
+
+def test_opencv_solves_each_order_when_no_fast_solve_clears_the_bar(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two starts on clutter (no drawing): both go on to OpenCV's wider basin."""
+    from deepmorph_detect.refine import ImagePyramid, _coarse_steps, warp_to_template
+
+    _, template, _, truth = _ghost_print()
+    rng = np.random.default_rng(3)
+    clutter = cv2.GaussianBlur(rng.random((280, 280)).astype(np.float32), (0, 0), 2)
+    pyramid, width = ImagePyramid(clutter), min(template.images)
+    calls = _count_opencv_solves(monkeypatch)
+    starts = [(H, warp_to_template(pyramid, H, template, width)) for H in (truth, truth @ np.diag([1.1, 1.1, 1.0]))]
+    _coarse_steps(pyramid, starts, template, width, 15, 5)
+    assert calls["opencv"] == 2
+
+
+def test_wider_searches_solve_by_inverse_composition_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A candidate on clutter, with a bar to reach: every wider search runs (other corner
+    orders, the outline sweep, starts from the ink) and fails, and OpenCV's solver runs only
+    for the quick path's orders (two at most)."""
+    from deepmorph_detect.refine import ImagePyramid, refine
+
+    _, template, _, truth = _ghost_print()
+    rng = np.random.default_rng(4)
+    clutter = np.ones((280, 280), np.float32)
+    for _ in range(40):  # dark strokes at random: ink for the sweep and the ink starts to try
+        p, q = rng.integers(20, 260, size=(2, 2))
+        cv2.line(clutter, (int(p[0]), int(p[1])), (int(q[0]), int(q[1])), 0.0, 3)
+    calls = _count_opencv_solves(monkeypatch)
+    found = refine(ImagePyramid(clutter), truth, template, orders=4, accept=0.55)
+    assert found is None or found.correlation < 0.6
+    assert calls["opencv"] <= 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -15,6 +16,7 @@ from deepmorph_core.imaging import (
     align_to_frame,
     canonicalize,
     canonicalize_one,
+    component_label_type,
     flatten_illumination,
     ink_mask,
     ink_moments,
@@ -242,3 +244,14 @@ def test_ink_mask_drops_a_light_border_shadow_and_keeps_dark_border_ink(ghost) -
     inked[40:60, :6] = 0.0  # as dark as the ink: a stroke running off the edge is kept
     _, box = ink_mask(inked)
     assert box[0] == 0 and box[2] == plain_box[2]
+
+
+@pytest.mark.parametrize("side", [192, 509, 510, 511, 700])
+def test_component_labels_never_run_out(side: int) -> None:
+    # the most components a mask of this size can hold: one pixel in every 2x2 block
+    worst = np.zeros((side, side), dtype=np.uint8)
+    worst[::2, ::2] = 255
+    n, labels, _, _ = cv2.connectedComponentsWithStats(worst, connectivity=8, ltype=component_label_type(side, side))
+    assert n == ((side + 1) // 2) ** 2 + 1
+    assert labels.max() == n - 1
+    assert component_label_type(side, side) == (cv2.CV_16U if n <= 65535 else cv2.CV_32S)
