@@ -135,7 +135,8 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     if img.dtype == np.uint8:
         if img.ndim == 3 and img.shape[2] > 1:  # photos: gray levels as OpenCV rounds them
             img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_BGR2GRAY)
-        out = img.astype(np.float32) / 255.0
+        out = img.astype(np.float32)
+        out /= np.float32(255.0)  # in place: the same numbers without a second frame-sized array
         if out.ndim == 2:  # k / 255 lies in [0, 1]: no clip (a copy of the frame) needed
             return out
     elif img.dtype == np.uint16:

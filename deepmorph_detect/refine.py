@@ -194,11 +194,14 @@ def _coarse_steps(
     width: int,
     iterations: int,
     smooth: int,
+    wide: int | None = None,
 ) -> list[tuple[np.ndarray, float] | None]:
-    """The coarsest level's solves from a detector's outline in one or two corner orders
-    (``(homography, crop)`` each): by inverse composition (about 0.4 ms for 15 iterations at
-    48 px), and when none of them reaches :data:`COARSE_FAST_BAR`, each again by OpenCV's
-    forward-additive ECC from the same start (about 1.5 ms), whose basin is wider.
+    """The coarsest level's solves from a detector's outline in one or two corner orders, or
+    from a wider search's starts (``(homography, crop)`` each): by inverse composition (about
+    0.4 ms for 15 iterations at 48 px), and when none of them reaches :data:`COARSE_FAST_BAR`,
+    again by OpenCV's forward-additive ECC from the same start (about 1.5 ms), whose basin is
+    wider: from each start (``wide`` None), or from the ``wide`` whose fast solves correlate
+    best.
 
     On prints the fast solve almost always gets there (302 of 654 coarse solves in 300 medium
     scenes, about one per print); what falls back is mostly clutter and other drawings.
@@ -214,7 +217,11 @@ def _coarse_steps(
     fast = [_ecc_step(pyramid, H, template, width, iterations, smooth, crop) for H, crop in starts]
     if any(step is not None and step[1] >= COARSE_FAST_BAR for step in fast):
         return fast
-    return [_ecc_step(pyramid, H, template, width, iterations, smooth, crop, wide_basin=True) for H, crop in starts]
+    ranked = sorted(range(len(fast)), key=lambda i: -1.0 if fast[i] is None else fast[i][1], reverse=True)
+    for i in ranked if wide is None else ranked[:wide]:
+        H, crop = starts[i]
+        fast[i] = _ecc_step(pyramid, H, template, width, iterations, smooth, crop, wide_basin=True)
+    return fast
 
 
 def refine_at(
@@ -304,11 +311,13 @@ def refine(
     its = iterations or (COARSE_ITERATIONS,) + (FINE_ITERATIONS,) * (len(levels) - 1)
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
 
-    def from_outline(H: np.ndarray, crop: np.ndarray) -> tuple[np.ndarray, float] | None:
-        """A wider search's coarsest solve: by inverse composition only. Of 368 OpenCV solves
-        after it in the wider searches of 600 scenes, 2 reached a print, each found from
-        another start too; together they cost about 0.9 ms per photo (docs/detection.md)."""
-        return _ecc_step(pyramid, H, template, levels[0], its[0], 5, crop)
+    def from_outlines(tries: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, float] | None]:
+        """A wider search's coarsest solves: OpenCV's only from the start whose fast solve
+        correlates best. Each start taking it, 368 OpenCV solves in the wider searches of 600
+        scenes reached 2 prints, both found from another start too, and cost about 0.9 ms a
+        photo; with none, a print in 100 was lost that only OpenCV reached, from the best fast
+        solve of its stage (docs/detection.md)."""
+        return _coarse_steps(pyramid, tries, template, levels[0], its[0], 5, wide=1)
 
     scored = _plain_scores(pyramid, starts, template, levels[0])
     coarse: list[tuple[np.ndarray, float] | None] = []
@@ -343,20 +352,18 @@ def refine(
     def best_few(starts: list[np.ndarray], best: Alignment | None) -> Alignment | None:
         """``best``, or better: the :data:`SWEEP_TRIES` best of ``starts`` by plain correlation,
         each solved from its outline and carried through all levels."""
-        for start, H, crop in _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]:
-            if start < min_start:
-                break
-            step = from_outline(H, crop)
+        scored = _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]
+        for step in from_outlines([(H, crop) for start, H, crop in scored if start >= min_start]):
             best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
         return best
 
     # of the 22 drawings the detector proposed but alignment missed in 400 scenes (medium and
     # hard), 7 were found this way: the detector's corner order was a quarter turn off, and
     # plain correlation ranked the right order third or fourth
-    for i, (start, H, crop) in enumerate(scored):
-        if i == chosen or start < min_start:
-            continue
-        step = coarse[i] if i < len(coarse) else from_outline(H, crop)
+    others = [i for i, (start, _, _) in enumerate(scored) if i != chosen and start >= min_start]
+    fresh = iter(from_outlines([scored[i][1:] for i in others if i >= len(coarse)]))
+    for i in others:
+        step = coarse[i] if i < len(coarse) else next(fresh)
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
         return searched(best)

@@ -669,3 +669,30 @@ def test_another_icon_that_barely_aligns_and_does_not_read_is_not_reported(locat
     assert [round(a.correlation, 2) for _, a, _ in aligned] == [0.56]  # what the fixture is for
     assert MIN_CORRELATION <= aligned[0][1].correlation < MIN_CORRELATION + UNREAD_MARGIN
     assert locator.locate(image) == []
+
+
+def test_qr_clock_times_qr_decoding_real_codes_frame_by_frame() -> None:
+    """The speed baseline: QR's detect-and-decode on frames that hold a readable code, one call
+    per tick, the frames taken in turn."""
+    from deepmorph_detect.benchmark import QR_TEXT, QrClock
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    clock = QrClock(model, (640, 480), frames=3)
+    assert clock.median_ms() is None
+    decoded = [cv2.QRCodeDetector().detectAndDecode(frame)[0] for frame in clock.frames]
+    # at medium severity QR reads about half its frames (20 of 40 here); these hold a code
+    assert decoded.count(QR_TEXT) >= 1 and all(f.shape[:2] == (480, 640) for f in clock.frames)
+    seen = []
+    real = clock.detector
+
+    class Spy:
+        def detectAndDecode(self, frame):  # noqa: N802 (OpenCV's name)
+            seen.append(next(i for i, f in enumerate(clock.frames) if f is frame))
+            return real.detectAndDecode(frame)
+
+    clock.detector = Spy()
+    clock.warm()
+    for _ in range(4):
+        assert clock.tick() > 0
+    assert seen == [0, 0, 1, 2, 0] and len(clock.times) == 4
+    assert clock.median_ms() == round(1000 * float(np.median(clock.times)), 2)

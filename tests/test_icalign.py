@@ -194,10 +194,11 @@ def test_opencv_solves_each_order_when_no_fast_solve_clears_the_bar(monkeypatch:
     assert calls["opencv"] == 2
 
 
-def test_wider_searches_solve_by_inverse_composition_only(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_wider_searches_take_opencvs_solve_once_per_stage(monkeypatch: pytest.MonkeyPatch) -> None:
     """A candidate on clutter, with a bar to reach: every wider search runs (other corner
-    orders, the outline sweep, starts from the ink) and fails, and OpenCV's solver runs only
-    for the quick path's orders (two at most)."""
+    orders, the outline sweep, starts from the ink) and fails. OpenCV's solver runs for the
+    quick path's orders (two at most) and then once per stage of the wider search, from the
+    start whose fast solve came closest, not from every start (six here, before)."""
     from deepmorph_detect.refine import ImagePyramid, refine
 
     _, template, _, truth = _ghost_print()
@@ -209,4 +210,4 @@ def test_wider_searches_solve_by_inverse_composition_only(monkeypatch: pytest.Mo
     calls = _count_opencv_solves(monkeypatch)
     found = refine(ImagePyramid(clutter), truth, template, orders=4, accept=0.55)
     assert found is None or found.correlation < 0.6
-    assert calls["opencv"] <= 2
+    assert 3 <= calls["opencv"] <= 2 + 3
