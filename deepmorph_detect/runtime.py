@@ -156,9 +156,9 @@ def decoder_graph(decoder: Decoder) -> bytes:
 
 
 class OnnxNetwork:
-    """An ONNX model run on one CPU thread (what ``torch.get_num_threads()`` says when it is
-    made), called like the PyTorch network it replaces: a ``(1, 1, H, W)`` float32 tensor in,
-    a tensor (or a tuple of them) out."""
+    """An ONNX model run on as many CPU threads as ``torch.get_num_threads()`` says when it is
+    made (one in the photo benchmarks), called like the PyTorch network it replaces: a
+    ``(1, 1, H, W)`` float32 tensor in, a tensor (or a tuple of them) out."""
 
     def __init__(self, graph: bytes, n_outputs: int) -> None:
         options = ort.SessionOptions()

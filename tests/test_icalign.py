@@ -79,56 +79,6 @@ def test_a_negative_does_not_align(template: np.ndarray) -> None:
     assert InverseECC(template, 3).align(1.0 - _photo(template, _known_warp()), 6, 1e-5) is None
 
 
-@pytest.mark.parametrize("wide_basin", [False, True])
-def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
-    wide_basin: bool, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A refit from a start a pixel off solves by inverse composition, or by OpenCV's ECC
-    when asked for its wider basin; both land on the print, 80 px (enlarged to the 128 px
-    template) or 256 px wide."""
-    import deepmorph_detect.refine as refine_module
-    from deepmorph_detect.refine import ImagePyramid, Template, refine_at
-
-    md = MorphableDrawing.load(BUNDLED_DRAWING)
-    svg = md.to_svg(md.neutral_values()[0])
-    vx, vy, vw, _ = md.drawing.viewbox
-    template = Template.from_svg(svg, md.drawing.viewbox)
-    calls = {"inverse": 0, "opencv": 0}
-    real_align, real_ecc = InverseECC.align, cv2.findTransformECC
-
-    def spy_align(self, *args, **kwargs):
-        calls["inverse"] += 1
-        return real_align(self, *args, **kwargs)
-
-    def spy_ecc(*args, **kwargs):
-        calls["opencv"] += 1
-        return real_ecc(*args, **kwargs)
-
-    monkeypatch.setattr(InverseECC, "align", spy_align)
-    monkeypatch.setattr(refine_module.cv2, "findTransformECC", spy_ecc)
-    corners = viewbox_corners(md.drawing.viewbox)
-    for print_px in (80, 256):
-        photo = np.pad(render_svg(svg, print_px), 40, constant_values=1.0)
-        s = print_px / vw  # photo px per SVG unit
-        truth = np.array([[s, 0, 40 - s * vx], [0, s, 40 - s * vy], [0, 0, 1.0]])
-        start = truth @ np.array([[1.01, 0.01, 0.8], [-0.01, 0.99, -0.6], [0, 0, 1.0]])
-        found = refine_at(ImagePyramid(photo), start, template, 128, 20, wide_basin=wide_basin)
-        err = np.abs(project(found.homography, corners) - project(truth, corners)).max()
-        assert found.correlation > 0.95 and err < 0.3 * s, (print_px, found.correlation, err)
-    assert calls == ({"inverse": 0, "opencv": 2} if wide_basin else {"inverse": 2, "opencv": 0})
-
-
-def test_inverse3_is_the_inverse_and_refuses_singular_matrices() -> None:
-    rng = np.random.default_rng(0)
-    for _ in range(200):
-        m = rng.normal(size=(3, 3))
-        np.testing.assert_allclose(inverse3(m) @ m, np.eye(3), atol=1e-9)
-        np.testing.assert_allclose(inverse3(m), np.linalg.inv(m), rtol=1e-9, atol=1e-12)
-    for bad in (np.zeros((3, 3)), np.array([[1.0, 2, 3], [2, 4, 6], [0, 1, 1]]), np.full((3, 3), np.nan)):
-        with pytest.raises(np.linalg.LinAlgError):
-            inverse3(bad)
-
-
 def _ghost_print(print_px: int = 160, margin: int = 60):
     """The unmorphed ghost printed ``print_px`` wide on white paper, its template (both
     levels), the frame's corners and the true homography (SVG units -> photo px)."""
@@ -155,6 +105,45 @@ def _count_opencv_solves(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
 
     monkeypatch.setattr(refine_module.cv2, "findTransformECC", spy)
     return calls
+
+
+@pytest.mark.parametrize("wide_basin", [False, True])
+def test_refits_take_the_inverse_form_unless_a_wide_basin_is_asked_for(
+    wide_basin: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A refit from a start a pixel off solves by inverse composition, or by OpenCV's ECC
+    when asked for its wider basin; both land on the print, 80 px (enlarged to the 128 px
+    template) or 256 px wide."""
+    from deepmorph_detect.refine import ImagePyramid, refine_at
+
+    calls = _count_opencv_solves(monkeypatch)
+    calls["inverse"] = 0
+    real_align = InverseECC.align
+
+    def spy_align(self, *args, **kwargs):
+        calls["inverse"] += 1
+        return real_align(self, *args, **kwargs)
+
+    monkeypatch.setattr(InverseECC, "align", spy_align)
+    for print_px in (80, 256):
+        photo, template, corners, truth = _ghost_print(print_px, margin=40)
+        s = truth[0, 0]  # photo px per SVG unit
+        start = truth @ np.array([[1.01, 0.01, 0.8], [-0.01, 0.99, -0.6], [0, 0, 1.0]])
+        found = refine_at(ImagePyramid(photo), start, template, 128, 20, wide_basin=wide_basin)
+        err = np.abs(project(found.homography, corners) - project(truth, corners)).max()
+        assert found.correlation > 0.95 and err < 0.3 * s, (print_px, found.correlation, err)
+    assert calls == ({"inverse": 0, "opencv": 2} if wide_basin else {"inverse": 2, "opencv": 0})
+
+
+def test_inverse3_is_the_inverse_and_refuses_singular_matrices() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        m = rng.normal(size=(3, 3))
+        np.testing.assert_allclose(inverse3(m) @ m, np.eye(3), atol=1e-9)
+        np.testing.assert_allclose(inverse3(m), np.linalg.inv(m), rtol=1e-9, atol=1e-12)
+    for bad in (np.zeros((3, 3)), np.array([[1.0, 2, 3], [2, 4, 6], [0, 1, 1]]), np.full((3, 3), np.nan)):
+        with pytest.raises(np.linalg.LinAlgError):
+            inverse3(bad)
 
 
 def test_the_runner_up_corner_order_is_not_solved_by_opencv_once_one_order_aligns(
