@@ -220,7 +220,7 @@ def area_resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def percentiles(values: np.ndarray, qs: tuple[float, ...]) -> np.ndarray:
     """``np.percentile(values, qs)`` (linear interpolation), to the last bit, in a fraction of
     the time: the order statistics the percentiles fall between (:func:`order_statistics`) and
-    numpy's own interpolation formula, without its general machinery (0.44 against 0.07 ms for
+    numpy's own interpolation formula, without its general machinery (0.44 against 0.08 ms for
     a 192 px view, which every reading of a photo frames by its percentiles).
 
     Returns:
