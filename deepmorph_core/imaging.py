@@ -206,9 +206,10 @@ def area_resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
         return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
     across = None if w == src_w else _area_weights(src_w, w)
     down = None if h == src_h else _area_weights(src_h, h)
-    whole = all(weights is None or weights.shape[0] == 1 for weights in (across, down))
-    if (across is None and w != src_w) or (down is None and h != src_h) or whole:
-        return cv2.resize(image, size, interpolation=cv2.INTER_AREA)  # OpenCV's quick path, or a long period
+    long_period = (across is None and w != src_w) or (down is None and h != src_h)
+    whole_numbers = all(weights is None or weights.shape[0] == 1 for weights in (across, down))
+    if long_period or whole_numbers:  # OpenCV's general path, or its quick one
+        return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
     out = np.ascontiguousarray(image)
     if across is not None:  # (rows, periods, p) @ (p, q) -> (rows, w)
         out = (out.reshape(-1, across.shape[1]) @ across.T).reshape(src_h, w)
@@ -232,9 +233,8 @@ def percentiles(values: np.ndarray, qs: tuple[float, ...]) -> np.ndarray:
     below = np.floor(virtual).astype(np.intp)
     above = np.minimum(below + 1, n - 1)
     ranks = np.unique(np.concatenate([below, above]))
-    ranked = dict(zip(ranks.tolist(), order_statistics(flat, ranks)))
-    a = np.array([ranked[r] for r in below.tolist()], dtype=flat.dtype)
-    b = np.array([ranked[r] for r in above.tolist()], dtype=flat.dtype)
+    ranked = order_statistics(flat, ranks)
+    a, b = ranked[np.searchsorted(ranks, below)], ranked[np.searchsorted(ranks, above)]
     t = virtual - below
     diff = b - a  # in the values' own precision, as numpy's _lerp takes it
     return np.where(t >= 0.5, b - diff * (1 - t), a + diff * t)

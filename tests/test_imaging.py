@@ -288,6 +288,7 @@ def test_percentiles_of_views_are_numpys_to_the_last_bit(shape, dtype, qs, seed,
 def test_order_statistics_partition_only_a_window_and_agree_with_a_full_partition(monkeypatch) -> None:
     rng = np.random.default_rng(7)
     flat = rng.random(192 * 192).astype(np.float32)
+    assert flat.size >= SELECTION_SAMPLE * 32  # large enough for the sampled path
     ranks = np.array([0, 367, 368, 20000, 36495, 36496, flat.size - 1])
     expected = np.partition(flat, ranks)[ranks]
     sizes = []
@@ -306,7 +307,6 @@ def test_order_statistics_partition_only_a_window_and_agree_with_a_full_partitio
     got = order_statistics(flat, np.array([368, flat.size - 1]))
     assert np.isnan(got[1]) and got[0] == full_partition(flat, 368)[368]
     assert flat.size in sizes
-    assert SELECTION_SAMPLE * 32 <= flat.size  # the test exercised the sampled path above
 
 
 @pytest.mark.parametrize(
