@@ -161,8 +161,12 @@ def test_encode_real_render_decode_round_trip(trained: Path, tmp_path: Path) -> 
         save_gray(render, png)
         from deepmorph_core.imaging import read_image
 
-        (det,) = m.decode_image(read_image(png))
-        if det.result.ok:
+        found = m.decode_image(read_image(png))
+        assert len(found) <= 1, "one drawing, found twice"
+        # a morph of 10 % of the width may align to the unmorphed drawing below the bar: not found
+        for det in found:
+            if not det.result.ok:
+                continue
             assert np.array_equal(det.result.payload, payload), "a wrong payload was reported ok"
             ok += 1
     assert ok >= 15, f"only {ok}/20 payloads recovered"
