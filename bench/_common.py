@@ -114,8 +114,8 @@ def load_scene_model(args: argparse.Namespace) -> tuple[Path, Any]:
     set_threads(args.threads)
     import cv2
 
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.model import DeepMorphModel
 
     cv2.setNumThreads(args.threads)
     path = args.model or BUNDLED_MODEL

@@ -39,7 +39,8 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
     """
     import numpy as np
 
-    from deepmorph_detect.benchmark import QrClock, _corner_error, matched_detections
+    from deepmorph_detect.baselines import QrClock
+    from deepmorph_detect.metrics import corner_error, matched_detections
     from deepmorph_detect.scenes import SceneMaker
 
     qr = QrClock(model, (640, 480), frames=20)  # the QR frames bench-scenes times too
@@ -71,7 +72,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
                     s["read"] += bool(d.result.ok and right)
                     s["wrong_ok"] += bool(d.result.ok and not right)
                     if d.result.ok and right:
-                        s["corner"].append(_corner_error(d.corners, p.corners))
+                        s["corner"].append(corner_error(d.corners, p.corners))
                     seen.append((p is not None, bool(d.result.ok), bytes(np.asarray(d.result.payload, np.uint8))))
                 outcome[k] = sorted(seen)
             differ += outcome["a"] != outcome["b"]

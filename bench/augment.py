@@ -83,7 +83,7 @@ def cases(batch: int, size: int):
     import kornia.augmentation
 
     import deepmorph_augment.plugin as plugin
-    from deepmorph_augment.pipeline import AugmentConfig, AugmentPipeline
+    from deepmorph_core.corruption import AugmentConfig, AugmentPipeline
     from deepmorph_core.plugins import load_registry
 
     registry = load_registry([plugin], entry_points=False)

@@ -58,7 +58,7 @@ def has_own_bounds(path: Path) -> bool:
 
 def default_move(path: Path, share: float) -> float:
     """``share`` of the drawing's viewBox width (0.02 * 24 = 0.48 for Feather icons)."""
-    from deepmorph_core.api import MorphableDrawing
+    from deepmorph_core.morphable import MorphableDrawing
 
     return round(share * MorphableDrawing.load(path, move=1.0).drawing.viewbox[2], 4)
 
@@ -191,10 +191,11 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     import torch
 
     from deepmorph_core.capture import simulate_photo
-    from deepmorph_core.codec import random_payloads
-    from deepmorph_core.imaging import canonicalize, render_moments
+    from deepmorph_core.corruption import build_pipeline
+    from deepmorph_core.framing import canonicalize, render_moments
+    from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
-    from deepmorph_core.train import build_augment, real_renders
+    from deepmorph_core.train import real_renders
 
     model.eval()
     codec = model.codec
@@ -226,7 +227,7 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     timings["real"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    augment = build_augment("medium", model.width)
+    augment = build_pipeline("medium", model.width)
     gen = torch.Generator().manual_seed(seed + 1)
     with torch.no_grad():
         p = net(augment(real, generator=gen))
@@ -285,9 +286,9 @@ def bundle_path(models_dir: Path, cell: dict[str, Any], args: argparse.Namespace
 
 
 def run_cell(cell: dict[str, Any], args: argparse.Namespace, unrelated: list, models_dir: Path) -> dict[str, Any]:
-    from deepmorph_core.api import train_model
-    from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_core.errors import DeepMorphError
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.train import train_model
 
     path = bundle_path(models_dir, cell, args)
     label = f"{cell['drawing'].name} @ {cell['payload_bits']} bits"

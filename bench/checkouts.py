@@ -46,9 +46,14 @@ def _worker(root: str, bundle: str | None, threads: int, conn: Any) -> None:
     torch.set_num_threads(threads)
     cv2.setNumThreads(threads)
     import deepmorph_detect
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
     from deepmorph_detect.locate import Locator
+
+    try:
+        from deepmorph_core.bundled import BUNDLED_MODEL
+        from deepmorph_core.model import DeepMorphModel
+    except ImportError:  # a checkout from before the packages were restructured
+        from deepmorph_core.api import BUNDLED_MODEL
+        from deepmorph_core.codemodel import DeepMorphModel
 
     locator = Locator(DeepMorphModel.load(Path(bundle) if bundle else BUNDLED_MODEL))
     conn.send(str(Path(deepmorph_detect.__file__).resolve().parent.parent))
@@ -86,8 +91,8 @@ def main() -> None:
     set_threads(args.threads)
     import cv2
 
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.model import DeepMorphModel
 
     cv2.setNumThreads(args.threads)
     model = DeepMorphModel.load(args.bundle or BUNDLED_MODEL)

@@ -51,7 +51,7 @@ def strip(rows: list[tuple[str, object, object]], path: Path) -> None:
     """Save soft | resvg | |difference| for each icon, one icon per row (paper white, ink black)."""
     import numpy as np
 
-    from deepmorph_core.render import save_gray
+    from deepmorph_core.image_io import save_gray
 
     gap = 3
     lines = []
@@ -136,8 +136,12 @@ def main(argv: list[str] | None = None) -> int:
         vals = np.array(list(m.values()))
         worst = sorted(m.items(), key=lambda kv: -kv[1])
         summary[label] = {
-            "width": width, "blend": blend, "icons": len(m),
-            "mean": float(vals.mean()), "median": float(np.median(vals)), "max": float(vals.max()),
+            "width": width,
+            "blend": blend,
+            "icons": len(m),
+            "mean": float(vals.mean()),
+            "median": float(np.median(vals)),
+            "max": float(vals.max()),
             "over_target": int((vals > args.target).sum()),
             "worst": [{"icon": k, "mad": v} for k, v in worst[: args.worst]],
         }
@@ -151,19 +155,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.sum_width and union_label in mads and mads[sum_label]:
         common = sorted(set(mads[union_label]) & set(mads[sum_label]))
         diff = np.array([mads[sum_label][k] - mads[union_label][k] for k in common])
-        compare = {"width": args.sum_width, "icons": len(common), "sum_worse": int((diff > 0).sum()),
-                   "mean_mad_increase_with_sum": float(diff.mean())}
+        compare = {
+            "width": args.sum_width,
+            "icons": len(common),
+            "sum_worse": int((diff > 0).sum()),
+            "mean_mad_increase_with_sum": float(diff.mean()),
+        }
 
     print("Parsing:")
-    print(table(["registry", "parsed", "total", "share"],
-                [[name, r["parsed"], r["total"], f"{100 * r['parsed'] / r['total']:.1f}%"]
-                 for name, r in parsing.items()]))
+    print(
+        table(
+            ["registry", "parsed", "total", "share"],
+            [[name, r["parsed"], r["total"], f"{100 * r['parsed'] / r['total']:.1f}%"] for name, r in parsing.items()],
+        )
+    )
     print(f"\nMean absolute difference to resvg (ink in [0, 1]; target <= {args.target:g} per icon):")
-    print(table(["variant", "icons", "mean MAD", "median MAD", "max MAD", f"> {args.target:g}"],
-                [[k, s["icons"], s["mean"], s["median"], s["max"], s["over_target"]] for k, s in summary.items()]))
+    print(
+        table(
+            ["variant", "icons", "mean MAD", "median MAD", "max MAD", f"> {args.target:g}"],
+            [[k, s["icons"], s["mean"], s["median"], s["max"], s["over_target"]] for k, s in summary.items()],
+        )
+    )
     if compare:
-        print(f"\nblend=sum vs union at {compare['width']} px: sum worse on {compare['sum_worse']}/{compare['icons']} "
-              f"icons, mean MAD +{compare['mean_mad_increase_with_sum']:.4f}")
+        print(
+            f"\nblend=sum vs union at {compare['width']} px: sum worse on {compare['sum_worse']}/{compare['icons']} "
+            f"icons, mean MAD +{compare['mean_mad_increase_with_sum']:.4f}"
+        )
     for label, s in summary.items():
         print(f"\nworst {label}: " + ", ".join(f"{w['icon'].removesuffix('.svg')} {w['mad']:.4f}" for w in s["worst"]))
     for name, r in parsing.items():
@@ -172,14 +189,21 @@ def main(argv: list[str] | None = None) -> int:
     if render_failures:
         print("\nrender failures: " + "; ".join(f"{k}: {v}" for k, v in list(render_failures.items())[:10]))
 
-    out = write_json(args.out, {
-        "benchmark": "fidelity",
-        "environment": {**environment(), "threads": threads},
-        "folder": str(args.folder), "target": args.target,
-        "parsing": parsing, "summary": summary, "union_vs_sum": compare,
-        "render_failures": render_failures, "per_icon": mads,
-        "wall_s": time.perf_counter() - started,
-    })
+    out = write_json(
+        args.out,
+        {
+            "benchmark": "fidelity",
+            "environment": {**environment(), "threads": threads},
+            "folder": str(args.folder),
+            "target": args.target,
+            "parsing": parsing,
+            "summary": summary,
+            "union_vs_sum": compare,
+            "render_failures": render_failures,
+            "per_icon": mads,
+            "wall_s": time.perf_counter() - started,
+        },
+    )
     print(f"\nwrote {out} ({time.perf_counter() - started:.0f} s)")
     return 0
 

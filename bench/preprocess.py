@@ -2,7 +2,7 @@
 
 The paper blurs the rectified cutout (3x3 Gaussian, sigma 0.95), thresholds it with Otsu, masks
 what lies outside a coarse region around the graphic, and blurs it again before decoding
-(``deepmorph_core.imaging.paper_preprocess``). Our decoder reads the rectified gray view as it
+(:func:`paper_preprocess`). Our decoder reads the rectified gray view as it
 is. For every drawing found in ``--n`` labelled scenes per severity, this reads the same first
 look (the photo aligned to the unmorphed drawing, rectified) three ways: plain, as in the paper,
 and with shadows divided out (``flatten_illumination``, what the locator's second look uses);
@@ -18,11 +18,36 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, add_scene_options, environment, load_scene_model, table, write_json  # noqa: E402
 
 MASK_MARGIN = 0.06  # the coarse region: the unmorphed drawing's ink grown by this much of its width
+
+
+def paper_preprocess(gray: Any, region: Any = None) -> Any:
+    """The paper's preprocessing of a rectified cutout, for comparison: a 3x3 Gaussian blur
+    (sigma 0.95), Otsu's threshold, everything outside a coarse ``region`` around the graphic
+    set to paper, and the same blur again.
+
+    The decoder does not use it: this benchmark measures it against the plain rectified view.
+
+    Args:
+        gray: ``(H, W)`` float image, 1 = white.
+        region: ``(H, W)`` bool, where the graphic may lie; ``None`` keeps everything.
+
+    Returns:
+        ``(H, W)`` float32 in ``[0, 1]``.
+    """
+    import cv2
+    import numpy as np
+
+    u8 = np.clip(gray * 255, 0, 255).astype(np.uint8)
+    _, binary = cv2.threshold(cv2.GaussianBlur(u8, (3, 3), 0.95), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    if region is not None:
+        binary[~region] = 255
+    return cv2.GaussianBlur(binary, (3, 3), 0.95).astype(np.float32) / 255.0
 
 
 def main() -> None:
@@ -33,12 +58,15 @@ def main() -> None:
     import cv2
     import numpy as np
 
-    from deepmorph_core.imaging import flatten_illumination, paper_preprocess, read_image_bgr, to_gray
+    from deepmorph_core.image_io import read_image_bgr
+    from deepmorph_core.photo import flatten_illumination, to_gray
     from deepmorph_core.render import render_svg
-    from deepmorph_detect.benchmark import _match, read_scenes, write_scenes
     from deepmorph_detect.camera import project
-    from deepmorph_detect.locate import RECTIFY_WIDTH_FACTOR, Locator
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.metrics import match_placement
+    from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR
     from deepmorph_detect.refine import ImagePyramid, warp_to_template
+    from deepmorph_detect.scene_folders import read_scenes, write_scenes
 
     locator = Locator(model)
     md = model.drawing
@@ -49,7 +77,7 @@ def main() -> None:
     ways = {
         "plain (ours)": lambda view: view,
         "paper": lambda view: paper_preprocess(view, region),
-        "flattened": lambda view: flatten_illumination(view, locator._ink_thickness),
+        "flattened": lambda view: flatten_illumination(view, locator.reader.ink_thickness),
     }
     reports = {}
     rows = []
@@ -65,8 +93,9 @@ def main() -> None:
                 pyramid = ImagePyramid(gray)
                 drawings = [p for p in truth["placements"] if p.kind == "drawing"]
                 candidates = locator.detector.detect(gray) if locator.detector is not None else []
-                for _, alignment, seen_in in locator._verify(pyramid, candidates):
-                    p = _match(project(alignment.homography, locator.frame_corners), drawings)
+                for aligned in locator.aligner.verify(pyramid, candidates):
+                    alignment, seen_in = aligned.alignment, aligned.pyramid
+                    p = match_placement(project(alignment.homography, locator.frame_corners), drawings)
                     if p is None:
                         continue
                     code = model.codec.encode(p.payload)
@@ -75,11 +104,11 @@ def main() -> None:
                     for name, prepare in ways.items():
                         s = stats[name]
                         s["payloads"] += 1
-                        reading = locator._read(prepare(view), soft=True)
+                        reading = locator.reader.read(prepare(view), soft=True)
                         if reading is None:
                             s["bits"] += len(code)
                             continue
-                        result, probs = reading
+                        result, probs = reading.result, reading.probabilities
                         s["bits"] += len(code)
                         s["bits_right"] += int(((probs > 0.5) == code).sum())
                         right = bool(np.array_equal(result.payload, p.payload))

@@ -235,8 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     for width in parse_ints(args.widths):
         for count in sorted(parse_ints(args.counts)):
-            base = dict(width=width, count=count, batch=args.batch, threads=args.threads, seed=args.seed,
-                        repeats=args.repeats)
+            base = dict(
+                width=width, count=count, batch=args.batch, threads=args.threads, seed=args.seed, repeats=args.repeats
+            )
             row: dict = {"width": width, "count": count}
             culled_file, dense_file = os.path.join(tmp, "culled.pt"), os.path.join(tmp, "dense.pt")
             row["culled"] = run_worker({**base, "mode": "memory", "cull": True, "save": culled_file})
@@ -262,26 +263,59 @@ def main(argv: list[str] | None = None) -> int:
                 row["dense"]["estimated_peak_mb"], row["dense"]["estimated_ms"] = est_mb, est_ms
             results.append(row)
             d, c = row["dense"], row["culled"]
-            print(f"  {width:4d} px {count:4d} prims: culled {c['median_ms']:.0f} ms {c['peak_mb']:.0f} MB | dense "
-                  + (d["skipped"] if "skipped" in d else f"{d['median_ms']:.0f} ms {d['peak_mb']:.0f} MB"),
-                  file=sys.stderr, flush=True)
+            print(
+                f"  {width:4d} px {count:4d} prims: culled {c['median_ms']:.0f} ms {c['peak_mb']:.0f} MB | dense "
+                + (d["skipped"] if "skipped" in d else f"{d['median_ms']:.0f} ms {d['peak_mb']:.0f} MB"),
+                file=sys.stderr,
+                flush=True,
+            )
 
     shutil.rmtree(tmp, ignore_errors=True)
-    headers = ["width", "prims", "N_v", "dense ms", "culled ms", "speed x", "cpu x", "dense MB", "culled MB",
-               "memory x", "box area", "max|d ink|", "max|d grad|"]
+    headers = [
+        "width",
+        "prims",
+        "N_v",
+        "dense ms",
+        "culled ms",
+        "speed x",
+        "cpu x",
+        "dense MB",
+        "culled MB",
+        "memory x",
+        "box area",
+        "max|d ink|",
+        "max|d grad|",
+    ]
     rows = []
     for r in results:
         d, c, agree = r["dense"], r["culled"], r.get("agreement", {})
-        dense_ms, dense_mb, speed, memory = d.get("median_ms"), d.get("peak_mb"), r.get("speed_ratio"), r.get(
-            "memory_ratio")
+        dense_ms, dense_mb, speed, memory = (
+            d.get("median_ms"),
+            d.get("peak_mb"),
+            r.get("speed_ratio"),
+            r.get("memory_ratio"),
+        )
         if "skipped" in d and d.get("estimated_ms") is not None:  # extrapolated, marked with "~"
             dense_ms, dense_mb = f"~{d['estimated_ms']:.0f} (skip)", f"~{d['estimated_peak_mb']:.0f} (skip)"
             speed = f"~{d['estimated_ms'] / c['median_ms']:.1f}"
             memory = f"~{d['estimated_peak_mb'] / c['peak_mb']:.1f}"
-        rows.append([r["width"], r["count"], c["n_variables"], dense_ms, c["median_ms"],
-                     speed, r.get("speed_ratio_cpu"), dense_mb, c["peak_mb"], memory,
-                     f"{100 * c['box_area_fraction']:.1f}%", agree.get("ink_max_abs_diff"),
-                     agree.get("grad_max_abs_diff")])
+        rows.append(
+            [
+                r["width"],
+                r["count"],
+                c["n_variables"],
+                dense_ms,
+                c["median_ms"],
+                speed,
+                r.get("speed_ratio_cpu"),
+                dense_mb,
+                c["peak_mb"],
+                memory,
+                f"{100 * c['box_area_fraction']:.1f}%",
+                agree.get("ink_max_abs_diff"),
+                agree.get("grad_max_abs_diff"),
+            ]
+        )
     print(table(headers, rows))
     for r in results:
         if "skipped" in r["dense"]:
@@ -290,24 +324,41 @@ def main(argv: list[str] | None = None) -> int:
     verdict = None
     if target:
         met_speed, met_mem = target["speed_ratio"] >= TARGET_SPEED, target["memory_ratio"] >= TARGET_MEMORY
-        verdict = {"speed_ratio": target["speed_ratio"], "memory_ratio": target["memory_ratio"],
-                   "speed_met": met_speed, "memory_met": met_mem}
-        print(f"target at {TARGET_CONFIG[0]} px / {TARGET_CONFIG[1]} prims: speed {target['speed_ratio']:.1f}x "
-              f"(>= {TARGET_SPEED:g}x: {'met' if met_speed else 'NOT met'}), memory {target['memory_ratio']:.1f}x "
-              f"(>= {TARGET_MEMORY:g}x: {'met' if met_mem else 'NOT met'})")
-    out = write_json(args.out, {
-        "benchmark": "raster",
-        "environment": {**environment(), "threads": threads},
-        "settings": {"batch": args.batch, "repeats": args.repeats, "seed": args.seed,
-                     "timing": "median wall time of forward+backward after one warm-up; culled and dense "
-                               "steps alternate in one process (cpu_ms: process CPU time of the same steps)",
-                     "memory": "ru_maxrss after one step minus the RSS just before it, in a fresh process "
-                               "with MALLOC_MMAP_THRESHOLD_=131072 (timing runs in another, default allocator)"},
-        "target": {"config": list(TARGET_CONFIG), "speed": TARGET_SPEED, "memory": TARGET_MEMORY,
-                   "result": verdict},
-        "results": results,
-        "wall_s": time.perf_counter() - started,
-    })
+        verdict = {
+            "speed_ratio": target["speed_ratio"],
+            "memory_ratio": target["memory_ratio"],
+            "speed_met": met_speed,
+            "memory_met": met_mem,
+        }
+        print(
+            f"target at {TARGET_CONFIG[0]} px / {TARGET_CONFIG[1]} prims: speed {target['speed_ratio']:.1f}x "
+            f"(>= {TARGET_SPEED:g}x: {'met' if met_speed else 'NOT met'}), memory {target['memory_ratio']:.1f}x "
+            f"(>= {TARGET_MEMORY:g}x: {'met' if met_mem else 'NOT met'})"
+        )
+    out = write_json(
+        args.out,
+        {
+            "benchmark": "raster",
+            "environment": {**environment(), "threads": threads},
+            "settings": {
+                "batch": args.batch,
+                "repeats": args.repeats,
+                "seed": args.seed,
+                "timing": "median wall time of forward+backward after one warm-up; culled and dense "
+                "steps alternate in one process (cpu_ms: process CPU time of the same steps)",
+                "memory": "ru_maxrss after one step minus the RSS just before it, in a fresh process "
+                "with MALLOC_MMAP_THRESHOLD_=131072 (timing runs in another, default allocator)",
+            },
+            "target": {
+                "config": list(TARGET_CONFIG),
+                "speed": TARGET_SPEED,
+                "memory": TARGET_MEMORY,
+                "result": verdict,
+            },
+            "results": results,
+            "wall_s": time.perf_counter() - started,
+        },
+    )
     print(f"wrote {out} ({time.perf_counter() - started:.0f} s)")
     return 0
 

@@ -36,8 +36,9 @@ def main() -> None:
     ap.add_argument("--tracking", type=int, default=12, help="moving 10-frame videos per severity (medium, hard)")
     args = ap.parse_args()
     model_path, model = load_scene_model(args)
-    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, tracking_rates, write_scenes
+    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, tracking_rates
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.scene_folders import write_scenes
     from deepmorph_detect.scenes import SceneMaker
 
     reports = {}
@@ -101,8 +102,17 @@ def main() -> None:
              for sev, r in reports.items()]  # fmt: skip
     print()
     print(
-        table(["severity", f"ours ms median ({args.threads} thread)", "ours ms mean", "ArUco ms", "QR detect+decode ms",
-               "ours median / QR"], speed)
+        table(
+            [
+                "severity",
+                f"ours ms median ({args.threads} thread)",
+                "ours ms mean",
+                "ArUco ms",
+                "QR detect+decode ms",
+                "ours median / QR",
+            ],
+            speed,
+        )
     )
     checks = [[sev] + [f"{r['morph_check'][k]['rejected']}/{r['morph_check'][k]['n']}"
                        for k in ("right", "random", "one_bit_off")]

@@ -33,8 +33,8 @@ def main() -> None:
     set_threads(args.threads)
     import cv2
 
-    from deepmorph_core.api import BUNDLED_MODEL
-    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
 
     cv2.setNumThreads(args.threads)

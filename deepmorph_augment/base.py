@@ -7,38 +7,15 @@ A subclass defines ``name``, ``stage``, :meth:`RandomAugmentation.sample` and
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import ClassVar
 
 import torch
 from torch import Tensor
 
-from deepmorph_augment.sampling import Sampler, check_images, probability
-
-#: Pipeline order of the stages (see :mod:`deepmorph_augment.pipeline`); an augmentation
-#: without a ``stage`` (or with an unknown one) runs as ``"custom"``.
-STAGES = ("geometry", "optics", "lighting", "intensity", "noise", "impulse", "custom", "compression")
+from deepmorph_augment.sampling import Sampler, probability
+from deepmorph_core.corruption import apply_to, check_images
 
 Params = dict[str, Tensor]
-
-
-def apply_to(images: Tensor, chosen: Tensor, fn: Callable[[Tensor, Tensor | slice], Tensor]) -> Tensor:
-    """``fn`` applied to the chosen samples only, the others passed through unchanged.
-
-    Args:
-        images: the batch.
-        chosen: ``(B,)`` bool.
-        fn: called as ``fn(images[idx], idx)`` with the chosen indices (a full slice when all are).
-
-    Shape:
-        images: ``(B, C, H, W)``; returns the same.
-    """
-    idx = chosen.nonzero().squeeze(1)
-    if idx.numel() == 0:
-        return images
-    if idx.numel() == images.shape[0]:
-        return fn(images, slice(None))
-    return images.index_copy(0, idx, fn(images[idx], idx))
 
 
 class RandomAugmentation:

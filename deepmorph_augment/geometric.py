@@ -1,34 +1,17 @@
 """Geometric corruptions as 3x3 pixel-space matrices and one white-bordered warp.
 
-Each geometric augmentation only builds per-sample matrices; the warp is shared, and the
-pipeline composes consecutive geometric steps into a single warp (one resampling, as a real
-rectified photo has).
+Each geometric augmentation only builds per-sample matrices; the warp is core's
+(:func:`~deepmorph_core.corruption.warp_white`), and the pipeline composes consecutive geometric
+steps into a single warp (one resampling, as a real rectified photo has).
 """
 
 from __future__ import annotations
 
 import torch
-from kornia.geometry.transform import warp_perspective
 from torch import Tensor
 
-from deepmorph_augment.base import Params, RandomAugmentation, apply_to
-
-
-def warp_white(images: Tensor, matrix: Tensor) -> Tensor:
-    """Warp ``images`` by ``matrix`` (source pixel -> destination pixel), bilinear, with
-    everything outside the source filled white (paper).
-
-    White fill is done as ``1 - warp(1 - images)`` with zero padding: exact, and one grid
-    sample where kornia's ``padding_mode="fill"`` takes two (it warps a mask of ones too).
-
-    Shape:
-        images: ``(B, C, H, W)``; matrix: ``(B, 3, 3)`` in pixel coordinates (``x`` right,
-        ``y`` down, pixel centres at integers); returns ``(B, C, H, W)``.
-    """
-    if matrix.shape != (images.shape[0], 3, 3):
-        raise ValueError(f"warp_white: expected matrix of shape ({images.shape[0]}, 3, 3), got {tuple(matrix.shape)}")
-    size = (images.shape[-2], images.shape[-1])
-    return 1.0 - warp_perspective(1.0 - images, matrix.to(images.dtype), size, align_corners=True)
+from deepmorph_augment.base import Params, RandomAugmentation
+from deepmorph_core.corruption import warp_white
 
 
 def about_centre(linear: Tensor, shift: Tensor, height: int, width: int) -> Tensor:
@@ -77,12 +60,3 @@ class GeometricAugmentation(RandomAugmentation):
             return torch.zeros(b, dtype=torch.bool, device=images.device), eye
         chosen, params = self.draw(images, generator)
         return chosen, torch.where(chosen[:, None, None], self.matrix(params, h, w), eye)
-
-
-def warp_chosen(images: Tensor, chosen: Tensor, matrix: Tensor) -> Tensor:
-    """:func:`warp_white` on the chosen samples only.
-
-    Shape:
-        images: ``(B, C, H, W)``; chosen: ``(B,)`` bool; matrix: ``(B, 3, 3)``.
-    """
-    return apply_to(images, chosen, lambda x, idx: warp_white(x, matrix[idx]))

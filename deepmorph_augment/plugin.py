@@ -3,38 +3,30 @@
 
 from __future__ import annotations
 
-from deepmorph_augment.blur import Blur
-from deepmorph_augment.defocus import Defocus
-from deepmorph_augment.gaussian_noise import GaussianNoise
-from deepmorph_augment.intensity import Intensity
-from deepmorph_augment.jpeg import Jpeg
-from deepmorph_augment.lighting import Lighting
-from deepmorph_augment.motion_blur import MotionBlur
-from deepmorph_augment.perspective import Perspective
-from deepmorph_augment.rotation import Rotation
-from deepmorph_augment.salt_pepper import SaltPepper
-from deepmorph_augment.scale import Scale
-from deepmorph_augment.translation import Translation
-from deepmorph_core import hookimpl
-from deepmorph_core.plugins import Register
+from typing import TYPE_CHECKING
 
-AUGMENTATIONS = (
-    Perspective,
-    Scale,
-    Rotation,
-    Translation,
-    Blur,
-    Defocus,
-    MotionBlur,
-    Lighting,
-    Intensity,
-    GaussianNoise,
-    SaltPepper,
-    Jpeg,
-)
+from deepmorph_core import hookimpl
+
+if TYPE_CHECKING:
+    from deepmorph_core.plugins import Register
 
 
 @hookimpl
 def deepmorph_register_augmentations(register: Register) -> None:
-    for cls in AUGMENTATIONS:
+    """Register the built-in capture corruptions (imported here, not at load: see hookspecs)."""
+    from deepmorph_augment.blur import Blur
+    from deepmorph_augment.defocus import Defocus
+    from deepmorph_augment.gaussian_noise import GaussianNoise
+    from deepmorph_augment.intensity import Intensity
+    from deepmorph_augment.jpeg import Jpeg
+    from deepmorph_augment.lighting import Lighting
+    from deepmorph_augment.motion_blur import MotionBlur
+    from deepmorph_augment.perspective import Perspective
+    from deepmorph_augment.rotation import Rotation
+    from deepmorph_augment.salt_pepper import SaltPepper
+    from deepmorph_augment.scale import Scale
+    from deepmorph_augment.translation import Translation
+
+    for cls in (Perspective, Scale, Rotation, Translation, Blur, Defocus, MotionBlur, Lighting, Intensity,
+                GaussianNoise, SaltPepper, Jpeg):  # fmt: skip
         register.augmentation(cls)

@@ -13,21 +13,6 @@ import torch
 from torch import Tensor
 
 
-def check_images(images: Tensor, where: str) -> None:
-    """Raise ``ValueError`` naming ``where`` unless ``images`` is a floating ``(B, 1, H, W)``-like
-    batch (any channel count is accepted; the augmentations treat channels alike).
-
-    Shape:
-        images: ``(B, C, H, W)``.
-    """
-    if not isinstance(images, Tensor):
-        raise ValueError(f"{where}: expected a tensor, got {type(images).__name__}")
-    if images.dim() != 4:
-        raise ValueError(f"{where}: expected images of shape (B, C, H, W), got {tuple(images.shape)}")
-    if not images.is_floating_point():
-        raise ValueError(f"{where}: expected floating images, got {images.dtype}")
-
-
 def probability(p: float) -> float:
     """``p`` as a float in ``[0, 1]``, or ``ValueError``."""
     p = float(p)

@@ -26,7 +26,7 @@ from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
-from deepmorph_core.model import DecoderConfig
+from deepmorph_core.networks import DecoderConfig
 
 FORMAT = "deepmorph-model/1"
 _META_KEY = "deepmorph"
@@ -50,10 +50,16 @@ class TrainingRecord(BaseModel):
 
 
 class DetectorMeta(BaseModel):
-    """The detector stored beside the codec networks (``deepmorph train-detector``)."""
+    """The detector stored beside the codec networks (``deepmorph train-detector``).
+
+    Attributes:
+        name: the registered detector that reads these weights (bundles from before the name
+            was stored hold the built-in ``centrenet``).
+    """
 
     model_config = ConfigDict(extra="forbid")
 
+    name: str = Field(default="centrenet", min_length=1, max_length=64)
     config: dict[str, Any]
     record: TrainingRecord
     # the runs a fine-tuned detector started from (``train-detector --fine-tune``), oldest first,

@@ -36,8 +36,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.payload import MAX_PAYLOAD_BITS, as_bits, format_payload, int_to_bits
 
-MAX_PAYLOAD_BITS = 256
 MAX_BCH_T = 16
 BCH_M_RANGE = (5, 15)
 _CRC_CONFIGS = {8: crc.Crc8.CCITT, 16: crc.Crc16.XMODEM}
@@ -209,93 +209,6 @@ def _flip_patterns(n: int) -> np.ndarray:
     return out
 
 
-# --------------------------------------------------------------------------- payload text
-
-
-def _check_payload_bits(payload_bits: int) -> None:
-    if not 1 <= payload_bits <= MAX_PAYLOAD_BITS:
-        raise DeepMorphError(f"payload_bits must be between 1 and {MAX_PAYLOAD_BITS}, got {payload_bits}")
-
-
-def _hex_digits(payload_bits: int) -> int:
-    return math.ceil(payload_bits / 4)
-
-
-def _int_to_bits(value: int, n: int) -> np.ndarray:
-    return np.array([(value >> (n - 1 - i)) & 1 for i in range(n)], dtype=np.uint8)
-
-
-def parse_payload(text: str, payload_bits: int) -> np.ndarray:
-    """Read a payload written as hex (``0xA1B2C3``) or as exactly ``payload_bits`` binary digits.
-
-    Hex needs the ``0x`` prefix and exactly ``ceil(payload_bits / 4)`` digits, and its value must
-    fit in ``payload_bits`` bits. Bits are most significant first: with 24 bits ``0xA1B2C3`` is
-    ``101000011011001011000011``.
-
-    Returns:
-        ``(payload_bits,)`` uint8 array of 0/1.
-
-    Raises:
-        DeepMorphError: anything else, saying what was expected.
-    """
-    _check_payload_bits(payload_bits)
-    digits = _hex_digits(payload_bits)
-    example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
-    expected = (
-        f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, "
-        f"or {payload_bits} binary digits"
-    )
-    if not isinstance(text, str):
-        raise DeepMorphError(f"payload must be text, got {type(text).__name__}; {expected}")
-    s = text.strip()
-    if not s:
-        raise DeepMorphError(f"empty payload; {expected}")
-    if s[:2] in ("0x", "0X"):
-        body = s[2:]
-        bad = [c for c in body if c not in "0123456789abcdefABCDEF"]
-        if bad:
-            raise DeepMorphError(f"payload {s!r}: {bad[0]!r} is not a hex digit; {expected}")
-        if len(body) != digits:
-            raise DeepMorphError(f"payload {s!r} has {len(body)} hex digits; {expected}")
-        value = int(body, 16)
-        if value >> payload_bits:
-            raise DeepMorphError(
-                f"payload {s!r} needs {value.bit_length()} bits, more than {payload_bits}; {expected} "
-                f"(at most 0x{(1 << payload_bits) - 1:0{digits}X})"
-            )
-        return _int_to_bits(value, payload_bits)
-    if set(s) <= {"0", "1"}:
-        if len(s) != payload_bits:
-            raise DeepMorphError(f"payload has {len(s)} binary digits; {expected}")
-        return np.frombuffer(s.encode(), dtype=np.uint8) - ord("0")
-    raise DeepMorphError(f"payload {s[:40]!r} is neither 0x-prefixed hex nor binary digits; {expected}")
-
-
-def _as_bits(bits: Any, n: int | None, what: str) -> np.ndarray:
-    arr = np.asarray(bits)
-    if arr.ndim != 1 or (n is not None and arr.shape[0] != n):
-        want = f"({n},)" if n is not None else "(n,)"
-        raise DeepMorphError(f"{what} must have shape {want}, got {tuple(arr.shape)}")
-    if arr.size and not np.isin(arr, (0, 1)).all():
-        raise DeepMorphError(f"{what} must hold only 0 and 1")
-    return arr.astype(np.uint8)
-
-
-def format_payload(bits: np.ndarray) -> dict[str, str]:
-    """``{"hex": "0x..", "bits": ".."}`` for a payload (most significant bit first)."""
-    arr = _as_bits(bits, None, "payload")
-    n = arr.shape[0]
-    text = "".join("1" if b else "0" for b in arr)
-    value = int(text, 2) if n else 0
-    return {"hex": f"0x{value:0{_hex_digits(n)}X}", "bits": text}
-
-
-def random_payloads(n: int, payload_bits: int, generator: np.random.Generator) -> np.ndarray:
-    """``(n, payload_bits)`` uniformly random uint8 payloads, drawn from ``generator``."""
-    _check_payload_bits(payload_bits)
-    return generator.integers(0, 2, size=(n, payload_bits), dtype=np.uint8)
-
-
 # --------------------------------------------------------------------------- decode result
 
 
@@ -391,7 +304,7 @@ class PayloadCodec:
         """CRC of the payload's value as big-endian bytes (left-padded with zeros)."""
         pad = (-payload.shape[0]) % 8
         data = np.packbits(np.concatenate([np.zeros(pad, np.uint8), payload])).tobytes()
-        return _int_to_bits(self._crc.checksum(data), self.spec.crc_bits)
+        return int_to_bits(self._crc.checksum(data), self.spec.crc_bits)
 
     def _crc_ok(self, word: np.ndarray) -> bool:
         p = self.spec.payload_bits
@@ -460,7 +373,7 @@ class PayloadCodec:
             for row, payload_row in enumerate(arr):
                 words[row] = self.encode(payload_row)
             return words
-        bits = _as_bits(arr, self.spec.payload_bits, "payload")
+        bits = as_bits(arr, self.spec.payload_bits, "payload")
         info = np.concatenate([bits, self._crc_bits_of(bits)]) if self._crc else bits
         word = np.concatenate([info, self._ecc(info)]) if self._bch else info
         return word ^ self._mask

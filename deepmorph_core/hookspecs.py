@@ -9,7 +9,9 @@ A plugin is a module (or object) exposed under the ``deepmorph`` entry-point gro
     [project.entry-points.deepmorph]
     my_plugin = "my_package.plugin"
 
-whose functions are decorated with :data:`deepmorph_core.hookimpl`.
+whose functions are decorated with :data:`deepmorph_core.hookimpl`. A plugin module should
+import its heavy parts (torch, its classes) inside its hook functions: every ``deepmorph``
+command loads every plugin module, and ``deepmorph --help`` should not wait for torch.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
+    import typer
+
     from deepmorph_core.plugins import Register
 
 PROJECT = "deepmorph"
@@ -31,10 +35,11 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 def deepmorph_register_primitives(register: Register) -> None:
     """Register primitive kinds and path-segment kinds.
 
-    Called once when the plugin manager loads. Call ``register.primitive(cls)`` for each class
-    implementing :class:`~deepmorph_core.protocols.Primitive` and ``register.path_segment(cls)``
-    for each implementing :class:`~deepmorph_core.protocols.PathSegment`. A kind already
-    registered by another plugin is an error naming both plugins.
+    Called once, the first time primitives or path segments are looked up. Call
+    ``register.primitive(cls)`` for each class implementing
+    :class:`~deepmorph_core.protocols.Primitive` and ``register.path_segment(cls)`` for each
+    implementing :class:`~deepmorph_core.protocols.PathSegment`. A kind already registered by
+    another plugin is an error naming both plugins.
     """
 
 
@@ -42,15 +47,30 @@ def deepmorph_register_primitives(register: Register) -> None:
 def deepmorph_register_augmentations(register: Register) -> None:
     """Register capture corruptions.
 
-    Call ``register.augmentation(cls)`` for each class implementing
-    :class:`~deepmorph_core.protocols.Augmentation`; keyed by ``cls.name``.
+    Called once, the first time augmentations are looked up. Call ``register.augmentation(cls)``
+    for each class implementing :class:`~deepmorph_core.protocols.Augmentation`; keyed by
+    ``cls.name``.
     """
 
 
 @hookspec
 def deepmorph_register_detectors(register: Register) -> None:
-    """Register drawing detectors.
+    """Register drawing detectors (what proposes where a drawing may be in a photo).
 
-    Call ``register.detector(cls)`` for each class implementing
-    :class:`~deepmorph_core.protocols.Detector`; keyed by ``cls.name``.
+    Called once, the first time detectors are looked up. Call ``register.detector(cls)`` for
+    each class implementing :class:`~deepmorph_core.protocols.Detector`; keyed by ``cls.name``.
+    The photo chain uses the detector a model bundle names (``centrenet`` by default), or the
+    one a caller asks for by name.
+    """
+
+
+@hookspec
+def deepmorph_register_commands(cli: typer.Typer) -> None:
+    """Add commands to the ``deepmorph`` command line.
+
+    Called once when the command line starts, with the :class:`typer.Typer` application:
+    decorate functions with ``cli.command()``. Import what a command needs inside the command,
+    not at the top of the plugin module, so that ``deepmorph --help`` stays fast. A command
+    reports a failure by raising :class:`~deepmorph_core.errors.DeepMorphError`, which the
+    command line prints as one ``error:`` line with exit status 1.
     """

@@ -1,188 +1,273 @@
-"""The two networks of the paper: a linear encoder (A, sigmoid, then the map T) and a small
-CNN decoder (a few strided convolutions and a two-layer head).
+"""A trained DeepMorph model: drawing + codec + encoder + decoder, and what it does.
 
-Both are plain ``nn.Module``s over batched tensors; the morph space, rasterizer and
-augmentations in between live in their own modules (:mod:`deepmorph_core.pipeline` wires them).
+:class:`DeepMorphModel` encodes payloads into morphed SVG, reads the bits of an image in
+which the drawing fills the frame, and saves and loads itself as a bundle
+(:mod:`deepmorph_core.bundle`). Training lives in :mod:`deepmorph_core.train`; finding and
+reading drawings in photos is the photo chain's (:mod:`deepmorph_detect`), which builds on this.
 """
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
+import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field
-from torch import Tensor, nn
+from torch import Tensor
 
-from deepmorph_core.spatial import SpatialTransformer
-
-
-class Encoder(nn.Module):
-    """Bits to encoder outputs in ``(0, 1)``: ``sigmoid(A (2b - 1))``.
-
-    Bits enter as ``+-1`` so that no bias is needed: flipping a bit flips its contribution.
-    ``A`` starts as the paper's dense random matrix, scaled so that the pre-activations have a
-    standard deviation of about 1.5. Training replaces that start by :func:`spread_weights`
-    unless told otherwise (``TrainConfig.encoder_init``): stage 1 of the paper's schedule
-    trains the decoder against whichever start is chosen.
-
-    Args:
-        code_bits: ``N_b``.
-        n_variables: ``N_v``.
-    """
-
-    def __init__(self, code_bits: int, n_variables: int):
-        super().__init__()
-        self.linear = nn.Linear(code_bits, n_variables, bias=False)
-        nn.init.normal_(self.linear.weight, std=1.5 / math.sqrt(code_bits))
-
-    def forward(self, bits: Tensor) -> Tensor:
-        """Shape: ``(B, N_b)`` in {0, 1} -> ``(B, N_v)`` in ``(0, 1)``."""
-        return torch.sigmoid(self.linear(2.0 * bits - 1.0))
+from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
+from deepmorph_core.code import Code
+from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
+from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.framing import align_to_frame, render_moments
+from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.networks import Decoder, DecoderConfig, Encoder
+from deepmorph_core.payload import Payload, PayloadLike
+from deepmorph_core.photo import to_gray
+from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.render import render_svg
 
 
-def spread_weights(
-    effects: Tensor, code_bits: int, generator: torch.Generator, strength: float = 4.0, same: float = 0.95
-) -> Tensor:
-    """A sparse start for the encoder matrix ``A``: each code bit drives its own variables.
+@dataclass
+class Detection:
+    """One decoded drawing in an image: the decode, its per-bit probabilities and where it is."""
 
-    Why: a dense random ``A`` mixes all ``N_b`` bits into every variable, so one bit moves each
-    variable by a tenth of its range and the decoder must undo a nonlinear mixture. Measured on
-    the bundled ghost (58 variables, 38 code bits, 2400 steps): 2.3 % of code bits read wrong
-    even on clean renders. Giving each bit whole variables, pushed to the ends of their bounds
-    (``sigmoid(+-strength)``, 98 % of the way for 4.0), makes every bit a full-range move: the
-    same training then reads about 99.5 % of bits right under medium capture corruption.
+    result: DecodeResult
+    probabilities: np.ndarray
+    bbox: tuple[int, int, int, int] | None = None
 
-    How:
+    @property
+    def payload(self) -> Payload:
+        """The payload read (the best guess even when :attr:`ok` is false)."""
+        return Payload(self.result.payload)
 
-    * Variables whose effects on the picture are the same (correlation ``>= same`` in absolute
-      value: the two ends of the ghost's half-circle head, which both turn the half circle
-      about the same centre) always go to the same bit, signed so that they add up. Two bits
-      on twins would be told apart by nothing.
-    * These groups are dealt out most visible first to the bit with the least visibility so
-      far, so the bits end up about equally visible.
-    * With fewer groups than bits, each group carries several bits at weights ``c, c/2, c/4 ...``
-      (``c`` chosen so that all of them agreeing reach ``strength``): several distinguishable
-      levels per variable.
+    @property
+    def ok(self) -> bool:
+        """Whether the payload is vouched for (its CRC, and any check the reader adds)."""
+        return bool(self.result.ok)
 
-    Signs and which bit goes where are drawn from ``generator``, so seeded runs stay reproducible.
-
-    Args:
-        effects: ``(N_v, N_v)`` Gram matrix of the variables' full-range picture changes
-            (``deepmorph_core.train.variable_effects``).
-        code_bits: ``N_b``.
-        generator: randomness for bit order and signs.
-        strength: pre-activation of a variable driven by all of its bits agreeing.
-        same: correlation from which two variables count as one.
-
-    Returns:
-        ``(N_v, N_b)``, the layout of ``Encoder.linear.weight``.
-    """
-    groups = _twin_groups(effects, same)
-    visibility = [float(signs @ effects[members][:, members] @ signs) for members, signs in groups]
-    strongest_first = sorted(range(len(groups)), key=lambda g: -visibility[g])
-    bit_order = torch.randperm(code_bits, generator=generator).tolist()
-    flips = (torch.randint(0, 2, (len(groups), code_bits), generator=generator) * 2 - 1).float()
-    weights = torch.zeros(effects.shape[0], code_bits)
-
-    def drive(group: int, bit: int, weight: float) -> None:
-        members, signs = groups[group]
-        weights[members, bit] = weight * flips[group, bit] * signs.float()
-
-    if len(groups) >= code_bits:
-        load = {bit: 0.0 for bit in bit_order}
-        for group in strongest_first:
-            bit = min(bit_order, key=lambda b: load[b])  # first in bit_order among the least loaded
-            load[bit] += visibility[group]
-            drive(group, bit, strength)
-    else:
-        hosted: dict[int, list[int]] = {}
-        for k, bit in enumerate(bit_order):
-            hosted.setdefault(strongest_first[k % len(groups)], []).append(bit)
-        for group, bits in hosted.items():
-            top = strength / (2.0 - 2.0 ** (1 - len(bits)))
-            for level, bit in enumerate(bits):
-                drive(group, bit, top * 2.0**-level)
-    return weights
+    def to_json(self) -> dict[str, Any]:
+        out = self.result.to_json()
+        out["bit_probabilities"] = [round(float(p), 4) for p in self.probabilities]
+        if self.bbox is not None:
+            out["bbox"] = list(self.bbox)
+        return out
 
 
-def _twin_groups(effects: Tensor, same: float) -> list[tuple[list[int], Tensor]]:
-    """Groups of variables with (nearly) the same effect, each with signs relative to its first."""
-    energy = effects.diagonal().clamp_min(1e-12)
-    corr = effects / torch.sqrt(energy[:, None] * energy[None, :])
-    groups: list[tuple[list[int], list[float]]] = []
-    for var in range(effects.shape[0]):
-        for members, signs in groups:
-            c = float(corr[members[0], var])
-            if abs(c) >= same:
-                members.append(var)
-                signs.append(1.0 if c > 0 else -1.0)
-                break
-        else:
-            groups.append(([var], [1.0]))
-    return [(members, torch.tensor(signs, dtype=effects.dtype)) for members, signs in groups]
-
-
-class DecoderConfig(BaseModel):
-    """Architecture of the decoder CNN (stored in model bundles).
+@dataclass
+class DeepMorphModel:
+    """Everything needed to hide payloads in one drawing and read them back.
 
     Attributes:
-        stem: channels of a first, full-resolution convolution (0: none). Morphs move strokes by
-            a pixel or two; a stride-2 first layer sees that only half as well.
-        channels: output channels of each stride-2 convolution.
-        hidden: width of the first fully connected layer.
-        spatial_transformer: resample each image through a learned homography before reading
-            it (:class:`~deepmorph_core.spatial.SpatialTransformer`). Off in bundles written
-            before it existed.
+        drawing: the morphable drawing (with the bound defaults it was trained with).
+        codec: payload <-> code bits.
+        encoder, decoder: the networks.
+        width: image width (pixels) the decoder reads; height follows the drawing's aspect.
+        meta: the bundle metadata (configuration, versions, training record).
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    drawing: MorphableDrawing
+    codec: PayloadCodec
+    encoder: Encoder
+    decoder: Decoder
+    width: int
+    meta: BundleMeta
+    extra_tensors: dict[str, Tensor] = field(default_factory=dict)
+    detector_state: dict[str, Tensor] = field(default_factory=dict)
 
-    stem: int = Field(default=16, ge=0, le=256)
-    channels: tuple[int, ...] = Field(default=(32, 48, 64, 64), min_length=2, max_length=6)
-    hidden: int = Field(default=128, ge=8, le=2048)
-    spatial_transformer: bool = False
+    # -- construction and files -----------------------------------------------------------
 
-
-class Decoder(nn.Module):
-    """A small CNN from ``(B, 1, H, W)`` images (1 = white paper) to ``(B, N_b)`` logits.
-
-    Args:
-        code_bits: ``N_b``.
-        image_size: ``(H, W)`` the decoder is trained at.
-        config: channels and head width.
-    """
-
-    def __init__(self, code_bits: int, image_size: tuple[int, int], config: DecoderConfig | None = None):
-        super().__init__()
-        cfg = config or DecoderConfig()
-        self.align = SpatialTransformer(image_size) if cfg.spatial_transformer else None
-        layers: list[nn.Module] = []
-        c_in = 1
-        if cfg.stem:
-            layers += [nn.Conv2d(1, cfg.stem, 3, padding=1), nn.BatchNorm2d(cfg.stem), nn.ReLU(inplace=True)]
-            c_in = cfg.stem
-        for c_out in cfg.channels:
-            layers += [nn.Conv2d(c_in, c_out, 3, stride=2, padding=1), nn.BatchNorm2d(c_out), nn.ReLU(inplace=True)]
-            c_in = c_out
-        self.features = nn.Sequential(*layers)
-        h, w = image_size
-        for _ in cfg.channels:
-            h, w = (h + 1) // 2, (w + 1) // 2
-        self.head = nn.Sequential(
-            nn.Flatten(),
-            nn.Linear(c_in * h * w, cfg.hidden),
-            nn.ReLU(inplace=True),
-            nn.Linear(cfg.hidden, code_bits),
-        )
-        self.image_size = image_size
-
-    def forward(self, images: Tensor) -> Tensor:
-        """Shape: ``(B, 1, H, W)`` -> ``(B, N_b)`` logits."""
-        if images.dim() != 4 or images.shape[1] != 1 or tuple(images.shape[2:]) != tuple(self.image_size):
-            raise ValueError(
-                f"decoder expects (B, 1, {self.image_size[0]}, {self.image_size[1]}), got {tuple(images.shape)}"
+    @classmethod
+    def create(
+        cls,
+        drawing_svg: str,
+        drawing_name: str,
+        bounds_defaults: dict[str, Any],
+        codec: CodecSpec,
+        width: int,
+        raster: dict[str, Any],
+        augment: dict[str, Any],
+        train: dict[str, Any],
+        decoder_config: DecoderConfig | None = None,
+        label: str | None = None,
+    ) -> DeepMorphModel:
+        """A fresh (untrained) model for a drawing (``label`` names it in SVG errors)."""
+        md = MorphableDrawing.load(drawing_svg.encode(), label=label or drawing_name, **_bound_kwargs(bounds_defaults))
+        if md.n_variables == 0:
+            raise DeepMorphError(
+                f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
             )
-        if self.align is not None:
-            images = self.align(images)
-        # centre intensities so that white paper is +0.5 and black ink -0.5
-        return self.head(self.features(images - 0.5))
+        height, _ = md.drawing.pixel_size(width)
+        dcfg = decoder_config or DecoderConfig()
+        meta = BundleMeta(
+            versions=versions(),
+            drawing_name=drawing_name,
+            drawing_svg=drawing_svg,
+            bounds_defaults=bounds_defaults,
+            n_variables=md.n_variables,
+            codec=codec,
+            image_width=width,
+            raster=raster,
+            decoder=dcfg,
+            augment=augment,
+            train=train,
+            record=TrainingRecord(),
+        )
+        return cls(
+            md,
+            PayloadCodec(codec),
+            Encoder(codec.code_bits, md.n_variables),
+            Decoder(codec.code_bits, (height, width), dcfg),
+            width,
+            meta,
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> DeepMorphModel:
+        """Load a bundle (``.dmm``); one clear error for anything unusable."""
+        meta, tensors = load_bundle(path)
+        try:
+            md = MorphableDrawing.load(meta.drawing_svg.encode(), **_bound_kwargs(meta.bounds_defaults))
+        except SvgError as exc:
+            raise DeepMorphError(f"{path}: the drawing inside the model cannot be read: {exc.message}") from None
+        if md.n_variables != meta.n_variables:
+            raise DeepMorphError(
+                f"{path}: the drawing now has {md.n_variables} variables but the model was trained with "
+                f"{meta.n_variables} (a primitive plugin is missing or changed?)"
+            )
+        height, _ = md.drawing.pixel_size(meta.image_width)
+        model = cls(
+            md,
+            PayloadCodec(meta.codec),
+            Encoder(meta.codec.code_bits, md.n_variables),
+            Decoder(meta.codec.code_bits, (height, meta.image_width), meta.decoder),
+            meta.image_width,
+            meta,
+        )
+        nets = {k: v for k, v in tensors.items() if k.startswith(("encoder.", "decoder."))}
+        model.detector_state = {k: v for k, v in tensors.items() if k.startswith("detector.")}
+        model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets and k not in model.detector_state}
+        if meta.detector is not None and not model.detector_state:
+            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (detector weights are missing)")
+        try:
+            model.encoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("encoder.")})
+            model.decoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("decoder.")})
+        except RuntimeError as exc:
+            first = str(exc).splitlines()[0][:160]
+            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (weights do not fit: {first})") from None
+        model.eval()
+        return model
+
+    def save(self, path: str | Path, extra: dict[str, Tensor] | None = None) -> None:
+        """Write the bundle atomically (``extra``: optimiser/RNG state in checkpoints)."""
+        tensors = {f"encoder.{k}": v for k, v in self.encoder.state_dict().items()}
+        tensors.update({f"decoder.{k}": v for k, v in self.decoder.state_dict().items()})
+        tensors.update(self.detector_state)
+        tensors.update(extra or {})
+        save_bundle(path, self.meta, tensors)
+
+    def eval(self) -> DeepMorphModel:
+        self.encoder.eval()
+        self.decoder.eval()
+        return self
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """``(H, W)`` of decoder inputs."""
+        return self.decoder.image_size
+
+    def rasterizer(self) -> SoftRasterizer:
+        """The soft rasterizer at the model's size and settings."""
+        settings = RasterSettings(**{**self.meta.raster, "width": self.width})
+        return SoftRasterizer(self.drawing.space, settings)
+
+    # -- encoding -------------------------------------------------------------------------
+
+    def morph_values(self, code_bits: Tensor) -> Tensor:
+        """Morph values for ``(B, N_b)`` code bits (no gradient)."""
+        with torch.no_grad():
+            return self.drawing.values_from_unit(self.encoder(code_bits.float()))
+
+    def morph_values_one(self, code_bits: np.ndarray) -> np.ndarray:
+        """:meth:`morph_values` of one ``(N_b,)`` code word (or soft bits), in numpy float64:
+        ``(N_v,)``, the same numbers to float rounding, for the morph the photo chain renders
+        for each payload it checks."""
+        bits = np.asarray(code_bits, dtype=np.float64).reshape(-1)
+        weight = self.encoder.linear.weight.detach().numpy()  # (N_v, N_b), a view
+        if bits.shape[0] != weight.shape[1]:
+            raise ValueError(f"expected {weight.shape[1]} code bits, got shape {bits.shape}")
+        unit = 1.0 / (1.0 + np.exp(-(weight.astype(np.float64) @ (2.0 * bits - 1.0))))
+        return self.drawing.space.values_from_unit_one(unit)
+
+    def encode(self, payload: PayloadLike) -> str:
+        """The morphed SVG document carrying ``payload`` (any form :meth:`Payload.of
+        <deepmorph_core.payload.Payload.of>` takes: an int, hex or binary text, bytes, bits)."""
+        bits = Payload.of(payload, self.codec.spec.payload_bits).bits
+        code = self.codec.encode(bits)
+        values = self.morph_values(torch.from_numpy(code.astype(np.float32))[None])
+        return self.drawing.to_svg(values[0])
+
+    def code(self, payload: PayloadLike) -> Code:
+        """``payload`` hidden in the drawing, as a :class:`~deepmorph_core.code.Code` (its SVG,
+        and renders of it for print)."""
+        value = Payload.of(payload, self.codec.spec.payload_bits)
+        return Code(value, self.encode(value), self.drawing.drawing.viewbox)
+
+    # -- decoding -------------------------------------------------------------------------
+
+    def canonical_moments(self) -> Tensor:
+        """Ink moments (cx, cy, sx, sy) of the unmorphed drawing in the decoder's frame."""
+        if not hasattr(self, "_moments"):
+            h, w = self.image_size
+            base = render_svg(self.drawing.to_svg(self.drawing.neutral_values()[0]), w)
+            self._moments = render_moments(torch.from_numpy(base)[None, None])[0]
+        return self._moments
+
+    def probabilities(self, images: Tensor) -> Tensor:
+        """Per-bit probabilities for decoder-ready images ``(B, 1, H, W)``."""
+        with torch.no_grad():
+            return torch.sigmoid(self.decoder(images))
+
+    def decode_framed(self, image: np.ndarray, soft: bool = True) -> list[Detection]:
+        """Decode an image in which the drawing fills the frame, framed by its ink alone (no
+        detection, no alignment check; the photo chain's :class:`~deepmorph_detect.locate.Locator`
+        does both)."""
+        gray = to_gray(image)
+        aligned = align_to_frame(gray, self.image_size, self.canonical_moments())
+        if aligned is None:
+            return []
+        frame, bbox = aligned
+        probs = self.probabilities(torch.from_numpy(frame)[None, None])[0].numpy()
+        return [Detection(self.codec.decode(probs, soft=soft), probs, bbox)]
+
+    def info(self) -> dict[str, Any]:
+        """A JSON-ready description of the bundle."""
+        m = self.meta
+        return {
+            "drawing": m.drawing_name,
+            "payload_bits": m.codec.payload_bits,
+            "code_bits": m.codec.code_bits,
+            "codec": {**m.codec.model_dump(), "ecc_bits": m.codec.ecc_bits},
+            "n_variables": m.n_variables,
+            "image_size": list(self.image_size),
+            "decoder": m.decoder.model_dump(),
+            "bounds_defaults": m.bounds_defaults,
+            "augment": m.augment,
+            "train": m.train,
+            "record": m.record.model_dump(),
+            "versions": m.versions,
+            "detector": None if m.detector is None else m.detector.model_dump(),
+            "tuning": m.tuning,
+        }
+
+
+def _bound_kwargs(defaults: dict[str, Any]) -> dict[str, Any]:
+    return {
+        k: (tuple(v) if isinstance(v, list) else v)
+        for k, v in defaults.items()
+        if k in ("move", "shift", "scale", "rotate")
+    }
+
+
+__all__ = ["DeepMorphModel", "Detection"]

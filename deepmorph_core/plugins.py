@@ -1,15 +1,17 @@
 """The plugin manager and the registries it fills.
 
 Plugins (built-in ones included) are found through the ``deepmorph`` entry-point group, loaded
-into a :class:`pluggy.PluginManager`, checked (``check_pending``: a misspelled hook is an error),
-and asked to register their kinds through a :class:`Register` that owns naming and duplicates.
+into a :class:`pluggy.PluginManager` and checked (``check_pending``: a misspelled hook is an
+error). Each registration hook runs the first time its kinds are looked up, with a
+:class:`Register` that owns naming and duplicates: a command that never renders a drawing
+never imports the primitives, and ``deepmorph --help`` imports no network.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import pluggy
@@ -25,7 +27,15 @@ _REQUIRED: dict[type, tuple[str, ...]] = {
     Primitive: ("kind", "tags", "priority", "morphable", "from_element", "control_points", "outline", "sdf", "write"),
     PathSegment: ("kind", "commands", "svgpath_types", "morphable", "from_svgpath", "add_pieces", "flatten", "to_d"),
     Augmentation: ("name", "__call__"),
-    Detector: ("name", "detect"),
+    Detector: ("name", "from_model", "detect"),
+}
+
+#: Registry table -> the registration hook that fills it.
+_HOOK_OF_TABLE = {
+    "primitives": "deepmorph_register_primitives",
+    "path_segments": "deepmorph_register_primitives",
+    "augmentations": "deepmorph_register_augmentations",
+    "detectors": "deepmorph_register_detectors",
 }
 
 
@@ -40,15 +50,57 @@ class Registration:
     distribution: str | None  # "name version", or None when not installed from a distribution
 
 
-@dataclass
 class Registry:
-    """Everything the loaded plugins registered, keyed by kind or name."""
+    """Everything the loaded plugins registered, keyed by kind or name.
 
-    primitives: dict[str, Registration] = field(default_factory=dict)
-    path_segments: dict[str, Registration] = field(default_factory=dict)
-    augmentations: dict[str, Registration] = field(default_factory=dict)
-    detectors: dict[str, Registration] = field(default_factory=dict)
-    plugin_manager: pluggy.PluginManager | None = None
+    Each table is filled by its registration hook the first time it is read; a plugin error
+    in that hook is raised then (and again at every later read: a table is never half full).
+
+    Args:
+        plugin_manager: the loaded and checked plugin manager.
+        distributions: plugin name -> ``"name version"`` of the distribution that installed it.
+    """
+
+    def __init__(self, plugin_manager: pluggy.PluginManager, distributions: dict[str, str | None] | None = None):
+        self.plugin_manager = plugin_manager
+        self._distributions = distributions or {}
+        self._tables: dict[str, dict[str, Registration]] = {name: {} for name in _HOOK_OF_TABLE}
+        self._called: set[str] = set()
+
+    def _table(self, name: str) -> dict[str, Registration]:
+        hook = _HOOK_OF_TABLE[name]
+        if hook not in self._called:
+            try:
+                for impl in getattr(self.plugin_manager.hook, hook).get_hookimpls():
+                    plugin = impl.plugin_name
+                    impl.function(register=Register(self, plugin, self._distributions.get(plugin)))
+            except BaseException:
+                for table, table_hook in _HOOK_OF_TABLE.items():
+                    if table_hook == hook:
+                        self._tables[table].clear()
+                raise
+            self._called.add(hook)
+        return self._tables[name]
+
+    @property
+    def primitives(self) -> dict[str, Registration]:
+        """Primitive kinds by ``kind``."""
+        return self._table("primitives")
+
+    @property
+    def path_segments(self) -> dict[str, Registration]:
+        """Path-segment kinds by ``kind``."""
+        return self._table("path_segments")
+
+    @property
+    def augmentations(self) -> dict[str, Registration]:
+        """Capture corruptions by ``name``."""
+        return self._table("augmentations")
+
+    @property
+    def detectors(self) -> dict[str, Registration]:
+        """Drawing detectors by ``name``."""
+        return self._table("detectors")
 
     def primitives_for_tag(self, tag: str) -> list[type[Primitive]]:
         """Primitive classes reading the element ``tag``, highest priority first."""
@@ -62,33 +114,46 @@ class Registry:
                 return reg.obj
         return None
 
+    def detector(self, name: str) -> type[Detector]:
+        """The detector class registered as ``name``.
+
+        Raises:
+            PluginError: no detector of that name, naming the ones there are.
+        """
+        found = self.detectors.get(name)
+        if found is None:
+            known = ", ".join(sorted(self.detectors)) or "none"
+            raise PluginError(f"no detector {name!r} is installed (installed: {known})")
+        return found.obj
+
     def all(self) -> list[Registration]:
         """Every registration, primitives first."""
-        return [
-            *self.primitives.values(),
-            *self.path_segments.values(),
-            *self.augmentations.values(),
-            *self.detectors.values(),
-        ]
+        return [*self.primitives.values(), *self.path_segments.values(), *self.augmentations.values(),
+                *self.detectors.values()]  # fmt: skip
+
+    def register_commands(self, cli: Any) -> None:
+        """Let every plugin add its commands to the command line ``cli`` (a ``typer.Typer``)."""
+        self.plugin_manager.hook.deepmorph_register_commands(cli=cli)
 
 
 class Register:
     """Handed to registration hooks; checks what a plugin registers and names it in errors."""
 
     def __init__(self, registry: Registry, plugin: str, distribution: str | None):
-        self._registry = registry
+        self._tables = registry._tables
         self._plugin = plugin
         self._distribution = distribution
 
-    def _add(self, table: dict[str, Registration], category: str, key: Any, obj: Any) -> None:
+    def _add(self, table: str, category: str, key: Any, obj: Any) -> None:
+        entries = self._tables[table]
         if not isinstance(key, str) or not key:
             raise PluginError(f"plugin {self._plugin!r}: {category} {obj!r} has no valid name/kind")
-        if key in table:
-            other = table[key].plugin
+        if key in entries:
+            other = entries[key].plugin
             raise PluginError(
                 f"plugin {self._plugin!r}: {category} kind {key!r} is already registered by plugin {other!r}"
             )
-        table[key] = Registration(category, key, obj, self._plugin, self._distribution)
+        entries[key] = Registration(category, key, obj, self._plugin, self._distribution)
 
     def _check(self, obj: Any, protocol: type, category: str) -> None:
         if not isinstance(obj, type):
@@ -102,29 +167,29 @@ class Register:
         self._check(cls, Primitive, "primitive")
         if not isinstance(cls.tags, tuple) or not all(isinstance(t, str) for t in cls.tags):
             raise PluginError(f"plugin {self._plugin!r}: primitive {cls.__name__}.tags must be a tuple of str")
-        self._add(self._registry.primitives, "primitive", cls.kind, cls)
+        self._add("primitives", "primitive", cls.kind, cls)
 
     def path_segment(self, cls: type[PathSegment]) -> None:
         """Register a path-segment kind (keyed by ``cls.kind``); its command letters must be new."""
         self._check(cls, PathSegment, "path segment")
-        taken = {c: r for r in self._registry.path_segments.values() for c in r.obj.commands}
+        taken = {c: r for r in self._tables["path_segments"].values() for c in r.obj.commands}
         for letter in cls.commands:
             if letter in taken:
                 raise PluginError(
                     f"plugin {self._plugin!r}: path command {letter!r} of {cls.kind!r} is already "
                     f"handled by {taken[letter].key!r} from plugin {taken[letter].plugin!r}"
                 )
-        self._add(self._registry.path_segments, "path-segment", cls.kind, cls)
+        self._add("path_segments", "path-segment", cls.kind, cls)
 
     def augmentation(self, cls: type[Augmentation]) -> None:
         """Register a capture corruption (keyed by ``cls.name``)."""
         self._check(cls, Augmentation, "augmentation")
-        self._add(self._registry.augmentations, "augmentation", cls.name, cls)
+        self._add("augmentations", "augmentation", cls.name, cls)
 
     def detector(self, cls: type[Detector]) -> None:
         """Register a detector (keyed by ``cls.name``)."""
         self._check(cls, Detector, "detector")
-        self._add(self._registry.detectors, "detector", cls.name, cls)
+        self._add("detectors", "detector", cls.name, cls)
 
 
 def _distribution_label(dist: importlib.metadata.Distribution | None) -> str | None:
@@ -136,14 +201,17 @@ def _distribution_label(dist: importlib.metadata.Distribution | None) -> str | N
 def load_registry(plugins: Iterable[Any] = (), *, entry_points: bool = True) -> Registry:
     """Build a registry from installed entry points and/or explicitly given plugin modules.
 
+    Loading imports the plugin modules and checks their hook names; what they register is
+    asked for when first looked up (:class:`Registry`).
+
     Args:
         plugins: plugin modules or objects to register directly (tests use this with
             ``entry_points=False`` so that nothing installed leaks in).
         entry_points: also load every plugin in the ``deepmorph`` entry-point group.
 
     Raises:
-        PluginError: a plugin fails to import, implements an unknown hook, or registers an
-            invalid or duplicate kind. The message names the plugin.
+        PluginError: a plugin fails to import, or implements an unknown hook. The message
+            names the plugin.
     """
     pm = pluggy.PluginManager(hookspecs.PROJECT)
     pm.add_hookspecs(hookspecs)
@@ -174,17 +242,7 @@ def load_registry(plugins: Iterable[Any] = (), *, entry_points: bool = True) -> 
     except pluggy.PluginValidationError as exc:
         name = pm.get_name(exc.plugin) if exc.plugin is not None else "?"
         raise PluginError(f"plugin {name!r}: {exc} (misspelled hook name?)") from None
-
-    registry = Registry(plugin_manager=pm)
-    for caller in (
-        pm.hook.deepmorph_register_primitives,
-        pm.hook.deepmorph_register_augmentations,
-        pm.hook.deepmorph_register_detectors,
-    ):
-        for impl in caller.get_hookimpls():
-            register = Register(registry, impl.plugin_name, distributions.get(impl.plugin_name))
-            impl.function(register=register)
-    return registry
+    return Registry(pm, distributions)
 
 
 _default: Registry | None = None

@@ -1,7 +1,8 @@
 """The contracts plugins implement: primitives, path segments, augmentations and detectors.
 
 Built-in kinds implement exactly these and register through the same entry-point group as
-third-party plugins (see :mod:`deepmorph_core.hookspecs`).
+third-party plugins (see :mod:`deepmorph_core.hookspecs`). This module imports no torch, so
+that loading plugins stays cheap.
 """
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
-from torch import Tensor
 
 if TYPE_CHECKING:
     from lxml import etree
+    from torch import Tensor
 
     from deepmorph_core.outline import Frame, Outline, OutlineBuilder
     from deepmorph_core.svg.reader import ElementReader
@@ -142,12 +143,23 @@ class PathSegment(Protocol):
         ...
 
 
+#: Pipeline order of the capture corruptions' stages (:mod:`deepmorph_core.corruption`); an
+#: augmentation without a ``stage`` (or with an unknown one) runs as ``"custom"``.
+STAGES = ("geometry", "optics", "lighting", "intensity", "noise", "impulse", "custom", "compression")
+
+
 @runtime_checkable
 class Augmentation(Protocol):
     """A differentiable capture corruption applied between rasterizer and decoder.
 
     Class attributes:
         name: registry key used in configs, e.g. ``"gaussian_noise"``.
+        stage: where in the physical order it runs (one of :data:`STAGES`; optional).
+
+    Constructed with its parameters as keywords plus ``p``, the probability per sample. A
+    geometric corruption may also define ``draw_matrices(images, generator)`` returning the
+    chosen samples ``(B,)`` and their ``(B, 3, 3)`` pixel-space warps: the pipeline then fuses
+    consecutive geometric steps into one resampling.
     """
 
     name: ClassVar[str]
@@ -157,17 +169,45 @@ class Augmentation(Protocol):
         ...
 
 
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """Where a drawing may be in a photo: what a detector proposes, before alignment checks it.
+
+    Attributes:
+        corners: ``(4, 2)`` image pixels of the drawing's frame (its viewBox), in the order
+            top-left, top-right, bottom-right, bottom-left as far as the proposer can tell
+            (alignment also tries the other cyclic orders).
+        score: the proposer's confidence in ``[0, 1]``.
+        bbox: ``(x0, y0, x1, y1)`` pixel box around ``corners``, clipped to the image.
+        homography: ``(3, 3)`` SVG units -> pixels, when the proposer already fixes the
+            drawing's frame exactly (the whole image framed by its ink); ``None`` otherwise.
+        source: what proposed it (``"detector"``, ``"whole-frame"``, a detector's name ...).
+    """
+
+    corners: np.ndarray
+    score: float
+    bbox: tuple[int, int, int, int]
+    homography: np.ndarray | None = None
+    source: str = "detector"
+
+
 @runtime_checkable
 class Detector(Protocol):
-    """Finds instances of a trained drawing in a photo.
+    """Finds where instances of a trained drawing may be in a photo.
 
     Class attributes:
-        name: registry key, e.g. ``"heatmap"``.
+        name: registry key, e.g. ``"centrenet"``.
     """
 
     name: ClassVar[str]
 
-    def detect(self, image: np.ndarray) -> list[dict[str, Any]]:
-        """Return detections (bounding box, keypoints, score) for an ``(H, W)`` or
-        ``(H, W, 3)`` uint8 image; an empty list when there is none."""
+    @classmethod
+    def from_model(cls, model: Any) -> Detector | None:
+        """This detector for a model (:class:`~deepmorph_core.model.DeepMorphModel`), from
+        the weights its bundle stores; ``None`` when the bundle holds none for it."""
+        ...
+
+    def detect(self, image: np.ndarray) -> list[Candidate]:
+        """Candidates for an ``(H, W)`` float32 gray image in ``[0, 1]``, best first; an empty
+        list when there is none."""
         ...

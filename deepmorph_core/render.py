@@ -8,14 +8,12 @@ closely, never fetches anything, and renders the same bytes to the same pixels e
 from __future__ import annotations
 
 import io
-from pathlib import Path
 
 import numpy as np
 import resvg_py
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write
 
 
 def render_svg(svg_text: str, width: int) -> np.ndarray:
@@ -35,47 +33,6 @@ def render_svg(svg_text: str, width: int) -> np.ndarray:
 def render_svg_ink(svg_text: str, width: int) -> np.ndarray:
     """Like :func:`render_svg` but as ink (1 = black), the rasterizer's convention."""
     return 1.0 - render_svg(svg_text, width)
-
-
-def save_gray(image: np.ndarray, path: str | Path, dpi: int | None = None) -> None:
-    """Save an ``(H, W)`` intensity image in ``[0, 1]`` as an 8-bit PNG (or any Pillow format).
-
-    ``dpi`` is recorded in the file so that printing it gives the intended physical size.
-    """
-    arr = np.clip(np.rint(np.asarray(image) * 255), 0, 255).astype(np.uint8)
-    _save(Image.fromarray(arr, "L"), path, dpi)
-
-
-def save_rgb(image: np.ndarray, path: str | Path) -> None:
-    """Save an ``(H, W, 3)`` image in ``[0, 1]``."""
-    arr = np.clip(np.rint(np.asarray(image) * 255), 0, 255).astype(np.uint8)
-    _save(Image.fromarray(arr, "RGB"), path)
-
-
-def image_format(path: str | Path) -> str:
-    """The image format Pillow writes for ``path``'s extension (check it before any work).
-
-    Raises:
-        DeepMorphError: an extension no image format has.
-    """
-    path = Path(path)
-    fmt = Image.registered_extensions().get(path.suffix.lower())
-    if fmt is None:
-        raise DeepMorphError(f"{path}: cannot write image: unknown file extension {path.suffix!r} (use .png)")
-    return fmt
-
-
-def _save(img: Image.Image, path: str | Path, dpi: int | None = None) -> None:
-    """Encode in memory, then write atomically: a failed write never leaves half an image (or
-    half of the file it replaces)."""
-    path = Path(path)
-    fmt = image_format(path)
-    buf = io.BytesIO()
-    try:
-        img.save(buf, format=fmt, **({"dpi": (dpi, dpi)} if dpi else {}))
-    except (OSError, ValueError) as exc:
-        raise DeepMorphError(f"{path}: cannot write image: {exc}") from None
-    atomic_write(path, buf.getvalue())
 
 
 def overlay(base_ink: np.ndarray, morph_ink: np.ndarray) -> np.ndarray:

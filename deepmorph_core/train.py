@@ -1,44 +1,52 @@
-"""Training: the paper's two-stage schedule, with checkpoints, resume, logs and plots.
+"""Codec training: the paper's two-stage schedule, and tuning a trained decoder further.
 
 One step: random code bits -> encoder -> morph values -> soft rasterizer -> paper-white image
 -> (a share of the batch replaced by real-renderer images of the same morphs) -> framing by
 the ink's centre and spread (exactly as decoding frames a photo) -> capture corruptions -> decoder
 -> sigmoid cross-entropy.
 
-* **Stage 1** keeps the encoder at its random initialisation and trains the decoder until its
-  bit accuracy plateaus (or a share of the steps is spent).
+* **Stage 1** keeps the encoder at its initialisation and trains the decoder until its bit
+  accuracy plateaus (or a share of the steps is spent).
 * **Stage 2** trains both end to end.
 
 The real-renderer share closes the gap between what the soft rasterizer draws and what
 resvg (and so a printer) draws. Those rows carry no gradient to the encoder, so they only
 teach the decoder to read real renders.
 
-Checkpoints are whole bundles plus optimiser and generator state, written atomically every
-``checkpoint_every`` steps and on Ctrl-C. ``resume`` continues one exactly.
+The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s.
+Checkpoints are whole bundles plus optimiser and generator state, so ``resume`` continues a
+run exactly. :func:`train_model` and :func:`tune_decoder` are what the command line calls.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import time
+import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 import torch
 import torch.nn.functional as F
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from torch import Tensor, nn
 
+from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.bundle import TrainingRecord
-from deepmorph_core.codemodel import DeepMorphModel
-from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import canonicalize, render_moments
-from deepmorph_core.model import spread_weights
+from deepmorph_core.codec import choose_codec
+from deepmorph_core.corruption import build_pipeline
+from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.framing import canonicalize, render_moments
+from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.morphable import bound_defaults, capacity_warning
+from deepmorph_core.networks import DecoderConfig, spread_weights
+from deepmorph_core.raster import RasterSettings
 from deepmorph_core.render import render_svg
+from deepmorph_core.severity import LADDER
+from deepmorph_core.svg.secure import read_svg_bytes
 
 
 class TrainConfig(BaseModel):
@@ -105,47 +113,12 @@ class TrainConfig(BaseModel):
     log_every: int = Field(default=25, ge=1)
 
 
-_LADDER = ["none", "easy", "medium", "hard"]
 SMALL_PRINT_SCALE = (0.55, 0.95)  # small prints: shrunk to this share of the decoder width
-
-
-@dataclass
-class StepMetrics:
-    """What one logged step reports."""
-
-    step: int
-    stage: int
-    loss: float
-    bit_acc: float
-    word_acc: float
-    elapsed_s: float
-
-    def to_json(self) -> dict[str, Any]:
-        return {k: (round(v, 5) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
-
-
-class Interrupted(DeepMorphError):
-    """Training stopped by Ctrl-C after writing a checkpoint."""
-
-
-def interrupted(
-    record: Any, started: float, checkpoint: Callable[[], None], out: Path, total_steps: int
-) -> Interrupted:
-    """After Ctrl-C: record the time, write the checkpoint, and return the error saying how to
-    go on (shared by every trainer, so they all stop the same way)."""
-    record.elapsed_s = time.perf_counter() - started
-    checkpoint()
-    return Interrupted(
-        f"interrupted at step {record.step}/{total_steps}; checkpoint written to {out} (continue with --resume)"
-    )
-
-
-def build_augment(severity: str, width: int, config: dict[str, Any] | None = None) -> nn.Module:
-    """The capture-corruption pipeline for a preset at an image width (or a stored config)."""
-    from deepmorph_augment.pipeline import AugmentConfig, AugmentPipeline
-
-    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width)
-    return AugmentPipeline(cfg)
+#: The plot of a codec training log.
+CODEC_PANELS = (
+    Panel("loss", ("loss",), log_scale=True),
+    Panel("accuracy (training batches)", ("bit_acc", "word_acc"), unit_range=True),
+)
 
 
 def real_renders(model: DeepMorphModel, values: Tensor) -> Tensor:
@@ -181,19 +154,19 @@ def variable_effects(model: DeepMorphModel, chunk: int = 64) -> Tensor:
     return change @ change.T
 
 
-class Trainer:
-    """Runs (or resumes) training of one model.
+class CodecRun:
+    """One codec training run (or its resumption) for the shared loop (:class:`~deepmorph_core.loop.Run`).
 
     Args:
         model: a fresh model (``DeepMorphModel.create``) or a loaded checkpoint.
         config: training settings.
         out: the bundle path written at checkpoints and at the end.
-        log_path: JSONL log (one line per ``log_every`` steps); a PNG plot is written beside it.
     """
 
-    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path, log_path: Path | None = None):
+    panels = CODEC_PANELS
+
+    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path):
         self.model, self.cfg, self.out = model, config, Path(out)
-        self.log_path = Path(log_path) if log_path else self.out.with_suffix(".log.jsonl")
         self.device = torch.device(config.device)
         if config.device == "cuda" and not torch.cuda.is_available():
             raise DeepMorphError("--device cuda was asked for but no CUDA device is available")
@@ -204,11 +177,10 @@ class Trainer:
         self.raster = model.rasterizer()
         self.target = model.canonical_moments()
         self._augments = {
-            sev: build_augment(sev, model.width).to(self.device) for sev in _LADDER[: _LADDER.index(config.severity)]
+            sev: build_pipeline(sev, model.width).to(self.device) for sev in LADDER[: LADDER.index(config.severity)]
         }
-        self._augments[config.severity] = build_augment(config.severity, model.width, model.meta.augment or None).to(
-            self.device
-        )
+        stored = model.meta.augment or None
+        self._augments[config.severity] = build_pipeline(config.severity, model.width, stored).to(self.device)
         self._small_augments: dict[tuple[str, int], nn.Module] = {}
         self.bce = nn.BCEWithLogitsLoss()
         self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
@@ -293,7 +265,7 @@ class Trainer:
         small_h = max(8, round(small_w * h / w))
         key = (self._rung(), small_w)
         if key not in self._small_augments:
-            self._small_augments[key] = build_augment(key[0], small_w).to(self.device)
+            self._small_augments[key] = build_pipeline(key[0], small_w).to(self.device)
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
         return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
@@ -303,13 +275,14 @@ class Trainer:
         return self._augments[self._rung()]
 
     def _rung(self) -> str:
-        rungs = _LADDER[: _LADDER.index(self.cfg.severity) + 1]
+        rungs = LADDER[: LADDER.index(self.cfg.severity) + 1]
         ramp = self.cfg.curriculum * self.cfg.steps
         if ramp <= 0 or len(rungs) == 1:
             return self.cfg.severity
         return rungs[min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))]
 
-    def step(self) -> StepMetrics:
+    def step(self) -> dict[str, float]:
+        """One optimisation step; its loss, bit accuracy and whole-word accuracy."""
         cfg, rec = self.cfg, self.record
         stage2 = rec.stage == 2
         self.model.encoder.train(stage2)
@@ -329,9 +302,8 @@ class Trainer:
             right = (logits > 0) == (bits > 0.5)
             bit_acc = right.float().mean().item()
             word_acc = right.all(1).float().mean().item()
-        rec.step += 1
-        self._update_stage(bit_acc)
-        return StepMetrics(rec.step, rec.stage, loss.item(), bit_acc, word_acc, rec.elapsed_s)
+        self._update_stage(bit_acc, rec.step + 1)  # the loop counts this step once it returns
+        return {"loss": loss.item(), "bit_acc": bit_acc, "word_acc": word_acc}
 
     def _set_learning_rates(self) -> None:
         """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step (over every
@@ -350,7 +322,7 @@ class Trainer:
             for group in opt.param_groups:
                 group["lr"] = base * factor
 
-    def _update_stage(self, bit_acc: float) -> None:
+    def _update_stage(self, bit_acc: float, step: int) -> None:
         rec, cfg = self.record, self.cfg
         if rec.stage == 2 or cfg.freeze_encoder:
             return
@@ -362,114 +334,12 @@ class Trainer:
             if self._prev_window is not None and mean - self._prev_window < cfg.plateau_gain:
                 plateau = True
             self._prev_window, self._window = mean, []
-        if plateau or rec.step >= limit:
-            rec.stage, rec.stage2_start = 2, rec.step
-
-    # -- the loop -------------------------------------------------------------------------
-
-    def run(self, on_log: Callable[[StepMetrics], None] | None = None) -> TrainingRecordSummary:
-        """Train until ``steps``; checkpoint on schedule and on Ctrl-C.
-
-        Raises:
-            Interrupted: after Ctrl-C, once the checkpoint is written.
-        """
-        cfg, rec = self.cfg, self.record
-        history = _read_log(self.log_path) if rec.step else []
-        if not rec.step:
-            self.log_path.parent.mkdir(parents=True, exist_ok=True)
-            self.log_path.write_text("")
-        start = time.perf_counter() - rec.elapsed_s
-        acc = {"loss": 0.0, "bit_acc": 0.0, "word_acc": 0.0, "n": 0}
-        try:
-            while rec.step < cfg.steps:
-                m = self.step()
-                rec.elapsed_s = time.perf_counter() - start
-                for k in ("loss", "bit_acc", "word_acc"):
-                    acc[k] += getattr(m, k)
-                acc["n"] += 1
-                if rec.step % cfg.log_every == 0 or rec.step == cfg.steps:
-                    n = acc.pop("n")
-                    logged = StepMetrics(
-                        rec.step, rec.stage, acc["loss"] / n, acc["bit_acc"] / n, acc["word_acc"] / n, rec.elapsed_s
-                    )
-                    acc = {"loss": 0.0, "bit_acc": 0.0, "word_acc": 0.0, "n": 0}
-                    history.append(logged.to_json())
-                    with self.log_path.open("a") as fh:
-                        fh.write(json.dumps(logged.to_json()) + "\n")
-                    rec.metrics = {"bit_acc": logged.bit_acc, "word_acc": logged.word_acc, "loss": logged.loss}
-                    if on_log:
-                        on_log(logged)
-                if rec.step % cfg.checkpoint_every == 0 and rec.step < cfg.steps:
-                    self.checkpoint()
-        except KeyboardInterrupt:
-            raise interrupted(rec, start, self.checkpoint, self.out, cfg.steps) from None
-        rec.finished = True
-        self.model.encoder.eval()
-        self.model.decoder.eval()
-        self.checkpoint()
-        plot = plot_history(history, self.log_path.with_suffix(".png"))
-        return TrainingRecordSummary(self.out, self.log_path, plot, rec.step, rec.stage2_start, rec.elapsed_s)
-
-
-def tune_decoder(
-    model: DeepMorphModel,
-    config: TrainConfig,
-    out: Path,
-    on_log: Callable[[StepMetrics], None] | None = None,
-) -> dict[str, Any]:
-    """Train a trained bundle's decoder further, its encoder frozen, and write it to ``out``.
-
-    The morphs stay exactly as they were, so codes already printed still decode and the
-    bundle's detector stays valid. The bundle's training record is kept; this run is appended
-    to ``meta.tuning``. Ctrl-C writes the decoder tuned so far, recorded as not finished.
-
-    Returns:
-        The ``meta.tuning`` entry of this run.
-
-    Raises:
-        Interrupted: after Ctrl-C, once the bundle is written.
-    """
-    if not config.freeze_encoder:
-        raise ValueError("tune_decoder trains the decoder alone: config.freeze_encoder must be set")
-    trained = model.meta.record
-    model.meta.record = TrainingRecord()
-    trainer = Trainer(model, config, out)
-    rec = trainer.record
-    entry: dict[str, Any] = {
-        "steps": 0,
-        "total_steps": config.steps,
-        **{k: getattr(config, k) for k in ("small_prints", "severity", "lr", "batch", "hard_fraction", "seed")},
-        "threads": rec.threads,
-    }
-    window: list[float] = []
-
-    def finish(finished: bool) -> None:
-        entry.update(steps=rec.step, finished=finished, elapsed_s=round(time.perf_counter() - start, 1))
-        if window:
-            entry["bit_acc"] = round(float(np.mean(window)), 5)
-        model.meta.record = trained
-        model.meta.tuning.append(entry)
-        model.decoder.eval()
-        model.save(out)
-
-    start = time.perf_counter()
-    try:
-        while rec.step < config.steps:
-            m = trainer.step()
-            window = (window + [m.bit_acc])[-config.log_every :]
-            if on_log and (rec.step % config.log_every == 0 or rec.step == config.steps):
-                on_log(replace(m, bit_acc=float(np.mean(window)), elapsed_s=time.perf_counter() - start))
-    except KeyboardInterrupt:
-        finish(False)
-        raise Interrupted(
-            f"interrupted at step {rec.step}/{config.steps}; the decoder tuned so far is in {out}"
-        ) from None
-    finish(True)
-    return entry
+        if plateau or step >= limit:
+            rec.stage, rec.stage2_start = 2, step
 
 
 @dataclass
-class TrainingRecordSummary:
+class TrainingSummary:
     """Where training wrote its files, and how it went."""
 
     bundle: Path
@@ -480,40 +350,198 @@ class TrainingRecordSummary:
     elapsed_s: float
 
 
-def _read_log(path: Path) -> list[dict[str, Any]]:
-    if not path.is_file():
-        return []
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except ValueError:
-            continue  # a line cut by a crash
-    return out
+def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
+    return DeepMorphError(f"{what}: {format_validation_error(exc).replace('dm:', '--')}")
 
 
-def plot_history(history: list[dict[str, Any]], path: Path) -> Path | None:
-    """Loss and bit accuracy against steps, with the stage switch marked (PNG)."""
-    if not history:
-        return None
-    import matplotlib
+def train_model(
+    svg: str | Path,
+    out: str | Path,
+    *,
+    payload_bits: int = 24,
+    crc_bits: int | None = None,
+    ecc_t: int | None = None,
+    bounds: dict[str, Any] | None = None,
+    train: dict[str, Any] | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
+    on_warning: Callable[[str], None] | None = None,
+) -> TrainingSummary:
+    """Train (or resume) a model for a drawing and write its bundle.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Args:
+        svg: the drawing.
+        out: bundle path; it is also the checkpoint that ``resume`` continues.
+        payload_bits, crc_bits, ecc_t: the payload and its code (:func:`deepmorph_core.codec.choose_codec`).
+        bounds: default bounds (``move``, ``shift``, ``scale``, ``rotate``) for unannotated elements.
+        train: :class:`TrainConfig` fields (``steps``, ``batch``, ``seed`` ...).
+        resume: continue the checkpoint at ``out``.
+        overwrite: replace an existing bundle at ``out`` instead of refusing.
+        on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback (progress bars).
+        on_warning: ``on_warning(text)`` for a warning before training starts (default:
+            :func:`warnings.warn`), such as :func:`~deepmorph_core.morphable.capacity_warning`'s.
+    """
+    out = Path(out)
+    overrides = {k: v for k, v in (train or {}).items() if v is not None}
+    if isinstance(svg, bytes):
+        data, label = svg, "<drawing>"
+    else:
+        data, label = read_svg_bytes(svg), str(svg)
+    try:
+        svg_text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise SvgError("the drawing is not UTF-8 text", label) from None
+    try:
+        if resume:
+            model = DeepMorphModel.load(out)
+            if model.meta.drawing_svg != svg_text:
+                raise DeepMorphError(f"{out}: the checkpoint was trained on another drawing than {svg}")
+            if model.meta.record.finished:
+                raise DeepMorphError(f"{out}: training already finished; nothing to resume")
+            config = TrainConfig(
+                **{
+                    **model.meta.train,
+                    # the checkpoint's decoder decides (one from before the transformer has none)
+                    "spatial_transformer": model.meta.decoder.spatial_transformer,
+                    **{k: v for k, v in overrides.items() if k in ("steps", "threads")},
+                }
+            )
+        else:
+            if out.exists() and not overwrite:
+                raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
+            config = TrainConfig(**overrides)
+            defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
+            augment = build_pipeline(config.severity, config.width)
+            settings = RasterSettings(width=config.width)
+            torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
+            model = DeepMorphModel.create(
+                svg_text,
+                Path(label).name,
+                defaults.model_dump(exclude_none=True),
+                choose_codec(payload_bits, crc_bits, ecc_t),
+                config.width,
+                {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
+                augment.config.model_dump(),
+                config.model_dump(),
+                decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer),
+                label=label,
+            )
+    except ValidationError as exc:
+        raise _settings_error("training settings", exc) from None
+    warning = None if resume else capacity_warning(model.codec.spec.code_bits, model.drawing.visibility(), label)
+    if warning:
+        (on_warning or (lambda text: warnings.warn(text, stacklevel=3)))(warning)
+    run = CodecRun(model, config, out)
+    loop = TrainingLoop(
+        out.with_suffix(".log.jsonl"),
+        config.log_every,
+        config.checkpoint_every,
+        f"checkpoint written to {out} (continue with --resume)",
+    )
+    on_log = on_start(config.steps, model.meta.record.step) if on_start else None
+    summary: LoopSummary = loop.run(run, on_log)
+    return TrainingSummary(out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s)
 
-    steps = [h["step"] for h in history]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.2))
-    ax1.plot(steps, [h["loss"] for h in history])
-    ax1.set(xlabel="step", ylabel="BCE loss", yscale="log", title="loss")
-    ax2.plot(steps, [h["bit_acc"] for h in history], label="bit accuracy")
-    ax2.plot(steps, [h["word_acc"] for h in history], label="all bits right")
-    ax2.set(xlabel="step", ylim=(0, 1.01), title="accuracy (training batches)")
-    switch = next((h["step"] for h in history if h["stage"] == 2), None)
-    for ax in (ax1, ax2):
-        if switch is not None:
-            ax.axvline(switch, color="grey", linestyle=":", label="stage 2")
-    ax2.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+
+class TuningRun(CodecRun):
+    """Training a trained bundle's decoder further, its encoder frozen (:func:`tune_decoder`).
+
+    Its progress is a record of its own; the bundle keeps its training record, and this run is
+    the last entry of ``meta.tuning``, written at each checkpoint (``finished`` false until the
+    last step).
+    """
+
+    panels = (Panel("decoder bit accuracy (training batches)", ("bit_acc",)),)
+
+    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path):
+        if not config.freeze_encoder:
+            raise ValueError("a tuning run trains the decoder alone: config.freeze_encoder must be set")
+        self._trained = model.meta.record
+        self._earlier = list(model.meta.tuning)
+        model.meta.record = TrainingRecord()
+        super().__init__(model, config, out)
+        self.entry: dict[str, Any] = {
+            "steps": 0,
+            "total_steps": config.steps,
+            **{k: getattr(config, k) for k in ("small_prints", "severity", "lr", "batch", "hard_fraction", "seed")},
+            "threads": self.record.threads,
+        }
+        self._window: list[float] = []
+
+    def step(self) -> dict[str, float]:
+        metrics = super().step()
+        self._window = (self._window + [metrics["bit_acc"]])[-self.cfg.log_every :]
+        return metrics
+
+    def checkpoint(self) -> None:
+        rec = self.record
+        self.entry.update(steps=rec.step, finished=rec.finished, elapsed_s=round(rec.elapsed_s, 1))
+        if self._window:
+            self.entry["bit_acc"] = round(float(np.mean(self._window)), 5)
+        self.model.meta.record = self._trained
+        self.model.meta.tuning = [*self._earlier, self.entry]
+        self.model.decoder.eval()
+        self.model.save(self.out)
+        self.model.meta.record = rec
+
+
+def tune_decoder(
+    model_path: str | Path,
+    out: str | Path,
+    *,
+    steps: int = 800,
+    small_prints: float = 0.5,
+    lr: float = 3e-4,
+    seed: int = 0,
+    threads: int | None = None,
+    overwrite: bool = False,
+    on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
+) -> dict[str, Any]:
+    """Train a trained bundle's decoder further, encoder frozen, and write the result to ``out``.
+
+    The morphs do not change, so printed codes still decode and the bundle's detector stays
+    valid. The run uses the bundle's own corruption, batch and real-render share, at full
+    corruption from the first step, with ``small_prints`` of each batch captured as small
+    prints (:class:`TrainConfig`); the learning rate decays from ``lr`` by a cosine to 10 %.
+    The run is recorded in the bundle's ``tuning`` list; Ctrl-C writes the decoder tuned so
+    far, recorded as not finished.
+
+    Args:
+        model_path: a bundle whose training has finished.
+        out: where to write the tuned bundle (may be ``model_path`` itself).
+        on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback.
+
+    Returns:
+        The bundle's new ``tuning`` entry.
+    """
+    model_path, out = Path(model_path), Path(out)
+    model = DeepMorphModel.load(model_path)
+    if not model.meta.record.finished:
+        raise DeepMorphError(f"{model_path}: its training has not finished; resume it before tuning")
+    if out.exists() and not overwrite and out.resolve() != model_path.resolve():
+        raise DeepMorphError(f"{out}: already exists; choose another --out")
+    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity", "device") if k in model.meta.train}
+    try:
+        config = TrainConfig(
+            **kept,
+            width=model.width,
+            steps=steps,
+            small_prints=small_prints,
+            lr=lr,
+            seed=seed,
+            threads=threads,
+            curriculum=0.0,
+            freeze_encoder=True,
+        )
+    except ValidationError as exc:
+        raise _settings_error("tuning settings", exc) from None
+    run = TuningRun(model, config, out)
+    loop = TrainingLoop(
+        out.with_suffix(".tune.log.jsonl"),
+        config.log_every,
+        config.checkpoint_every,
+        f"the decoder tuned so far is in {out}",
+    )
+    loop.run(run, on_start(config.steps, 0) if on_start else None)
+    return run.entry

@@ -1,14 +1,14 @@
 """Scoring the whole chain on synthetic scenes, side by side with ArUco and QR codes.
 
-:func:`write_scenes` stores scenes (PNG + JSON truth) as ``deepmorph synth`` does;
-:func:`bench_scenes` reads such a folder back and measures, on the same images:
+:func:`bench_scenes` reads a scene folder (:mod:`deepmorph_detect.scene_folders`) and
+measures, on the same images:
 
 * detection recall and precision, whole-payload success, and wrong payloads reported as ok;
 * pose: rotation and translation error and corner reprojection error, for our drawings and for
   the ArUco markers printed at the same size in the same scenes (found by ``cv2.aruco``);
 * time per frame on the current thread count: our locate+decode, ArUco detection on the same
   frames, and ``cv2.QRCodeDetector().detectAndDecode`` on same-size frames holding a QR code,
-  one QR call after each scene (:class:`QrClock`), so that both medians are taken over the
+  one QR call after each scene (:class:`~deepmorph_detect.baselines.QrClock`), so that both medians are taken over the
   same minutes: the machine's speed drifts by a fifth within a run.
 
 :func:`tracking_rates` compares searching every frame of a filmed print with following it.
@@ -16,9 +16,7 @@
 
 from __future__ import annotations
 
-import json
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,130 +24,15 @@ import cv2
 import numpy as np
 
 from deepmorph_core.codec import DecodeResult
-from deepmorph_core.codemodel import DeepMorphModel
-from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write, output_folder, refuse_non_folder
-from deepmorph_core.imaging import read_image_bgr
+from deepmorph_core.image_io import read_image_bgr
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_detect.baselines import QrClock, aruco_detector
 from deepmorph_detect.camera import Camera, rotation_error_deg, solve_pose, translation_error
-from deepmorph_detect.locate import Located, Locator
-from deepmorph_detect.scenes import ARUCO_DICT, Placement, SceneMaker
-
-QR_TEXT = "https://deepmorph.example/0xA1B2C3"  # what the QR frames of the speed baseline hold
-
-
-def check_scene_folder(out: Path) -> None:
-    """Refuse, before any work, a place :func:`write_scenes` cannot fill without loss: a file,
-    or a folder that already holds scenes (a second set would replace some of the first and
-    leave the rest stale)."""
-    refuse_non_folder(out)
-    if out.is_dir() and ((out / "index.json").exists() or next(out.glob("scene_*"), None) is not None):
-        raise DeepMorphError(f"{out}: already holds scenes; write to a new folder, or remove them first")
-
-
-def write_scenes(
-    model: DeepMorphModel,
-    out: Path,
-    n: int,
-    severity: str = "medium",
-    seed: int = 0,
-    size: tuple[int, int] = (640, 480),
-    drawings: int = 1,
-    distractors: int = 0,
-    aruco: bool = True,
-    empty_fraction: float = 0.0,
-    on_scene: Any = None,
-) -> Path:
-    """Write ``n`` labelled scenes into ``out`` (``scene_00000.png`` + ``.json``, ``index.json``).
-
-    ``empty_fraction`` of the scenes hold no drawing of the model (only distractors and
-    markers): the negatives for false-accept counts.
-
-    Raises:
-        DeepMorphError: ``out`` is a file, or a folder that already holds scenes (checked before
-            any work: a second set would replace some of the first and leave the rest stale).
-    """
-    check_scene_folder(Path(out))
-    out = output_folder(out)
-    maker = SceneMaker(model, size, severity, seed=seed)
-    rng = np.random.default_rng([seed, 7])
-    names = []
-    for i in range(n):
-        empty = rng.random() < empty_fraction
-        scene = maker.make(
-            drawings=0 if empty else drawings,
-            distractors=max(distractors, 1) if empty else distractors,
-            aruco=aruco,
-        )
-        name = f"scene_{i:05d}"
-        ok, buf = cv2.imencode(".png", scene.image)
-        if not ok:  # pragma: no cover
-            raise DeepMorphError("PNG encoding failed")
-        atomic_write(out / f"{name}.png", buf.tobytes())
-        atomic_write(out / f"{name}.json", json.dumps(scene.truth_json(), indent=1).encode())
-        names.append(name)
-        if on_scene:
-            on_scene(i + 1)
-    index = {"format": "deepmorph-scenes/1", "model": model.meta.drawing_name, "severity": severity,
-             "seed": seed, "size": list(size), "scenes": names}  # fmt: skip
-    atomic_write(out / "index.json", json.dumps(index, indent=1).encode())
-    return out
-
-
-def read_scenes(folder: Path) -> tuple[dict[str, Any], list[tuple[Path, dict[str, Any]]]]:
-    """The index and ``(image path, truth)`` pairs of a scene folder; clear errors otherwise."""
-    index_path = folder / "index.json"
-    if not index_path.is_file():
-        raise DeepMorphError(f"{folder}: not a scene folder (no index.json; make one with `deepmorph synth`)")
-    try:
-        index = json.loads(index_path.read_text())
-        names = list(index["scenes"])
-    except (ValueError, KeyError, TypeError):
-        raise DeepMorphError(f"{index_path}: not a scene index written by `deepmorph synth`") from None
-    scenes = []
-    for name in names:
-        truth_path = folder / f"{name}.json"
-        try:
-            truth = json.loads(truth_path.read_text())
-            truth["placements"] = [Placement.from_json(p) for p in truth["placements"]]
-        except (OSError, ValueError, KeyError, TypeError):
-            raise DeepMorphError(f"{truth_path}: missing or malformed scene truth") from None
-        scenes.append((folder / f"{name}.png", truth))
-    return index, scenes
-
-
-def _corner_error(found: np.ndarray, truth: np.ndarray) -> float:
-    return float(np.linalg.norm(np.asarray(found) - truth, axis=1).mean())
-
-
-def _match(det_corners: np.ndarray, truths: list[Placement]) -> Placement | None:
-    centre = det_corners.mean(0)
-    for p in truths:
-        size = float(np.linalg.norm(p.corners[2] - p.corners[0]))
-        if np.linalg.norm(centre - p.corners.mean(0)) < 0.25 * size:
-            return p
-    return None
-
-
-def matched_detections(
-    dets: list[Located], drawings: list[Placement]
-) -> Iterator[tuple[Located, Placement | None, bool]]:
-    """Each detection with the drawing it found (``None``: a false detection, or a second one of
-    a drawing already found) and whether its payload is that drawing's."""
-    matched: set[int] = set()
-    for det in dets:
-        p = _match(det.corners, drawings)
-        if p is None or id(p) in matched:
-            yield det, None, False
-            continue
-        matched.add(id(p))
-        yield det, p, p.payload is not None and np.array_equal(det.result.payload, p.payload)
-
-
-def aruco_detector() -> cv2.aruco.ArucoDetector:
-    """OpenCV's ArUco detector for DICT_6X6_250 with sub-pixel corner refinement."""
-    params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(ARUCO_DICT), params)
+from deepmorph_detect.locate import Locator
+from deepmorph_detect.metrics import corner_error, match_placement, matched_detections
+from deepmorph_detect.results import Located
+from deepmorph_detect.scene_folders import read_scenes
+from deepmorph_detect.scenes import SceneMaker
 
 
 def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> dict[str, Any]:
@@ -188,7 +71,7 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
             stats["wrong_ok"] += bool(det.result.ok and not right)
             rot.append(rotation_error_deg(det.rvec, p.rvec))
             trans.append(translation_error(det.tvec, p.tvec))
-            corner.append(_corner_error(det.corners, p.corners))
+            corner.append(corner_error(det.corners, p.corners))
         gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         t0 = time.perf_counter()
         m_corners, ids, _ = aruco.detectMarkers(gray)
@@ -203,7 +86,7 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
             rvec, tvec = solve_pose(cam, square, cc)
             a_rot.append(rotation_error_deg(rvec, p.rvec))
             a_trans.append(translation_error(tvec, p.tvec))
-            a_corner.append(_corner_error(cc, p.corners))
+            a_corner.append(corner_error(cc, p.corners))
         qr.tick()
         if on_scene:
             on_scene(i + 1)
@@ -265,7 +148,7 @@ def morph_check_rates(model: DeepMorphModel, folder: Path, seed: int = 0) -> dic
         image = read_image_bgr(path)
         drawings = [p for p in truth["placements"] if p.kind == "drawing"]
         for det in locator.locate(image):
-            p = _match(det.corners, drawings)
+            p = match_placement(det.corners, drawings)
             if p is None or p.payload is None:
                 continue
             near = p.payload.copy()
@@ -302,7 +185,7 @@ def tracking_rates(
     per frame, frames whose payload was read right, wrong payloads reported ok, and the median
     corner error against the moved truth; plus QR's detect-and-decode on same-size frames.
     """
-    from deepmorph_detect.tracking import SequenceLocator
+    from deepmorph_detect.track import SequenceLocator
 
     maker = SceneMaker(model, (640, 480), severity, seed=seed)
     scenes = [maker.make(drawings=1, frames=frames, shake_px=shake_px) for _ in range(sequences)]
@@ -326,7 +209,7 @@ def tracking_rates(
                 wrong += sum(bool(d.result.ok) for d in found) - len(right)
                 read += bool(right)
                 if right:
-                    errors.append(_corner_error(right[0].corners, scene.corners_in_frame(truth, k)))
+                    errors.append(corner_error(right[0].corners, scene.corners_in_frame(truth, k)))
         out[mode] = {
             "ms_median": round(1000 * float(np.median(times)), 2),
             "ms_mean": round(1000 * float(np.mean(times)), 2),
@@ -338,76 +221,4 @@ def tracking_rates(
     return out
 
 
-class QrClock:
-    """OpenCV's QR ``detectAndDecode`` timed on ``frames`` same-size scenes (medium severity)
-    holding one QR code, one call per :meth:`tick`, taking the frames in turn.
-
-    A benchmark ticks it after each of its own frames, so that QR's median is taken over the
-    same stretch of the run as the chain's. Timed in a block after the chain's frames instead,
-    four runs in one process on the same 100 hard scenes put the chain at 1.08x (the first,
-    without a warm-up call), 0.78x, 0.87x and 0.82x QR's time: the machine's speed drifts
-    within a minute.
-    """
-
-    def __init__(self, model: DeepMorphModel, size: tuple[int, int], frames: int) -> None:
-        maker = SceneMaker(model, size, "medium", seed=99)
-        self.frames = [maker.make(drawings=0, qr=QR_TEXT).image for _ in range(max(1, frames))]
-        self.detector = cv2.QRCodeDetector()
-        self.times: list[float] = []
-
-    def warm(self) -> None:
-        """One call left out of the timings (the first allocates)."""
-        self.detector.detectAndDecode(self.frames[0])
-
-    def tick(self) -> float:
-        """Time one call on the next frame; its seconds."""
-        frame = self.frames[len(self.times) % len(self.frames)]
-        t0 = time.perf_counter()
-        self.detector.detectAndDecode(frame)
-        self.times.append(time.perf_counter() - t0)
-        return self.times[-1]
-
-    def median_ms(self) -> float | None:
-        """The median call in milliseconds (``None`` before the first tick)."""
-        return round(1000 * float(np.median(self.times)), 2) if self.times else None
-
-
-def format_report(report: dict[str, Any]) -> str:
-    """The report as a plain-text table."""
-    p, s = report["pose"], report["speed_ms"]
-    rows = [
-        ("scenes", report["scenes"], ""),
-        ("drawings / found (recall)", f"{report['drawings']} / {report['found']} ({report['recall']:.1%})", ""),
-        ("precision", f"{report['precision']:.1%}", ""),
-        ("whole-payload success", f"{report['payload_success']:.1%}", ""),
-        ("wrong payloads reported ok", report["wrong_ok"], f"over {report['scenes']} images"),
-        ("", "DeepMorph", "ArUco 6x6"),
-        ("found", report["found"], f"{report['aruco_found']}/{report['aruco_markers']}"),
-        ("rotation error, median (deg)", p["deepmorph"]["rotation_deg_median"], p["aruco"]["rotation_deg_median"]),
-        (
-            "translation error, median (rel)",
-            p["deepmorph"]["translation_rel_median"],
-            p["aruco"]["translation_rel_median"],
-        ),
-        ("corner error, median (px)", p["deepmorph"]["corner_px_median"], p["aruco"]["corner_px_median"]),
-        ("time per frame, median (ms)", s["deepmorph_locate_decode_median"], s["aruco_detect_median"]),
-        ("time per frame, mean (ms)", s["deepmorph_locate_decode_mean"], ""),
-        ("QR detectAndDecode (ms)", s["qr_detect_and_decode_median"], ""),
-    ]
-    width = max(len(r[0]) for r in rows)
-    return "\n".join(f"{a:<{width}}  {b!s:>20}  {c!s:>16}" for a, b, c in rows)
-
-
-__all__ = [
-    "QR_TEXT",
-    "QrClock",
-    "aruco_detector",
-    "bench_scenes",
-    "format_report",
-    "matched_detections",
-    "morph_check_rates",
-    "read_scenes",
-    "tracking_rates",
-    "check_scene_folder",
-    "write_scenes",
-]
+__all__ = ["bench_scenes", "morph_check_rates", "tracking_rates"]

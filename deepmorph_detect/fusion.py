@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from deepmorph_core.codec import DecodeResult, PayloadCodec
-from deepmorph_detect.locate import Located, PayloadCheck
+from deepmorph_detect.check import PayloadCheck
+from deepmorph_detect.results import Located
 
 MorphCheck = Callable[[np.ndarray, np.ndarray, DecodeResult], PayloadCheck]
 

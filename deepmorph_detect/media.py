@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.imaging import MIN_IMAGE_SIDE
+from deepmorph_core.image_io import MIN_IMAGE_SIDE
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm"}
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv"}

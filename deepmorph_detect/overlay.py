@@ -6,8 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from deepmorph_core.codec import format_payload
-from deepmorph_detect.locate import Located
+from deepmorph_core.payload import format_payload
+from deepmorph_detect.results import Located
 
 
 def draw_overlay(image: np.ndarray, detections: list[Located]) -> np.ndarray:

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from deepmorph_core.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.camera import project, viewbox_corners
+from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.icalign import InverseECC, inverse3
 from deepmorph_detect.inkstart import ink_starts
 
@@ -69,7 +69,7 @@ class Template:
         renderer: Renderer = render_svg_resvg,
     ) -> Template:
         """``svg`` rendered at each width in ``levels`` by ``renderer`` (resvg unless given;
-        :func:`~deepmorph_core.fastrender.template_renderer` picks one for a drawing)."""
+        :func:`~deepmorph_detect.fastrender.template_renderer` picks one for a drawing)."""
         return cls(viewbox, {w: renderer(svg, w, viewbox) for w in levels})
 
     @functools.cached_property

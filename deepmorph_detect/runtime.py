@@ -26,7 +26,7 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 from torch import Tensor, nn
 
-from deepmorph_core.model import Decoder
+from deepmorph_core.networks import Decoder
 from deepmorph_detect.network import STRIDE, DetectorNet
 
 OPSET = 17

@@ -29,7 +29,7 @@ from deepmorph_detect.backgrounds import random_background
 from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners, viewbox_to_frame
 
 if TYPE_CHECKING:
-    from deepmorph_core.codemodel import DeepMorphModel
+    from deepmorph_core.model import DeepMorphModel
 
 DISTRACTOR_DIR = Path(__file__).parent / "data" / "distractors"
 ARUCO_DICT = cv2.aruco.DICT_6X6_250

@@ -39,9 +39,9 @@ import cv2
 import numpy as np
 import torch
 
-from deepmorph_core.codemodel import DeepMorphModel
-from deepmorph_core.fastrender import Renderer, render_svg_resvg
+from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (96 read fewer small prints, slower)

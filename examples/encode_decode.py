@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from deepmorph_core.api import load_model, train_model
+import deepmorph
 from deepmorph_core.capture import simulate_photo
-from deepmorph_core.codec import format_payload, parse_payload
 from deepmorph_core.render import render_svg
 
 DRAWING = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" viewBox="0 0 24 24"
@@ -31,26 +30,25 @@ def main() -> None:
     svg.write_text(DRAWING)
 
     # 1. Train: 8 payload bits, CRC-8, BCH correcting one bit error.
-    summary = train_model(
+    model = deepmorph.train(
         svg, work / "model.dmm", payload_bits=8, crc_bits=8, ecc_t=1,
-        train={"steps": 600, "width": 48, "batch": 16, "severity": "easy", "threads": 1},
-    )
-    print(f"trained in {summary.elapsed_s:.0f} s -> {summary.bundle}")
+        steps=600, threads=1, width=48, batch=16, severity="easy",
+    )  # fmt: skip
+    print(f"trained in {model.info()['record']['elapsed_s']:.0f} s -> {work / 'model.dmm'}")
 
-    # 2. Encode: a payload becomes a morphed SVG document.
-    model = load_model(summary.bundle)
-    payload = parse_payload("0xA5", model.codec.spec.payload_bits)
-    code_svg = model.encode(payload)
-    (work / "code.svg").write_text(code_svg)
+    # 2. Encode: a payload (an int here; hex text, bytes or bits work too) becomes a code.
+    code = model.encode(0xA5)
+    (work / "code.svg").write_text(code.svg)
 
     # 3. Decode: from a real render, and from a simulated phone photo of a print.
-    render = render_svg(code_svg, 300)
-    photo = simulate_photo(render, "easy", np.random.default_rng(0)) / 255.0
+    render = render_svg(code.svg, 300)
+    photo = simulate_photo(render, "easy", np.random.default_rng(0))
     for name, image in (("render", render), ("photo", photo)):
-        for det in model.decode_image(image):
-            r = det.result
-            print(f"{name}: {format_payload(r.payload)['hex']} ok={r.ok} corrected={r.corrected_bits} "
-                  f"confidence={r.confidence:.2f}")
+        for found in model.decode(image):
+            r = found.result
+            print(
+                f"{name}: {found.payload.hex} ok={found.ok} corrected={r.corrected_bits} confidence={r.confidence:.2f}"
+            )
 
 
 if __name__ == "__main__":

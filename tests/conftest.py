@@ -13,8 +13,8 @@ from hypothesis import settings
 import deepmorph_augment.plugin as builtin_augmentations
 import deepmorph_detect.plugin as builtin_detectors
 import deepmorph_primitives.plugin as builtin_plugin
-from deepmorph_core.api import BUNDLED_MODEL
-from deepmorph_core.codemodel import DeepMorphModel
+from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
 from deepmorph_detect.locate import Locator
 

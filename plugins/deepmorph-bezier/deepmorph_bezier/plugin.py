@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
-from deepmorph_bezier.segments import CubicBezierSegment, QuadraticBezierSegment
+from typing import TYPE_CHECKING
+
 from deepmorph_core import hookimpl
-from deepmorph_core.plugins import Register
+
+if TYPE_CHECKING:
+    from deepmorph_core.plugins import Register
 
 
 @hookimpl
 def deepmorph_register_primitives(register: Register) -> None:
     """Register the cubic and quadratic Bézier path-segment kinds."""
+    from deepmorph_bezier.segments import CubicBezierSegment, QuadraticBezierSegment
+
     register.path_segment(CubicBezierSegment)
     register.path_segment(QuadraticBezierSegment)

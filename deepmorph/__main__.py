@@ -1,0 +1,6 @@
+"""``python -m deepmorph``: the ``deepmorph`` command line."""
+
+from deepmorph_core.cli import main
+
+if __name__ == "__main__":
+    main()

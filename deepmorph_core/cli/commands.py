@@ -1,0 +1,404 @@
+"""Core's commands: the drawing (``list-primitives``, ``inspect``, ``morph``, ``render``) and the
+model (``train``, ``info``, ``tune-decoder``, ``encode``). Each parses its arguments and calls
+the library; photos are the photo chain's commands (:mod:`deepmorph_detect.commands`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Optional
+
+import typer
+from rich.table import Table
+
+from deepmorph_core.cli.frame import (
+    JsonOpt,
+    ModelArg,
+    MoveOpt,
+    RotateOpt,
+    ScaleOpt,
+    SeedOpt,
+    ShiftOpt,
+    SvgArg,
+    ThreadsOpt,
+    err,
+    out,
+    parse_pair,
+    step_progress,
+    write_text_atomic,
+)
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import refuse_to_overwrite
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from deepmorph_core.morphable import MorphableDrawing
+
+
+def _load(svg: Path, move: float | None, shift: str | None, scale: str | None, rotate: str | None) -> MorphableDrawing:
+    from deepmorph_core.morphable import MorphableDrawing
+
+    return MorphableDrawing.load(
+        svg,
+        move=move,
+        shift=parse_pair(shift, "shift", single_ok=True),
+        scale=parse_pair(scale, "scale"),
+        rotate=parse_pair(rotate, "rotate"),
+    )
+
+
+def list_primitives(as_json: JsonOpt = False) -> None:
+    """List the primitive and path-segment kinds the installed plugins provide."""
+    from deepmorph_core.plugins import default_registry
+
+    reg = default_registry()
+    rows = []
+    for r in [*reg.primitives.values(), *reg.path_segments.values()]:
+        reads = " ".join(f"<{t}>" for t in r.obj.tags) if r.category == "primitive" else f"path {r.obj.commands}"
+        rows.append(
+            {
+                "kind": r.key,
+                "category": r.category,
+                "reads": reads,
+                "plugin": r.plugin,
+                "distribution": r.distribution,
+                "morphable": r.obj.morphable,
+            }
+        )
+    if as_json:
+        out.print_json(json.dumps(rows))
+        return
+    table = Table(title="DeepMorph primitives")
+    for col in ("kind", "reads", "plugin", "distribution", "morphable parameters"):
+        table.add_column(col, overflow="fold")
+    for row in rows:
+        table.add_row(row["kind"], row["reads"], row["plugin"], row["distribution"] or "-", row["morphable"])
+    out.print(table)
+
+
+def inspect(
+    svg: SvgArg,
+    move: MoveOpt = None,
+    shift: ShiftOpt = None,
+    scale: ScaleOpt = None,
+    rotate: RotateOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Show the primitives of a drawing, its variables N_v and their bounds."""
+    md = _load(svg, move, shift, scale, rotate)
+    info = md.describe()
+    if as_json:
+        out.print_json(json.dumps(info))
+        return
+    table = Table(title=f"{svg}: {len(info['primitives'])} primitives, N_v = {info['n_variables']}")
+    for col in ("#", "kind", "line", "points", "variables", "bounds", "paints"):
+        table.add_column(col, overflow="fold")
+    for p in info["primitives"]:
+        bounds = "fixed" if p["fixed"] else (", ".join(f"{k}={v}" for k, v in p["bounds"].items()) or "none")
+        table.add_row(
+            str(p["index"]),
+            p["kind"],
+            str(p["line"]),
+            str(p["control_points"]),
+            str(p["variables"]),
+            bounds,
+            " ".join(p["paints"]),
+        )
+    out.print(table)
+    for g in info["groups"]:
+        out.print(f"group at line {g['line']}: {g['variables']} variables, bounds {g['bounds']}")
+    for s in info["skipped"]:
+        out.print(f"skipped line {s['line']}: {s['reason']}")
+    if info["n_variables"] == 0:
+        out.print(
+            "This drawing has 0 variables: nothing may morph yet. Add bounds to the SVG, e.g. "
+            'xmlns:dm="urn:deepmorph:1" dm:move="0.5" on the root <svg> (see docs/bounds.md), '
+            "or pass defaults such as --move 0.5."
+        )
+
+
+def morph(
+    svg: SvgArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Where to write the morphed SVG.")],
+    random: Annotated[bool, typer.Option("--random", help="Draw a uniformly random morph inside the bounds.")] = False,
+    seed: Annotated[Optional[int], typer.Option("--seed", help="Seed for --random.")] = None,
+    move: MoveOpt = None,
+    shift: ShiftOpt = None,
+    scale: ScaleOpt = None,
+    rotate: RotateOpt = None,
+) -> None:
+    """Write a morph of a drawing (inside its bounds) as a new SVG."""
+    if not random:
+        raise DeepMorphError("nothing to do: pass --random (payloads are encoded with 'deepmorph encode')")
+    refuse_to_overwrite(out_path, "--out", [("input drawing", svg)])
+    md = _load(svg, move, shift, scale, rotate)
+    if md.n_variables == 0:
+        raise DeepMorphError(f"{svg}: the drawing has 0 variables; add dm: bounds or pass --move 0.5")
+    values = md.values_from_unit(md.random_unit(1, seed))
+    write_text_atomic(out_path, md.to_svg(values[0]))
+    out.print(f"wrote {out_path} (random morph of {md.n_variables} variables, seed {seed})")
+
+
+def render(
+    svg: SvgArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Output PNG.")],
+    size: Annotated[int, typer.Option("--size", min=8, max=4096, help="Width in pixels.")] = 256,
+    soft: Annotated[bool, typer.Option("--soft", help="Use the soft (differentiable) rasterizer.")] = False,
+    overlay_base: Annotated[
+        Optional[Path], typer.Option("--overlay", help="Draw this base drawing in red under the SVG.")
+    ] = None,
+) -> None:
+    """Render a drawing with the real renderer (resvg) or the soft rasterizer."""
+    from deepmorph_core.image_io import image_format, save_gray, save_rgb
+    from deepmorph_core.render import overlay
+
+    refuse_to_overwrite(out_path, "--out", [("input drawing", svg), ("overlay's base drawing", overlay_base)])
+    image_format(out_path)
+    ink = _render_ink(svg, size, soft)
+    if overlay_base is None:
+        save_gray(1.0 - ink, out_path)
+    else:
+        base = _render_ink(overlay_base, size, soft)
+        if base.shape != ink.shape:
+            raise DeepMorphError(f"{overlay_base}: its aspect ratio differs from {svg}'s; cannot overlay")
+        save_rgb(overlay(base, ink), out_path)
+    out.print(f"wrote {out_path} ({ink.shape[1]}x{ink.shape[0]}, {'soft' if soft else 'resvg'})")
+
+
+def _render_ink(svg: Path, size: int, soft: bool) -> np.ndarray:
+    from deepmorph_core.morphable import MorphableDrawing
+    from deepmorph_core.render import render_svg_ink
+
+    md = MorphableDrawing.load(svg)  # validates the file (hostile input never reaches resvg)
+    if soft:
+        return md.render_soft(md.neutral_values(), size).detach()[0, 0].numpy()
+    return render_svg_ink(md.to_svg(md.neutral_values()[0]), size)
+
+
+def train(
+    svg: SvgArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Model bundle to write (.dmm); also the checkpoint.")],
+    payload_bits: Annotated[int, typer.Option("--payload-bits", min=1, max=256, help="Payload length in bits.")] = 24,
+    crc: Annotated[
+        Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
+    ] = None,
+    ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 3000,
+    batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
+    width: Annotated[int, typer.Option("--width", min=32, max=512, help="Decoder image width in pixels.")] = 96,
+    severity: Annotated[
+        str, typer.Option("--severity", help="Capture corruption: none, easy, medium, hard.")
+    ] = "medium",
+    hard_fraction: Annotated[
+        float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
+    ] = 0.25,
+    small_prints: Annotated[
+        float,
+        typer.Option(
+            "--small-prints",
+            min=0,
+            max=1,
+            help="Share of each batch captured as a small print (corrupted at 55-95 % of the width, enlarged).",
+        ),
+    ] = 0.0,
+    seed: SeedOpt = 0,
+    encoder_init: Annotated[
+        str,
+        typer.Option(
+            "--encoder-init", help="Encoder start: spread (each bit drives its own variables) or random (the paper's)."
+        ),
+    ] = "spread",
+    spatial_transformer: Annotated[
+        bool,
+        typer.Option(
+            "--spatial-transformer/--no-spatial-transformer",
+            help="Learn a homography in front of the decoder that undoes leftover perspective.",
+        ),
+    ] = True,
+    device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
+    threads: ThreadsOpt = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+    move: MoveOpt = None,
+    shift: ShiftOpt = None,
+    scale: ScaleOpt = None,
+    rotate: RotateOpt = None,
+) -> None:
+    """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
+    from deepmorph_core.train import train_model
+
+    def describe(m: dict[str, Any]) -> str:
+        return f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
+
+    with step_progress("training", describe) as on_start:
+        summary = train_model(
+            svg,
+            out_path,
+            payload_bits=payload_bits,
+            crc_bits=crc,
+            ecc_t=ecc_t,
+            resume=resume,
+            bounds={
+                "move": move,
+                "shift": parse_pair(shift, "shift", single_ok=True),
+                "scale": parse_pair(scale, "scale"),
+                "rotate": parse_pair(rotate, "rotate"),
+            },
+            train={
+                "steps": steps,
+                "batch": batch,
+                "width": width,
+                "severity": severity,
+                "seed": seed,
+                "encoder_init": encoder_init,
+                "spatial_transformer": spatial_transformer,
+                "device": device,
+                "threads": threads,
+                "hard_fraction": hard_fraction,
+                "small_prints": small_prints,
+            },
+            on_start=on_start,
+            on_warning=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
+        )
+    out.print(
+        f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
+        f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
+    )
+
+
+def info(model: ModelArg, as_json: JsonOpt = False) -> None:
+    """Describe a model bundle: payload and code bits, codec, image size, bounds, training record."""
+    from deepmorph_core.model import DeepMorphModel
+
+    data = DeepMorphModel.load(model).info()
+    if as_json:
+        out.print_json(json.dumps(data))
+        return
+    table = Table(title=str(model), show_header=False)
+    table.add_column("field")
+    table.add_column("value", overflow="fold")
+    codec = data["codec"]
+    rec = data["record"]
+    dec = data["decoder"]
+    rows = [
+        ("drawing", data["drawing"]),
+        ("payload bits", str(data["payload_bits"])),
+        (
+            "code bits",
+            f"{data['code_bits']} (CRC {codec['crc_bits']}, BCH t={codec['bch_t']}: {codec['ecc_bits']} ECC bits)",
+        ),
+        ("variables N_v", str(data["n_variables"])),
+        ("image size", "x".join(map(str, data["image_size"][::-1]))),
+        (
+            "decoder",
+            f"{'spatial transformer, then ' if dec['spatial_transformer'] else ''}CNN "
+            f"(stem {dec['stem']}, channels {list(dec['channels'])}, head {dec['hidden']})",
+        ),
+        ("bounds defaults", json.dumps(data["bounds_defaults"]) or "-"),
+        (
+            "training",
+            f"{rec['step']}/{rec['total_steps']} steps, {rec['elapsed_s']:.0f} s on {rec['device']} "
+            f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
+            f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}",
+        ),
+        ("last metrics", json.dumps(rec["metrics"])),
+        ("versions", json.dumps(data["versions"])),
+    ]
+    det = data["detector"]
+    if det is None:
+        rows.append(("detector", "none (decode frames whole images; add one with `deepmorph train-detector`)"))
+    else:
+        drec = det["record"]
+        rows.append(
+            (
+                "detector",
+                f"{drec['step']}/{drec['total_steps']} steps, {drec['elapsed_s']:.0f} s "
+                f"({'finished' if drec['finished'] else 'checkpoint (resume to finish)'}), "
+                + "".join(f"fine-tuned after {e['record']['step']} steps, " for e in reversed(det.get("earlier", [])))
+                + f"{json.dumps(drec['metrics'])}",
+            )
+        )
+    for run in data["tuning"]:
+        rows.append(
+            (
+                "decoder tuned",
+                f"{run['steps']}/{run['total_steps']} steps, {run['elapsed_s']:.0f} s, small prints "
+                f"{run['small_prints']:.0%}, bit acc {run.get('bit_acc', float('nan')):.4f}"
+                + ("" if run["finished"] else " (interrupted)"),
+            )
+        )
+    for k, v in rows:
+        table.add_row(k, v)
+    out.print(table)
+
+
+def tune_decoder(
+    model: ModelArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Bundle to write (may be the same file).")],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Tuning steps.")] = 800,
+    small_prints: Annotated[
+        float,
+        typer.Option("--small-prints", min=0, max=1, help="Share of each batch captured as a small print."),
+    ] = 0.5,
+    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1e-1, help="Start learning rate (cosine to 10 %).")] = 3e-4,
+    seed: SeedOpt = 0,
+    threads: ThreadsOpt = None,
+) -> None:
+    """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
+    from deepmorph_core.train import tune_decoder as tune
+
+    with step_progress("tuning", lambda m: f"decoder bit acc {m['bit_acc']:.4f}") as on_start:
+        run = tune(model, out_path, steps=steps, small_prints=small_prints, lr=lr, seed=seed, threads=threads,
+                   on_start=on_start)  # fmt: skip
+    out.print(f"wrote {out_path} ({run['steps']} steps in {run['elapsed_s']:.0f} s, bit acc {run['bit_acc']:.4f})")
+
+
+def encode(
+    model: ModelArg,
+    payload: Annotated[
+        str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")
+    ],
+    out_path: Annotated[Path, typer.Option("--out", help="Morphed SVG to write.")],
+    png: Annotated[Optional[Path], typer.Option("--png", help="Also render a PNG for printing.")] = None,
+    width_mm: Annotated[float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of the PNG.")] = 50.0,
+    dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of the PNG.")] = 300,
+) -> None:
+    """Hide a payload in the model's drawing and write the morphed SVG (and a print-ready PNG)."""
+    from deepmorph_core.image_io import image_format, save_gray
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.payload import format_payload, parse_payload_text
+    from deepmorph_core.render import render_svg_ink
+
+    refuse_to_overwrite(out_path, "--out", [("model file", model)])
+    if png is not None:
+        refuse_to_overwrite(png, "--png", [("model file", model), ("SVG given with --out", out_path)])
+        image_format(png)
+    m = DeepMorphModel.load(model)
+    bits = parse_payload_text(payload, m.codec.spec.payload_bits)
+    svg_text = m.encode(bits)
+    write_text_atomic(out_path, svg_text)
+    msg = f"wrote {out_path} carrying {format_payload(bits)['hex']}"
+    if png is not None:
+        px = max(16, round(width_mm / 25.4 * dpi))
+        img = render_svg_ink(svg_text, px)
+        save_gray(1.0 - img, png, dpi=dpi)
+        msg += f" and {png} ({px} px wide = {width_mm:g} mm at {dpi} dpi)"
+    out.print(msg)
+
+
+def register(cli: typer.Typer) -> None:
+    """Add core's commands to ``cli``."""
+    from deepmorph_core.cli.frame import friendly
+
+    for name, command in (
+        ("list-primitives", list_primitives),
+        ("inspect", inspect),
+        ("morph", morph),
+        ("render", render),
+        ("train", train),
+        ("info", info),
+        ("tune-decoder", tune_decoder),
+        ("encode", encode),
+    ):
+        cli.command(name)(friendly(command))

@@ -1,0 +1,133 @@
+"""What every command shares: the consoles, one-line errors, common options, progress bars.
+
+Commands (core's own in :mod:`deepmorph_core.cli.commands`, plugins' through the
+``deepmorph_register_commands`` hook) import these; nothing here imports torch.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Any, Optional, TypeVar
+
+import typer
+from rich.console import Console
+from rich.text import Text
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
+
+out = Console()
+err = Console(stderr=True)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def print_error(exc: BaseException) -> None:
+    """One line on stderr, never interpreted as markup, never wrapped."""
+    err.print(Text.assemble(("error: ", "bold red"), str(exc)), soft_wrap=True, highlight=False)
+
+
+def friendly(fn: F) -> F:
+    """Turn a DeepMorphError raised by a command into one ``error:`` line and exit status 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except DeepMorphError as exc:
+            print_error(exc)
+            raise typer.Exit(1) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+SvgArg = Annotated[Path, typer.Argument(help="An SVG drawing.", show_default=False)]
+
+
+MoveOpt = Annotated[Optional[float], typer.Option("--move", help="Default dm:move radius for elements without bounds.")]
+
+
+ShiftOpt = Annotated[Optional[str], typer.Option("--shift", help='Default dm:shift: "R" or "RX,RY".')]
+
+
+ScaleOpt = Annotated[Optional[str], typer.Option("--scale", help='Default dm:scale: "LO,HI".')]
+
+
+RotateOpt = Annotated[Optional[str], typer.Option("--rotate", help='Default dm:rotate in degrees: "LO,HI".')]
+
+
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+
+
+def parse_pair(text: str | None, name: str, single_ok: bool = False) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    parts = [p for p in text.replace(",", " ").split() if p]
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        raise DeepMorphError(f"--{name}={text!r}: expected numbers") from None
+    if single_ok and len(nums) == 1:
+        return nums[0], nums[0]
+    if len(nums) != 2:
+        raise DeepMorphError(f'--{name}={text!r}: expected two numbers "LO,HI"')
+    return nums[0], nums[1]
+
+
+def progress_bar(description: str = "{task.description}"):  # noqa: ANN201 - a rich Progress
+    """The progress bar of long commands (on stderr): description, bar, count, elapsed, ETA."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn(description),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err,
+    )
+
+
+@contextmanager
+def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[Callable[[int, int], Callable[[Any], None]]]:
+    """A progress bar for a training run: yields ``on_start(total, done)``, which starts the bar
+    and returns the per-log callback (``describe(metrics)`` is its text). Callers start it
+    only once the settings are validated, so an error prints alone; a bar never started is
+    never stopped (that would print a stray newline)."""
+    progress = progress_bar()
+
+    def on_start(total: int, done: int) -> Callable[[Any], None]:
+        progress.start()
+        task = progress.add_task(label, total=total, completed=done)
+        return lambda m: progress.update(task, completed=m["step"], description=describe(m))
+
+    try:
+        yield on_start
+    finally:
+        if progress.live.is_started:
+            progress.stop()
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write a text file so that a crash never leaves it half written."""
+    atomic_write(path, text.encode("utf-8"))
+
+
+ModelArg = Annotated[Path, typer.Argument(help="A DeepMorph model bundle (.dmm).", show_default=False)]
+
+
+SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")]
+
+
+ThreadsOpt = Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")]

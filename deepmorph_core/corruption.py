@@ -1,0 +1,243 @@
+"""The capture-corruption pipeline: a validated config of steps and an ``nn.Module`` that
+builds the steps from the plugin registry and applies them in a fixed physical order.
+
+Order (by each augmentation's ``stage``, :data:`~deepmorph_core.protocols.STAGES`; config
+order within a stage): geometry (fused into one warp), optics (blur, defocus, motion blur),
+lighting, intensity, noise, impulse (salt and pepper), custom (plugins that name no known
+stage), compression (JPEG). The output is clamped to ``[0, 1]``. The severity presets are
+:mod:`deepmorph_core.severity`'s; the corruptions themselves are plugins
+(:mod:`deepmorph_augment` holds the built-in ones).
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Mapping
+from typing import Any, Union
+
+import torch
+from kornia.geometry.transform import warp_perspective
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from torch import Tensor, nn
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.plugins import Registry, default_registry
+from deepmorph_core.protocols import STAGES
+from deepmorph_core.severity import residual_steps
+
+ParamValue = Union[float, list[float], str]
+
+
+class AugmentConfigError(DeepMorphError):
+    """An augmentation config that cannot be built; the message names the step."""
+
+
+class AugmentationSpec(BaseModel):
+    """One step: a registered augmentation's name, its probability per sample and its
+    constructor parameters (numbers, ``[lo, hi]`` ranges or strings: JSON-safe)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, max_length=64)
+    p: float = Field(default=1.0, ge=0.0, le=1.0)
+    params: dict[str, ParamValue] = Field(default_factory=dict)
+
+
+class AugmentConfig(BaseModel):
+    """The steps of a pipeline (applied in stage order, not list order); stored in model
+    bundles as ``model_dump()`` JSON."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    steps: list[AugmentationSpec] = Field(default_factory=list, max_length=64)
+
+    @classmethod
+    def preset(cls, severity: str, *, size: int | None = None) -> AugmentConfig:
+        """The decoder-frame corruption of a severity (:data:`deepmorph_core.severity.SEVERITIES`),
+        with its pixel-valued parameters scaled to images ``size`` pixels wide."""
+        return cls(
+            steps=[AugmentationSpec(name=n, p=p, params=params) for n, p, params in residual_steps(severity, size)]
+        )
+
+    @classmethod
+    def parse(cls, data: AugmentConfig | Mapping[str, Any]) -> AugmentConfig:
+        """Validate ``data`` (e.g. from JSON).
+
+        Raises:
+            AugmentConfigError: one ``steps[i] 'name': field: problem`` line per problem.
+        """
+        if isinstance(data, AugmentConfig):
+            return data
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            raise AugmentConfigError(_describe(exc, data)) from None
+
+
+def _step_label(data: Any, index: int) -> str:
+    try:
+        return f"steps[{index}] {data['steps'][index]['name']!r}"
+    except (KeyError, IndexError, TypeError):
+        return f"steps[{index}]"
+
+
+def _describe(exc: ValidationError, data: Any) -> str:
+    lines = []
+    for err in exc.errors():
+        loc, msg = list(err["loc"]), err["msg"].removeprefix("Value error, ")
+        where = "augment config"
+        if len(loc) >= 2 and loc[0] == "steps" and isinstance(loc[1], int):
+            where, loc = _step_label(data, loc[1]), loc[2:]
+        field = ".".join(str(x) for x in loc)
+        lines.append(f"{where}: {field}: {msg}" if field else f"{where}: {msg}")
+    return "; ".join(lines)
+
+
+def _build_step(index: int, spec: AugmentationSpec, registry: Registry) -> Any:
+    label = f"steps[{index}] {spec.name!r}"
+    registration = registry.augmentations.get(spec.name)
+    if registration is None:
+        known = ", ".join(sorted(registry.augmentations)) or "none registered"
+        raise AugmentConfigError(f"{label}: unknown augmentation (known: {known})")
+    cls = registration.obj
+    if "p" in spec.params:
+        raise AugmentConfigError(f"{label}: give p as the step's own field, not in params")
+    signature = inspect.signature(cls)
+    if not any(par.kind is inspect.Parameter.VAR_KEYWORD for par in signature.parameters.values()):
+        known = [n for n, par in signature.parameters.items() if par.kind is not inspect.Parameter.VAR_POSITIONAL]
+        unknown = sorted(set(spec.params) - set(known))
+        if unknown:
+            raise AugmentConfigError(
+                f"{label}: unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} "
+                f"(known: {', '.join(known)})"
+            )
+    try:
+        return cls(p=spec.p, **spec.params)
+    except (TypeError, ValueError) as exc:
+        raise AugmentConfigError(f"{label}: {exc}") from None
+
+
+def _stage(step: Any) -> int:
+    stage = getattr(step, "stage", "custom")
+    return STAGES.index(stage if stage in STAGES else "custom")
+
+
+class AugmentPipeline(nn.Module):
+    """Applies a config's augmentations in stage order, differentiably.
+
+    Consecutive geometric steps (those with ``draw_matrices``) are composed into one warp, so
+    the image is resampled once; their random draws are the same as applying them one by one.
+
+    Args:
+        config: the steps (an :class:`AugmentConfig` or its ``model_dump()``).
+        registry: where step names are looked up; the process-wide default when ``None``.
+
+    Raises:
+        AugmentConfigError: an invalid config, an unknown augmentation or parameter, or a
+            parameter the augmentation refuses; the message names the step.
+    """
+
+    def __init__(self, config: AugmentConfig | Mapping[str, Any], registry: Registry | None = None):
+        super().__init__()
+        self.config = AugmentConfig.parse(config)
+        registry = registry if registry is not None else default_registry()
+        built = [_build_step(i, spec, registry) for i, spec in enumerate(self.config.steps)]
+        order = sorted(range(len(built)), key=lambda i: (_stage(built[i]), i))
+        self.steps = [built[i] for i in order]
+        self._runs: list[Any] = []  # an augmentation, or a list of geometric ones to fuse
+        for step in self.steps:
+            if hasattr(step, "draw_matrices"):
+                if self._runs and isinstance(self._runs[-1], list):
+                    self._runs[-1].append(step)
+                else:
+                    self._runs.append([step])
+            else:
+                self._runs.append(step)
+
+    def forward(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """Corrupt ``images`` (``(B, 1, H, W)`` in ``[0, 1]``, white paper = 1).
+
+        Shape:
+            images: ``(B, C, H, W)``; returns the same shape, device and dtype, in ``[0, 1]``.
+        """
+        check_images(images, "augment")
+        out = images
+        for run in self._runs:
+            if isinstance(run, list):
+                out = self._warp(run, out, generator)
+            else:
+                out = run(out, generator)
+        return out.clamp(0.0, 1.0)
+
+    @staticmethod
+    def _warp(steps: list[Any], images: Tensor, generator: torch.Generator | None) -> Tensor:
+        chosen, matrix = steps[0].draw_matrices(images, generator)
+        for step in steps[1:]:
+            c, m = step.draw_matrices(images, generator)
+            chosen, matrix = chosen | c, m @ matrix
+        return warp_chosen(images, chosen, matrix)
+
+    def extra_repr(self) -> str:
+        return "\n".join(repr(step) for step in self.steps)
+
+
+def check_images(images: Tensor, where: str) -> None:
+    """Raise ``ValueError`` naming ``where`` unless ``images`` is a floating ``(B, C, H, W)``
+    batch (any channel count is accepted; the corruptions treat channels alike)."""
+    if not isinstance(images, Tensor):
+        raise ValueError(f"{where}: expected a tensor, got {type(images).__name__}")
+    if images.dim() != 4:
+        raise ValueError(f"{where}: expected images of shape (B, C, H, W), got {tuple(images.shape)}")
+    if not images.is_floating_point():
+        raise ValueError(f"{where}: expected floating images, got {images.dtype}")
+
+
+def apply_to(images: Tensor, chosen: Tensor, fn: Callable[[Tensor, Tensor | slice], Tensor]) -> Tensor:
+    """``fn`` applied to the chosen samples only, the others passed through unchanged.
+
+    Args:
+        images: the batch.
+        chosen: ``(B,)`` bool.
+        fn: called as ``fn(images[idx], idx)`` with the chosen indices (a full slice when all are).
+
+    Shape:
+        images: ``(B, C, H, W)``; returns the same.
+    """
+    idx = chosen.nonzero().squeeze(1)
+    if idx.numel() == 0:
+        return images
+    if idx.numel() == images.shape[0]:
+        return fn(images, slice(None))
+    return images.index_copy(0, idx, fn(images[idx], idx))
+
+
+def warp_white(images: Tensor, matrix: Tensor) -> Tensor:
+    """Warp ``images`` by ``matrix`` (source pixel -> destination pixel), bilinear, with
+    everything outside the source filled white (paper).
+
+    White fill is done as ``1 - warp(1 - images)`` with zero padding: exact, and one grid
+    sample where kornia's ``padding_mode="fill"`` takes two (it warps a mask of ones too).
+
+    Shape:
+        images: ``(B, C, H, W)``; matrix: ``(B, 3, 3)`` in pixel coordinates (``x`` right,
+        ``y`` down, pixel centres at integers); returns ``(B, C, H, W)``.
+    """
+    if matrix.shape != (images.shape[0], 3, 3):
+        raise ValueError(f"warp_white: expected matrix of shape ({images.shape[0]}, 3, 3), got {tuple(matrix.shape)}")
+    size = (images.shape[-2], images.shape[-1])
+    return 1.0 - warp_perspective(1.0 - images, matrix.to(images.dtype), size, align_corners=True)
+
+
+def warp_chosen(images: Tensor, chosen: Tensor, matrix: Tensor) -> Tensor:
+    """:func:`warp_white` on the chosen samples only.
+
+    Shape:
+        images: ``(B, C, H, W)``; chosen: ``(B,)`` bool; matrix: ``(B, 3, 3)``.
+    """
+    return apply_to(images, chosen, lambda x, idx: warp_white(x, matrix[idx]))
+
+
+def build_pipeline(severity: str, width: int, config: dict[str, Any] | None = None) -> AugmentPipeline:
+    """The corruption pipeline of a severity preset at an image width (or of a stored config)."""
+    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width)
+    return AugmentPipeline(cfg)

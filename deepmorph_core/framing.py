@@ -1,0 +1,140 @@
+"""Bringing a drawing into the decoder's frame by its ink's moments, as training frames renders.
+
+Training frames its renders and decoding frames its photos the same way: the ink's centre and
+spread (its first and second moments) land where the unmorphed drawing's do in the decoder's
+image. Moments average over every ink pixel, so one moved control point shifts them only a
+little. What framing leaves (a turn, a perspective) is what the decoder's spatial transformer
+and the training corruption cover.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from deepmorph_core.photo import ink_mask, normalise_contrast
+
+
+def mask_moments(mask: Tensor) -> Tensor:
+    """Centre and spread of ink masks: ``(B, H, W)`` bool -> ``(B, 4)`` = cx, cy, sx, sy (pixels).
+
+    Moments average over every ink pixel, so one moved control point shifts them only a
+    little: a far steadier frame than a bounding box, which any extreme point drags along.
+    An empty mask gives the frame's own centre and spread.
+    """
+    B, H, W = mask.shape
+    w = mask.to(torch.float64)
+    total = w.sum((1, 2)).clamp_min(1.0)
+    xs = torch.arange(W, dtype=torch.float64, device=mask.device) + 0.5
+    ys = torch.arange(H, dtype=torch.float64, device=mask.device) + 0.5
+    cx = (w.sum(1) * xs).sum(1) / total
+    cy = (w.sum(2) * ys).sum(1) / total
+    sx = torch.sqrt((w.sum(1) * (xs - cx[:, None]) ** 2).sum(1) / total).clamp_min(1.0)
+    sy = torch.sqrt((w.sum(2) * (ys - cy[:, None]) ** 2).sum(1) / total).clamp_min(1.0)
+    empty = mask.flatten(1).sum(1) == 0
+    frame = torch.tensor([W / 2, H / 2, W / 4, H / 4], dtype=torch.float64, device=mask.device)
+    return torch.where(empty[:, None], frame, torch.stack([cx, cy, sx, sy], 1))
+
+
+def ink_moments(mask: np.ndarray) -> np.ndarray:
+    """:func:`mask_moments` of one ``(H, W)`` mask, by OpenCV: ``(4,)`` float64 cx, cy, sx, sy.
+    The same numbers (to float rounding) about six times faster, for decoding one photo."""
+    H, W = mask.shape
+    m = cv2.moments(np.asarray(mask, dtype=np.uint8), binaryImage=True)
+    if m["m00"] == 0:
+        return np.array([W / 2, H / 2, W / 4, H / 4], dtype=np.float64)
+    spread = np.sqrt(np.array([m["mu20"], m["mu02"]]) / m["m00"])
+    return np.array([m["m10"] / m["m00"] + 0.5, m["m01"] / m["m00"] + 0.5, *np.maximum(spread, 1.0)])
+
+
+def canonicalize(images: Tensor, moments: Tensor, target: Tensor, size: tuple[int, int]) -> Tensor:
+    """Resample so that each image's ink moments land on ``target`` in a white ``size`` frame.
+
+    Used identically in training (on renders) and in decoding (on photos), so the decoder
+    always sees drawings framed the same way. Differentiable w.r.t. ``images`` (bilinear).
+
+    Shape:
+        images ``(B, 1, h, w)``, moments ``(B, 4)`` (cx, cy, sx, sy in input pixels),
+        target ``(4,)`` in output pixels -> ``(B, 1, H, W)``.
+    """
+    H, W = size
+    h_in, w_in = images.shape[-2:]
+    dtype, device = images.dtype, images.device
+    m = moments.to(dtype=dtype, device=device)
+    t = target.to(dtype=dtype, device=device)
+    u = torch.arange(W, dtype=dtype, device=device) + 0.5
+    v = torch.arange(H, dtype=dtype, device=device) + 0.5
+    x = m[:, 0:1] + (u[None] - t[0]) * (m[:, 2:3] / t[2])  # (B, W) input coordinates
+    y = m[:, 1:2] + (v[None] - t[1]) * (m[:, 3:4] / t[3])  # (B, H)
+    gx = (x / w_in * 2 - 1)[:, None, :].expand(-1, H, -1)
+    gy = (y / h_in * 2 - 1)[:, :, None].expand(-1, -1, W)
+    grid = torch.stack([gx, gy], -1)
+    # sample (image - 1) with zero padding so that everything outside the photo reads as white paper
+    out = F.grid_sample(images - 1.0, grid, mode="bilinear", padding_mode="zeros", align_corners=False) + 1.0
+    return out.clamp(0.0, 1.0)
+
+
+def render_moments(images: Tensor) -> Tensor:
+    """Ink moments of clean renders ``(B, 1, H, W)`` (ink = darker than 0.5): ``(B, 4)``."""
+    with torch.no_grad():
+        return mask_moments(images[:, 0] < 0.5)
+
+
+def align_to_frame(
+    gray: np.ndarray, size: tuple[int, int], target: Tensor
+) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
+    """Bring a photo or scan into the decoder's frame, as training frames its renders.
+
+    Args:
+        gray: ``(h, w)`` float image, 1 = white.
+        size: ``(H, W)`` of the decoder's frame.
+        target: ``(4,)`` ink moments of the unmorphed drawing in that frame.
+
+    Returns:
+        The ``(H, W)`` float32 frame and the ink's bounding box in the input, or ``None`` when
+        the image holds no drawing (blank, or no ink).
+    """
+    norm = normalise_contrast(gray)
+    if norm is None:
+        return None
+    found = ink_mask(norm)
+    if found is None:
+        return None
+    mask, box = found
+    moments = ink_moments(mask)
+    goal = target.detach().cpu().numpy() if isinstance(target, Tensor) else np.asarray(target)
+    src = norm
+    shrink = float(goal[2]) / float(moments[2])
+    factor = int(1 / max(shrink, 1e-6)) // 2
+    if factor > 1:  # area-average large photos first so that thin strokes survive
+        src = cv2.resize(norm, (norm.shape[1] // factor, norm.shape[0] // factor), interpolation=cv2.INTER_AREA)
+        moments = moments * np.array([src.shape[1] / norm.shape[1], src.shape[0] / norm.shape[0]] * 2)
+    return canonicalize_one(np.ascontiguousarray(src, dtype=np.float32), moments, goal, size), box
+
+
+def canonicalize_one(
+    gray: np.ndarray, moments: np.ndarray, target: Tensor | np.ndarray, size: tuple[int, int]
+) -> np.ndarray:
+    """:func:`canonicalize` of one ``(h, w)`` float32 image by OpenCV: the same map (a scale
+    and a shift) and the same bilinear sampling with white beyond the edges, in a quarter of the
+    time. It differs by about 1e-4 in intensity on average and by up to 0.02 on the steepest
+    edges (OpenCV rounds sample positions to 1/32 pixel).
+
+    Args:
+        moments: ``(4,)`` cx, cy, sx, sy of the ink in ``gray``'s pixels.
+        target: ``(4,)`` where they go in the ``size`` = ``(H, W)`` output.
+    """
+    H, W = size
+    cx, cy, sx, sy = (float(v) for v in moments)
+    tx, ty, tsx, tsy = (float(v) for v in target)
+    ax, ay = sx / tsx, sy / tsy
+    # output pixel u (centre u + 0.5) samples input position cx + (u + 0.5 - tx) * ax, whose
+    # pixel-centre coordinate (OpenCV's) is half a pixel less
+    M = np.array([[ax, 0.0, cx + (0.5 - tx) * ax - 0.5], [0.0, ay, cy + (0.5 - ty) * ay - 0.5]])
+    out = cv2.warpAffine(
+        gray, M, (W, H), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT, borderValue=1.0
+    )
+    return np.clip(out, 0.0, 1.0, out=out)

@@ -1,0 +1,183 @@
+"""Image files: reading photos and scans (EXIF orientation, pixel limits), writing PNGs.
+
+Reading refuses, with one clear error, what is not an image, what is too large to decode
+(judged from the header, before any pixel is decoded) and what is too small to hold a
+drawing. Writing encodes in memory and then writes atomically, so a failed write never leaves
+half an image behind.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from PIL import Image
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
+from deepmorph_core.photo import to_gray
+
+MAX_IMAGE_PIXELS = 80_000_000
+
+
+EXIF_ORIENTATION = 0x0112  # the EXIF tag of how a viewer turns the stored pixels
+
+
+MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an image file as a float32 grayscale array in ``[0, 1]`` (1 = white).
+
+    Raises:
+        DeepMorphError: missing, unreadable, corrupt or non-image files.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise DeepMorphError(f"{path}: is a folder; pass image files (the CLI reads folders as frame sequences)")
+    return to_gray(read_image_bgr(path))
+
+
+def read_image_bgr(path: str | Path) -> np.ndarray:
+    """Read an image file as ``(H, W, 3)`` uint8 BGR (gray expanded, transparency on white).
+
+    Raises:
+        DeepMorphError: missing, empty, corrupt, too large, too small or non-image files.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DeepMorphError(f"{path}: no such image file")
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        raise DeepMorphError(f"{path}: empty file, not an image")
+    size, orientation = _peek_header(data, path)
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:  # refused before it is decoded
+        raise DeepMorphError(f"{path}: {size[0]}x{size[1]} pixels is too large to decode")
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
+    if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
+        raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
+    img = _upright(img, orientation)
+    if min(img.shape[:2]) < MIN_IMAGE_SIDE:
+        raise DeepMorphError(
+            f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too small to hold a drawing"
+            f" (at least {MIN_IMAGE_SIDE} pixels each way)"
+        )
+    if img.dtype == np.uint16:
+        img = (img // 257).astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise DeepMorphError(f"{path}: {img.dtype} pixels are not supported (8 or 16 bits per channel)")
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.shape[2] == 4:  # composite transparency onto white paper
+        alpha = img[..., 3:4].astype(np.float32) / 255.0
+        return (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
+    return np.ascontiguousarray(img[..., :3])
+
+
+def image_input(source: Any, bgr: bool = False) -> np.ndarray:
+    """What a user hands in as a photo, as the photo chain takes it: a path (read with
+    :func:`read_image_bgr`), a PIL image, or an array.
+
+    Colour arrays are RGB (PIL's and most libraries' order) unless ``bgr`` says they are
+    OpenCV's BGR; a 4th channel is transparency. Gray arrays and float arrays in ``[0, 1]``
+    pass as they are.
+
+    Returns:
+        ``(H, W)`` gray or ``(H, W, 3|4)`` BGR(A) array.
+
+    Raises:
+        DeepMorphError: a path that is not a readable image, or another type.
+    """
+    if isinstance(source, (str, Path)):
+        return read_image_bgr(source)
+    if isinstance(source, Image.Image):
+        source = np.asarray(source.convert("RGBA" if "A" in source.getbands() else "RGB"))
+    if not isinstance(source, np.ndarray):
+        raise DeepMorphError(f"an image is a path, a PIL image or an array, not a {type(source).__name__}")
+    if source.ndim == 3 and source.shape[2] in (3, 4) and not bgr:
+        source = source[..., [2, 1, 0, 3][: source.shape[2]]]
+    return np.ascontiguousarray(source)
+
+
+def _peek_header(data: np.ndarray, path: Path) -> tuple[tuple[int, int] | None, int]:
+    """``((width, height), EXIF orientation)`` from an image file's header, without decoding
+    its pixels (Pillow opens lazily); ``(None, 1)`` where Pillow cannot tell, and then OpenCV's
+    decoder alone judges the file.
+
+    Raises:
+        DeepMorphError: a header beyond Pillow's own bomb limit (far more than
+            :data:`MAX_IMAGE_PIXELS`), before any pixel is decoded.
+    """
+    try:
+        with warnings.catch_warnings():  # the size is judged by the caller, not by Pillow's warning
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data.tobytes())) as img:
+                return img.size, int(img.getexif().get(EXIF_ORIENTATION, 1) or 1)
+    except Image.DecompressionBombError:
+        raise DeepMorphError(f"{path}: its header claims far too many pixels to decode") from None
+    except Exception:  # not a format Pillow knows, or a header it cannot parse: OpenCV decides
+        return None, 1
+
+
+def _upright(img: np.ndarray, orientation: int) -> np.ndarray:
+    """The image as a viewer shows it, following its EXIF orientation (phone cameras store
+    pixels as the sensor saw them and the turn in this tag); keypoints, boxes, overlays and the
+    pose are then in the frame the user sees, where a calibration for it applies."""
+    turns = {
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1],
+        5: lambda a: np.swapaxes(a, 0, 1),
+        6: lambda a: np.rot90(a, -1),
+        7: lambda a: np.rot90(np.swapaxes(a, 0, 1), 2),
+        8: lambda a: np.rot90(a, 1),
+    }
+    turn = turns.get(orientation)
+    return img if turn is None else np.ascontiguousarray(turn(img))
+
+
+def save_gray(image: np.ndarray, path: str | Path, dpi: int | None = None) -> None:
+    """Save an ``(H, W)`` intensity image in ``[0, 1]`` as an 8-bit PNG (or any Pillow format).
+
+    ``dpi`` is recorded in the file so that printing it gives the intended physical size.
+    """
+    arr = np.clip(np.rint(np.asarray(image) * 255), 0, 255).astype(np.uint8)
+    _save(Image.fromarray(arr, "L"), path, dpi)
+
+
+def save_rgb(image: np.ndarray, path: str | Path) -> None:
+    """Save an ``(H, W, 3)`` image in ``[0, 1]``."""
+    arr = np.clip(np.rint(np.asarray(image) * 255), 0, 255).astype(np.uint8)
+    _save(Image.fromarray(arr, "RGB"), path)
+
+
+def image_format(path: str | Path) -> str:
+    """The image format Pillow writes for ``path``'s extension (check it before any work).
+
+    Raises:
+        DeepMorphError: an extension no image format has.
+    """
+    path = Path(path)
+    fmt = Image.registered_extensions().get(path.suffix.lower())
+    if fmt is None:
+        raise DeepMorphError(f"{path}: cannot write image: unknown file extension {path.suffix!r} (use .png)")
+    return fmt
+
+
+def _save(img: Image.Image, path: str | Path, dpi: int | None = None) -> None:
+    """Encode in memory, then write atomically: a failed write never leaves half an image (or
+    half of the file it replaces)."""
+    path = Path(path)
+    fmt = image_format(path)
+    buf = io.BytesIO()
+    try:
+        img.save(buf, format=fmt, **({"dpi": (dpi, dpi)} if dpi else {}))
+    except (OSError, ValueError) as exc:
+        raise DeepMorphError(f"{path}: cannot write image: {exc}") from None
+    atomic_write(path, buf.getvalue())

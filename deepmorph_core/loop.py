@@ -1,0 +1,226 @@
+"""The one training loop: steps, a JSONL log, checkpoints, resume, interrupts, progress, a plot.
+
+Codec training, decoder tuning and detector training each define what one step does and how
+their state is written (a :class:`Run`); this loop does the rest the same way for all three:
+
+* it calls :meth:`Run.step` until the record's step reaches its total, averaging the metrics of
+  the steps between two log lines;
+* every ``log_every`` steps it appends one JSON line to the log and calls ``on_log`` (the
+  command line's progress bar);
+* every ``checkpoint_every`` steps, on Ctrl-C and on SIGTERM it has the run write a checkpoint
+  (atomically: a crash at any moment leaves the last good file); an interrupt then raises
+  :class:`Interrupted`, whose message says how to go on;
+* resuming continues from the record's step: log lines written after that checkpoint (and a
+  line cut by a crash) are dropped, so the log and the plot hold each step once;
+* at the end the run writes its final state and a PNG plot of the log goes beside the log
+  (matplotlib is optional: without it there is no plot).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from deepmorph_core.bundle import TrainingRecord
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write
+
+
+class Interrupted(DeepMorphError):
+    """Training stopped by Ctrl-C or SIGTERM after writing a checkpoint."""
+
+
+@dataclass(frozen=True)
+class Panel:
+    """One panel of the training plot: the log's ``keys`` against steps.
+
+    Attributes:
+        title: the panel's title.
+        keys: metrics drawn in it (each a line).
+        log_scale: a logarithmic y axis (losses).
+        unit_range: a y axis from 0 to 1 (accuracies, recalls).
+    """
+
+    title: str
+    keys: tuple[str, ...]
+    log_scale: bool = False
+    unit_range: bool = False
+
+
+class Run(Protocol):
+    """What the loop trains: one step at a time, with its own state and files.
+
+    Attributes:
+        record: the run's progress (``step``, ``total_steps``, ``elapsed_s``, ``finished``,
+            ``metrics``, ``stage``); the loop advances ``step`` and ``elapsed_s``.
+        panels: what the plot shows.
+    """
+
+    record: TrainingRecord
+    panels: tuple[Panel, ...]
+
+    def step(self) -> dict[str, float]:
+        """Train one step; its metrics (averaged by the loop between log lines)."""
+        ...
+
+    def checkpoint(self) -> None:
+        """Write the run's state (final when ``record.finished``), atomically."""
+        ...
+
+
+@dataclass
+class LoopSummary:
+    """What a finished run wrote, and how long it took."""
+
+    log: Path
+    plot: Path | None
+    steps: int
+    elapsed_s: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+class TrainingLoop:
+    """Runs a :class:`Run` to its record's ``total_steps``.
+
+    Args:
+        log_path: the JSONL log (created, or continued when the record has steps).
+        log_every, checkpoint_every: in steps.
+        resume_hint: what the interrupt message says after the step: where the checkpoint is
+            and how to go on.
+    """
+
+    def __init__(self, log_path: Path, log_every: int, checkpoint_every: int, resume_hint: str) -> None:
+        self.log_path = Path(log_path)
+        self.log_every = log_every
+        self.checkpoint_every = checkpoint_every
+        self.resume_hint = resume_hint
+
+    def run(self, run: Run, on_log: Callable[[dict[str, Any]], None] | None = None) -> LoopSummary:
+        """Train until ``run.record.total_steps``.
+
+        Raises:
+            Interrupted: after Ctrl-C or SIGTERM, once the checkpoint is written.
+        """
+        rec = run.record
+        history = self._start_log(rec.step)
+        started = time.perf_counter() - rec.elapsed_s
+        sums: dict[str, float] = {}
+        count = 0
+        try:
+            with _sigterm_as_interrupt():
+                while rec.step < rec.total_steps:
+                    metrics = run.step()
+                    rec.step += 1
+                    rec.elapsed_s = time.perf_counter() - started
+                    for key, value in metrics.items():
+                        sums[key] = sums.get(key, 0.0) + float(value)
+                    count += 1
+                    if rec.step % self.log_every == 0 or rec.step == rec.total_steps:
+                        line = {"step": rec.step, "stage": rec.stage}
+                        line.update({k: round(v / count, 5) for k, v in sums.items()})
+                        line["elapsed_s"] = round(rec.elapsed_s, 2)
+                        sums, count = {}, 0
+                        history.append(line)
+                        with self.log_path.open("a") as fh:
+                            fh.write(json.dumps(line) + "\n")
+                        rec.metrics = {k: line[k] for k in line if k not in ("step", "stage", "elapsed_s")}
+                        if on_log:
+                            on_log(line)
+                    if rec.step % self.checkpoint_every == 0 and rec.step < rec.total_steps:
+                        run.checkpoint()
+        except KeyboardInterrupt:
+            rec.elapsed_s = time.perf_counter() - started
+            run.checkpoint()
+            raise Interrupted(f"interrupted at step {rec.step}/{rec.total_steps}; {self.resume_hint}") from None
+        rec.finished = True
+        run.checkpoint()
+        plot = plot_history(history, run.panels, self.log_path.with_suffix(".png"))
+        return LoopSummary(self.log_path, plot, rec.step, rec.elapsed_s, history)
+
+    def _start_log(self, step: int) -> list[dict[str, Any]]:
+        """The log's lines up to ``step`` (a fresh, empty log at step 0), written back so that
+        the lines a resumed run logs again follow them exactly once."""
+        history = [line for line in read_log(self.log_path) if line.get("step", 0) <= step] if step else []
+        text = "".join(json.dumps(line) + "\n" for line in history)
+        atomic_write(self.log_path, text.encode())
+        return history
+
+
+def read_log(path: Path) -> list[dict[str, Any]]:
+    """The JSON lines of a training log; a line cut by a crash (or any unreadable one) is left out."""
+    try:
+        text = Path(path).read_text()
+    except OSError:
+        return []
+    out = []
+    for line in text.splitlines():
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(entry, dict):
+            out.append(entry)
+    return out
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (what ``kill`` and container stops send) handled as Ctrl-C while training, so it
+    too leaves a checkpoint; the previous handler is restored afterwards. Only the main thread
+    can set handlers: elsewhere SIGTERM keeps its meaning."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def plot_history(history: list[dict[str, Any]], panels: tuple[Panel, ...], path: Path) -> Path | None:
+    """The log's metrics against steps, one panel each, with the switch to stage 2 marked (PNG);
+    ``None`` when there is nothing to plot or matplotlib is not installed."""
+    if not history or not panels:
+        return None
+    try:
+        import matplotlib
+    except ImportError:
+        return None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [h["step"] for h in history]
+    switch = next((h["step"] for h in history if h.get("stage") == 2), None)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 3.2), squeeze=False)
+    for ax, panel in zip(axes[0], panels):
+        for key in panel.keys:
+            ax.plot(steps, [h.get(key, float("nan")) for h in history], label=key.replace("_", " "))
+        ax.set(xlabel="step", title=panel.title)
+        if panel.log_scale:
+            ax.set_yscale("log")
+        if panel.unit_range:
+            ax.set_ylim(0, 1.01)
+        if switch is not None:
+            ax.axvline(switch, color="grey", linestyle=":", label="stage 2")
+        if len(panel.keys) > 1 or switch is not None:
+            ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write(path, buf.getvalue())
+    return path

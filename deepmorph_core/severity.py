@@ -1,0 +1,127 @@
+"""The severity table: what ``easy``, ``medium`` and ``hard`` mean, in one place.
+
+A severity names how rough a capture is. Two things read it:
+
+* **the residual corruption** of training (:mod:`deepmorph_core.corruption`): what is left of
+  a print-and-photo once the drawing is framed in the decoder's image. Framing by the ink's
+  centre and spread (:mod:`deepmorph_core.framing`) removes the photo's translation and scale;
+  what remains is a little residual scale, shift, rotation and perspective, then blur, light,
+  noise and compression at the decoder's size. Pixel-valued parameters are given for
+  :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width.
+* **the photo simulator** (:mod:`deepmorph_detect.scenes`), through :attr:`Severity.photo`:
+  tilt, print size, blur, noise, light, shadows, contrast, motion and JPEG of a whole photo.
+
+``none`` corrupts nothing and has no photo settings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from deepmorph_core.errors import DeepMorphError
+
+#: Reference image width of the residual steps' pixel-valued parameters.
+PRESET_SIZE = 96
+#: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``).
+PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length")}
+
+Step = tuple[str, float, dict[str, Any]]  # (augmentation name, probability, parameters)
+
+
+@dataclass(frozen=True)
+class Severity:
+    """One level of the table.
+
+    Attributes:
+        name: ``none``, ``easy``, ``medium`` or ``hard``.
+        residual: the decoder-frame corruption steps ``(name, p, params)``.
+    """
+
+    name: str
+    residual: tuple[Step, ...] = field(default=())
+
+
+SEVERITIES: dict[str, Severity] = {
+    "none": Severity("none"),
+    "easy": Severity(
+        "easy",
+        residual=(
+            ("perspective", 1.0, {"jitter": 0.02}),
+            ("scale", 1.0, {"factor": [0.98, 1.02]}),
+            ("rotation", 1.0, {"degrees": 2.0}),
+            ("translation", 1.0, {"fraction": 0.01}),
+            ("blur", 1.0, {"sigma": [0.0, 0.5]}),
+            ("motion_blur", 0.3, {"length": [0.0, 1.5]}),
+            ("lighting", 1.0, {"gradient": 0.1, "vignette": [0.0, 0.05]}),
+            ("intensity", 1.0, {"contrast": [0.8, 1.05], "brightness": 0.08}),
+            ("gaussian_noise", 1.0, {"sigma": [0.0, 0.02]}),
+            ("salt_pepper", 0.3, {"amount": [0.0, 0.003]}),
+            ("jpeg", 0.5, {"quality": [70.0, 95.0]}),
+        ),
+    ),
+    "medium": Severity(
+        "medium",
+        residual=(
+            ("perspective", 1.0, {"jitter": 0.03}),
+            ("scale", 1.0, {"factor": [0.96, 1.04]}),
+            ("rotation", 1.0, {"degrees": 5.0}),
+            ("translation", 1.0, {"fraction": 0.015}),
+            ("blur", 1.0, {"sigma": [0.0, 1.0]}),
+            ("motion_blur", 0.5, {"length": [0.0, 3.0]}),
+            ("lighting", 1.0, {"gradient": 0.2, "vignette": [0.0, 0.1]}),
+            ("intensity", 1.0, {"contrast": [0.6, 1.1], "brightness": 0.15}),
+            ("gaussian_noise", 1.0, {"sigma": [0.0, 0.04]}),
+            ("salt_pepper", 0.5, {"amount": [0.0, 0.01]}),
+            ("jpeg", 0.8, {"quality": [40.0, 90.0]}),
+        ),
+    ),
+    "hard": Severity(
+        "hard",
+        residual=(
+            ("perspective", 1.0, {"jitter": 0.06}),
+            ("scale", 1.0, {"factor": [0.93, 1.07]}),
+            ("rotation", 1.0, {"degrees": 10.0}),
+            ("translation", 1.0, {"fraction": 0.03}),
+            ("blur", 1.0, {"sigma": [0.0, 1.6]}),
+            ("defocus", 0.3, {"radius": [0.0, 2.0]}),
+            ("motion_blur", 0.6, {"length": [0.0, 5.0]}),
+            ("lighting", 1.0, {"gradient": 0.35, "vignette": [0.0, 0.25]}),
+            ("intensity", 1.0, {"contrast": [0.4, 1.2], "brightness": 0.25}),
+            ("gaussian_noise", 1.0, {"sigma": [0.0, 0.07]}),
+            ("salt_pepper", 0.6, {"amount": [0.0, 0.02]}),
+            ("jpeg", 0.9, {"quality": [20.0, 80.0]}),
+        ),
+    ),
+}
+
+#: Severities from mildest to roughest (training's curriculum climbs them).
+LADDER = tuple(SEVERITIES)
+
+
+def severity(name: str) -> Severity:
+    """The table's entry for ``name``.
+
+    Raises:
+        DeepMorphError: an unknown name, listing the known ones.
+    """
+    found = SEVERITIES.get(name)
+    if found is None:
+        raise DeepMorphError(f"unknown severity {name!r} (known: {', '.join(SEVERITIES)})")
+    return found
+
+
+def residual_steps(name: str, size: int | None = None) -> list[Step]:
+    """The residual corruption steps of a severity, pixel parameters scaled to ``size``-pixel
+    images (:data:`PRESET_SIZE` when ``None``)."""
+    factor = (size or PRESET_SIZE) / PRESET_SIZE
+    steps = []
+    for step_name, p, params in severity(name).residual:
+        scaled = {
+            key: ([v * factor for v in value] if isinstance(value, list) else value * factor)
+            if (step_name, key) in PIXEL_PARAMS
+            else value
+            for key, value in params.items()
+        }
+        steps.append((step_name, p, scaled))
+    return steps

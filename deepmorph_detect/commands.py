@@ -1,0 +1,411 @@
+"""The photo chain's commands: ``decode``, ``synth``, ``bench-scenes``, ``train-detector`` and
+``demo``, added to the command line through the ``deepmorph_register_commands`` hook
+(:mod:`deepmorph_detect.plugin`). Each parses its arguments and calls the library."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+from deepmorph_core.cli.frame import JsonOpt, ModelArg, SeedOpt, err, out, progress_bar, write_text_atomic
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
+
+
+def _progress(name: str):  # noqa: ANN202 - a rich Progress
+    return progress_bar(name + " {task.description}")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise DeepMorphError(f"--size {text!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
+    if not (64 <= w <= 8192 and 64 <= h <= 8192):
+        raise DeepMorphError(f"--size {text!r}: width and height must be 64..8192 pixels")
+    return w, h
+
+
+def _readable_frames(files: list[Path], skipped: list[dict[str, str]]) -> Iterator[tuple[str, Any]]:
+    """``(name, BGR image)`` of a folder's frames in order. A file that is not a readable image
+    (truncated while copying, say) is skipped with a warning and listed in ``skipped``: the
+    frames before and after it still count, and the work done on them is not thrown away."""
+    from deepmorph_core.image_io import read_image_bgr
+
+    for path in files:
+        try:
+            yield path.name, read_image_bgr(path)
+        except DeepMorphError as exc:
+            err.print(f"warning: skipped frame {exc}", markup=False, highlight=False)
+            skipped.append({"frame": path.name, "error": str(exc)})
+
+
+def _fits_camera(camera: Any, path: Path, size: tuple[int, int]) -> None:
+    """Check, before any work, that ``--camera`` describes an input of ``size`` (naming it)."""
+    if camera is None:
+        return
+    try:
+        camera.for_image(*size)
+    except DeepMorphError as exc:
+        raise DeepMorphError(f"{path}: {exc}") from None
+
+
+def _overlay_targets(overlay: Path | None, inputs: list[Path], model: Path) -> dict[Path, Path]:
+    """Where ``--overlay`` puts each input's annotated image: the file itself for one input,
+    else ``<folder>/<input name>.overlay.png``. Checked before any work: no target may replace
+    an input or the model, and no two inputs may share one (the first would be lost)."""
+    if overlay is None:
+        return {}
+    if len(inputs) > 1 and overlay.suffix:
+        raise DeepMorphError(f"--overlay {overlay}: with several inputs, give a folder for the annotated images")
+    targets = {p: overlay if len(inputs) == 1 and overlay.suffix else overlay / f"{p.stem}.overlay.png" for p in inputs}
+    claimed: dict[Path, Path] = {}
+    for path, target in targets.items():
+        refuse_to_overwrite(target, "--overlay", [("model file", model), *(("input", p) for p in inputs)])
+        first = claimed.setdefault(target.resolve(), path)
+        if first != path:
+            raise DeepMorphError(
+                f"--overlay {overlay}: {first} and {path} would both be annotated as {target}; rename one"
+            )
+    if len(inputs) == 1 and overlay.suffix:
+        import cv2
+
+        if not cv2.haveImageWriter(str(overlay)):
+            raise DeepMorphError(f"--overlay {overlay}: cannot write this image format (use .png or .jpg)")
+    return targets
+
+
+def decode(
+    model: ModelArg,
+    inputs: Annotated[
+        list[Path],
+        typer.Argument(help="Images (each decoded on its own), folders of frames or videos (frames fused)."),
+    ],
+    as_json: JsonOpt = False,
+    camera: Annotated[
+        Optional[str],
+        typer.Option("--camera", help="Intrinsics fx,fy,cx,cy in pixels, or an OpenCV calibration file (YAML/XML)."),
+    ] = None,
+    overlay: Annotated[
+        Optional[Path],
+        typer.Option("--overlay", help="Write an annotated image (a folder when there are several inputs)."),
+    ] = None,
+    every: Annotated[int, typer.Option("--every", min=1, help="Use every N-th frame of a video.")] = 1,
+    hard_only: Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")] = False,
+) -> None:
+    """Find every drawing in photos, read its payload, and give its keypoints and camera pose."""
+    import cv2
+
+    from deepmorph_core.image_io import read_image_bgr
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.camera import parse_camera
+    from deepmorph_detect.fusion import FrameFuser
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.media import check_video, folder_frames, is_video, video_frames
+    from deepmorph_detect.overlay import draw_overlay
+    from deepmorph_detect.synthesis import disagreement
+    from deepmorph_detect.track import SequenceLocator
+
+    m = DeepMorphModel.load(model)
+    cam = parse_camera(camera) if camera else None
+    jobs: list[tuple[str, Path, Any]] = []
+    for path in inputs:  # every input is checked before any work
+        if path.is_dir():
+            jobs.append(("folder", path, folder_frames(path)))
+        elif is_video(path):
+            _fits_camera(cam, path, check_video(path))
+            jobs.append(("video", path, None))
+        else:
+            image = read_image_bgr(path)
+            _fits_camera(cam, path, (image.shape[1], image.shape[0]))
+            jobs.append(("image", path, image))
+    targets = _overlay_targets(overlay, [path for _, path, _ in jobs], model)
+    locator = Locator(m)
+    soft = not hard_only
+    results: list[dict[str, Any]] = []
+
+    def save_overlay(path: Path, image: Any, dets: list[Any]) -> None:
+        target = targets.get(path)
+        if target is None:
+            return
+        ok, buf = cv2.imencode(target.suffix or ".png", draw_overlay(image, dets))
+        if not ok:
+            raise DeepMorphError(f"--overlay {target}: cannot write this image format")
+        atomic_write(target, buf.tobytes())
+
+    for kind, path, payload in jobs:
+        if kind == "image":
+            dets = locator.locate(payload, camera=cam, soft=soft)
+            results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
+            save_overlay(path, payload, dets)
+            continue
+        fuser = FrameFuser(m.codec, locator.check_payload)
+        follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
+        skipped: list[dict[str, str]] = []
+        frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
+        last = None
+        for label, frame in frames:
+            try:
+                dets = follow(frame, camera=cam, soft=soft)
+            except DeepMorphError as exc:  # a frame of another size than the calibration's, say
+                err.print(f"warning: skipped frame {label}: {exc}", markup=False, highlight=False)
+                skipped.append({"frame": label, "error": str(exc)})
+                continue
+            fuser.add(label, dets, frame)
+            last = (frame, dets)
+        if last is None:  # a folder none of whose files is an image
+            raise DeepMorphError(f"{path}: no frame could be read ({skipped[0]['error']})")
+        entry = {"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)}
+        if skipped:
+            entry["skipped_frames"] = skipped
+        results.append(entry)
+        save_overlay(path, *last)
+    if as_json:
+        out.print_json(json.dumps(results))
+        return
+    for r in results:
+        name = r.get("image") or f"{r['sequence']} ({r['frames']} frames)"
+        if not r["detections"]:
+            out.print(f"{name}: no drawing found")
+        for d in r["detections"]:
+            status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
+            if d.get("morph_check") == "failed":
+                status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
+            elif d.get("morph_check") == "contradicted":
+                why = disagreement(d["bits_contradicted"], d["weakest_bits_support"])
+                status = f"NOT VERIFIED (the CRC passed, but {why})"
+            where = ""
+            if "pose" in d:
+                t = d["pose"]["tvec"]
+                where = f", at {t[2]:.2f} drawing widths" + (
+                    " (assumed camera)" if d["pose"]["camera"]["assumed"] else ""
+                )
+            frames = f", fused over {d['frames']} frames" if "frames" in d else ""
+            out.print(
+                f"{name}: {d['payload']['hex']} {status}, corrected {d['corrected_bits']} bits, "
+                f"confidence {d['confidence']:.3f}{where}{frames}"
+            )
+
+
+def synth(
+    model: ModelArg,
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each).")],
+    n: Annotated[int, typer.Option("--n", min=1, max=1_000_000, help="Number of scenes.")] = 200,
+    severity: Annotated[str, typer.Option("--severity", help="easy, medium or hard.")] = "medium",
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same scenes).")] = 0,
+    size: Annotated[str, typer.Option("--size", help="Photo size WIDTHxHEIGHT.")] = "640x480",
+    drawings: Annotated[int, typer.Option("--drawings", min=0, max=8, help="Drawings of the model per scene.")] = 1,
+    distractors: Annotated[int, typer.Option("--distractors", min=0, max=8, help="Other drawings per scene.")] = 0,
+    aruco: Annotated[bool, typer.Option("--aruco/--no-aruco", help="Add an ArUco marker of the same size.")] = True,
+    empty_share: Annotated[
+        float, typer.Option("--empty-share", min=0, max=1, help="Share of scenes without the model's drawing.")
+    ] = 0.0,
+) -> None:
+    """Make labelled synthetic photos of printed drawings (the capture simulator)."""
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.scene_folders import check_scene_folder, write_scenes
+    from deepmorph_detect.scenes import SCENE_SEVERITIES
+
+    if severity not in SCENE_SEVERITIES:
+        raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(SCENE_SEVERITIES)}")
+    check_scene_folder(out_dir)
+    m = DeepMorphModel.load(model)
+    dims = _size(size)
+    progress = _progress("synth")
+    with progress:
+        task = progress.add_task("", total=n)
+        write_scenes(m, out_dir, n, severity, seed, dims, drawings, distractors, aruco, empty_share,
+                     on_scene=lambda i: progress.update(task, completed=i))  # fmt: skip
+    out.print(f"wrote {n} scenes ({severity}, {dims[0]}x{dims[1]}) to {out_dir}")
+
+
+def bench_scenes_cmd(
+    model: ModelArg,
+    scenes: Annotated[Path, typer.Argument(help="A folder written by `deepmorph synth`.")],
+    as_json: JsonOpt = False,
+    report_path: Annotated[Optional[Path], typer.Option("--out", help="Also write the report as JSON here.")] = None,
+    threads: Annotated[int, typer.Option("--threads", min=1, help="CPU threads (speed is per this many).")] = 1,
+) -> None:
+    """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
+    if report_path is not None:
+        refuse_to_overwrite(report_path, "--out", [("model file", model), ("scene index", scenes / "index.json")])
+    import cv2
+    import torch
+
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.benchmark import bench_scenes
+    from deepmorph_detect.report import format_report
+    from deepmorph_detect.scene_folders import read_scenes
+
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(threads)
+    m = DeepMorphModel.load(model)
+    _, listed = read_scenes(scenes)  # validates the folder before any work
+    progress = _progress("bench")
+    with progress:
+        task = progress.add_task("", total=len(listed))
+        report = bench_scenes(m, scenes, on_scene=lambda i: progress.update(task, completed=i))
+    report["threads"] = threads
+    if report_path is not None:
+        atomic_write(report_path, json.dumps(report, indent=1).encode())
+    if as_json:
+        out.print_json(json.dumps(report))
+    else:
+        out.print(format_report(report))
+
+
+def train_detector_cmd(
+    model: ModelArg,
+    out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps.")] = 2000,
+    batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
+    seed: SeedOpt = 0,
+    threads: Annotated[int, typer.Option("--threads", min=1, help="torch threads of the training process.")] = 1,
+    workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
+    width: Annotated[
+        int, typer.Option("--width", min=8, max=256, help="Channel width of the network (16: about half the time).")
+    ] = 32,
+    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 2e-3,
+    fine_tune: Annotated[
+        bool,
+        typer.Option(
+            "--fine-tune",
+            help="Start from the model's trained detector (same --width) instead of from scratch;"
+            " use another --seed for new scenes and a lower --lr.",
+        ),
+    ] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+) -> None:
+    """Train the detector of a model on synthetic scenes and store it in the bundle."""
+    from deepmorph_detect.detector_training import DetectorConfig, train_detector
+
+    config = (
+        None
+        if resume
+        else DetectorConfig(
+            steps=steps,
+            batch=batch,
+            seed=seed,
+            threads=threads,
+            workers=workers,
+            width=width,
+            lr=lr,
+            fine_tune=fine_tune,
+        )
+    )
+    progress = _progress("detector")
+    with progress:
+        task = progress.add_task("", total=steps)
+
+        def on_log(m: dict[str, Any]) -> None:
+            progress.update(
+                task,
+                completed=m["step"],
+                description=f"loss {m['loss']:.3f} centre recall {m['recall']:.3f} corner err {m['corner']:.1f}px",
+            )
+
+        summary = train_detector(out_path if resume else model, out_path, config, resume=resume, on_log=on_log)
+    out.print(
+        f"wrote {summary.bundle} ({summary.steps} detector steps in {summary.elapsed_s:.0f} s); log {summary.log}"
+    )
+
+
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo's files.")] = Path("deepmorph-demo"),
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the payload and the photo simulation.")] = 3,
+    retrain: Annotated[
+        bool, typer.Option("--train", help="Train a fresh model instead of loading the bundled one.")
+    ] = False,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Steps when training (--train).")] = 600,
+) -> None:
+    """Bundled drawing end to end: model, encode a payload, simulate print-and-photo, decode."""
+    import numpy as np
+
+    from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
+    from deepmorph_core.capture import simulate_photo
+    from deepmorph_core.fileio import output_folder
+    from deepmorph_core.image_io import save_gray, save_rgb
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.payload import format_payload, random_payloads
+    from deepmorph_core.render import overlay, render_svg, render_svg_ink
+    from deepmorph_core.train import train_model
+    from deepmorph_detect.locate import Locator
+
+    output_folder(out_dir, f"--out {out_dir}")
+    if retrain or not BUNDLED_MODEL.is_file():
+        out.print(f"training a model for {BUNDLED_DRAWING.name} ({steps} steps) ...")
+        summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps})
+        model_path = summary.bundle
+    else:
+        model_path = BUNDLED_MODEL
+    m = DeepMorphModel.load(model_path)
+    rng = np.random.default_rng(seed)
+    payload = random_payloads(1, m.codec.spec.payload_bits, rng)[0]
+    svg_text = m.encode(payload)
+    write_text_atomic(out_dir / "code.svg", svg_text)
+    render = render_svg(svg_text, 400)
+    save_gray(render, out_dir / "code.png")
+    base = render_svg_ink(m.drawing.to_svg(m.drawing.neutral_values()[0]), 400)
+    save_rgb(overlay(base, 1.0 - render), out_dir / "overlay.png")
+    out.print(f"model {model_path}: {m.codec.spec.payload_bits} payload bits in {m.codec.spec.code_bits} code bits")
+    out.print(f"encoded {format_payload(payload)['hex']} into {out_dir}/code.svg (and code.png, overlay.png)")
+    locator = Locator(m)
+    for severity in ("easy", "medium", "hard"):
+        photo = simulate_photo(render, severity, rng)
+        save_gray(photo / 255.0, out_dir / f"photo-{severity}.png")
+        dets = locator.locate(photo)
+        if not dets:
+            out.print(f"photo-{severity}.png: no drawing found")
+            continue
+        r = dets[0].result
+        verdict = "ok" if r.ok and np.array_equal(r.payload, payload) else ("WRONG" if r.ok else "not verified")
+        out.print(
+            f"photo-{severity}.png: decoded {format_payload(r.payload)['hex']} ({verdict}; "
+            f"corrected {r.corrected_bits} bits, confidence {r.confidence:.3f})"
+        )
+    if m.meta.detector is not None:
+        _demo_scene(locator, out_dir, seed)
+
+
+def _demo_scene(locator: Any, out_dir: Path, seed: int) -> None:
+    """A cluttered synthetic photo with two prints: find, decode and pose both."""
+    import cv2
+    import numpy as np
+
+    from deepmorph_core.payload import format_payload
+    from deepmorph_detect.overlay import draw_overlay
+    from deepmorph_detect.scenes import SceneMaker
+
+    scene = SceneMaker(locator.model, severity="medium", seed=seed).make(drawings=2, distractors=1, aruco=True)
+    cv2.imwrite(str(out_dir / "scene.png"), scene.image)
+    dets = locator.locate(scene.image, camera=scene.camera)
+    cv2.imwrite(str(out_dir / "scene-overlay.png"), draw_overlay(scene.image, dets))
+    truths = [p for p in scene.placements if p.kind == "drawing"]
+    out.print(f"scene.png: {len(truths)} printed codes among clutter, another icon and an ArUco marker")
+    for d in dets:
+        right = any(np.array_equal(d.result.payload, t.payload) for t in truths)
+        verdict = "ok" if d.result.ok and right else ("WRONG" if d.result.ok else "not verified")
+        t = d.tvec if d.tvec is not None else np.zeros(3)
+        out.print(
+            f"  found {format_payload(d.result.payload)['hex']} ({verdict}) at {t[2]:.2f} drawing widths, "
+            f"alignment {d.correlation:.2f}"
+        )
+    out.print(f"  {len(dets)} of {len(truths)} found; annotated in {out_dir}/scene-overlay.png")
+
+
+def register(cli: typer.Typer) -> None:
+    """Add the photo chain's commands to ``cli``."""
+    from deepmorph_core.cli.frame import friendly
+
+    for name, command in (
+        ("decode", decode),
+        ("synth", synth),
+        ("bench-scenes", bench_scenes_cmd),
+        ("train-detector", train_detector_cmd),
+        ("demo", demo),
+    ):
+        cli.command(name)(friendly(command))

@@ -1,0 +1,334 @@
+"""Training the detector on synthetic scenes (``deepmorph train-detector``).
+
+Every step draws a fresh batch of scenes from :class:`~deepmorph_detect.scenes.SceneMaker` at
+the network's input size: zero to three payload morphs of the model's drawing, other drawings
+(bundled Feather icons) and ArUco markers as negatives, over photos and clutter, at medium and
+hard severity. Batches are seeded by ``(seed, step)`` and made in a worker process (the other
+core), so a run is reproducible and ``--resume`` continues exactly where a checkpoint stopped.
+
+The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s;
+checkpoints are the bundle itself plus optimiser state, written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+from torch import Tensor
+
+from deepmorph_core.bundle import DetectorMeta, TrainingRecord
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import same_file
+from deepmorph_core.loop import Panel, TrainingLoop
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_detect.centrenet import CentreNetDetector
+from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
+from deepmorph_detect.scenes import Placement, SceneMaker
+
+
+class DetectorConfig(BaseModel):
+    """Detector training settings (stored in the bundle).
+
+    Attributes:
+        steps, batch, lr: optimisation (Adam, cosine decay to 5 %).
+        width: channel width of the network.
+        seed: scenes and initialisation.
+        threads: torch threads of the training process.
+        workers: scene-making processes (0: in the training process).
+        fine_tune: start from the detector already in the bundle (same width) instead of from
+            scratch; the runs it came from are kept in the bundle (``DetectorMeta.earlier``).
+        checkpoint_every, log_every: in steps.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    steps: int = Field(default=2000, ge=1, le=10_000_000)
+    batch: int = Field(default=16, ge=1, le=1024)
+    lr: float = Field(default=2e-3, gt=0, le=1)
+    width: int = Field(default=32, ge=8, le=256)
+    seed: int = 0
+    threads: int | None = Field(default=1, ge=1, le=256)
+    workers: int = Field(default=1, ge=0, le=16)
+    fine_tune: bool = False
+    checkpoint_every: int = Field(default=200, ge=1)
+    log_every: int = Field(default=25, ge=1)
+
+
+def targets_for(placements: list[Placement], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Training targets on the stride-8 grid for the model's drawings in a scene.
+
+    Returns:
+        heat ``(1, h, w)`` (Gaussian splats, 1 at each centre cell), corner offsets
+        ``(8, h, w)`` in cells from each cell centre, and their weight mask ``(1, h, w)``
+        (the 3x3 cells around each centre).
+    """
+    W, H = size
+    w, h = W // STRIDE, H // STRIDE
+    heat = np.zeros((1, h, w), np.float32)
+    corners = np.zeros((8, h, w), np.float32)
+    mask = np.zeros((1, h, w), np.float32)
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    for p in placements:
+        if p.kind != "drawing":
+            continue
+        c = _centre(p) / STRIDE
+        size_cells = float(np.linalg.norm(p.corners[2] - p.corners[0])) / STRIDE / math.sqrt(2)
+        sigma = max(0.6, size_cells / 8)
+        cx, cy = int(np.clip(np.floor(c[0]), 0, w - 1)), int(np.clip(np.floor(c[1]), 0, h - 1))
+        g = np.exp(-((xs + 0.5 - c[0]) ** 2 + (ys + 0.5 - c[1]) ** 2) / (2 * sigma**2))
+        heat[0] = np.maximum(heat[0], g)
+        heat[0, cy, cx] = 1.0
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                x, y = cx + dx, cy + dy
+                if 0 <= x < w and 0 <= y < h:
+                    corners[:, y, x] = (p.corners / STRIDE - np.array([x + 0.5, y + 0.5])).ravel()
+                    mask[0, y, x] = 1.0
+    return heat, corners, mask
+
+
+def _centre(p: Placement) -> np.ndarray:
+    """Image position of the centre of a placement's frame (projective, not the corner mean)."""
+    a, b, c, d = p.corners
+    # intersection of the diagonals a-c and b-d
+    x1, y1, x2, y2, x3, y3, x4, y4 = *a, *c, *b, *d
+    den = (x1 - x2) * (y3 - y4) - (y1 - y2) * (x3 - x4)
+    if abs(den) < 1e-9:
+        return p.corners.mean(0)
+    t = ((x1 - x3) * (y3 - y4) - (y1 - y3) * (x3 - x4)) / den
+    return np.array([x1 + t * (x2 - x1), y1 + t * (y2 - y1)])
+
+
+class SceneBatches(torch.utils.data.IterableDataset):
+    """Batches of ``(image, heat, corners, mask)`` for steps ``[start, stop)``, each seeded by
+    ``(seed, step)``: the same step always gets the same scenes.
+
+    In a :class:`~torch.utils.data.DataLoader` with workers, worker ``k`` of ``n`` makes steps
+    ``start + k``, ``start + k + n``, ...; the loader takes them from its workers in turn, so the
+    steps arrive once each and in order, as with no workers. (Without this split every worker
+    made every step: ``--workers 4`` trained on each batch four times.)
+    """
+
+    def __init__(self, model: DeepMorphModel, config: DetectorConfig, start: int, stop: int) -> None:
+        super().__init__()
+        self.model, self.cfg, self.start, self.stop = model, config, start, stop
+
+    def __iter__(self) -> Iterator[tuple[Tensor, Tensor, Tensor, Tensor]]:
+        torch.set_num_threads(1)
+        makers = {
+            sev: SceneMaker(self.model, INPUT_SIZE, sev, seed=self.cfg.seed, payload_pool=96)
+            for sev in ("medium", "hard")
+        }
+        worker = torch.utils.data.get_worker_info()
+        first, every = (0, 1) if worker is None else (worker.id, worker.num_workers)
+        for step in range(self.start + first, self.stop, every):
+            rng = np.random.default_rng([self.cfg.seed, step])
+            imgs, heats, corners, masks = [], [], [], []
+            for _ in range(self.cfg.batch):
+                maker = makers["hard" if rng.random() < 0.5 else "medium"]
+                maker.rng = np.random.default_rng(rng.integers(2**63))
+                n = int(rng.choice([0, 1, 1, 1, 1, 2, 2, 3]))
+                scene = maker.make(drawings=n, distractors=int(rng.integers(0, 3)), aruco=bool(rng.random() < 0.2))
+                gray = scene.image.astype(np.float32).mean(-1) / 255.0
+                h, c, m = targets_for(scene.placements, INPUT_SIZE)
+                imgs.append(gray[None])
+                heats.append(h)
+                corners.append(c)
+                masks.append(m)
+            yield (
+                torch.from_numpy(np.stack(imgs)),
+                torch.from_numpy(np.stack(heats)),
+                torch.from_numpy(np.stack(corners)),
+                torch.from_numpy(np.stack(masks)),
+            )
+
+
+#: The plot of a detector training log.
+DETECTOR_PANELS = (
+    Panel("loss", ("loss",), log_scale=True),
+    Panel("centre recall (training batches)", ("recall",), unit_range=True),
+    Panel("corner error (px at 256x192)", ("corner",)),
+)
+
+
+@dataclass
+class DetectorSummary:
+    bundle: Path
+    log: Path
+    plot: Path | None
+    steps: int
+    elapsed_s: float
+
+
+class DetectorRun:
+    """Training (or resuming) the detector of a bundle, for the shared loop
+    (:class:`~deepmorph_core.loop.Run`); every checkpoint writes the bundle ``out``."""
+
+    panels = DETECTOR_PANELS
+
+    def __init__(self, model: DeepMorphModel, config: DetectorConfig, out: Path):
+        self.model, self.cfg, self.out = model, config, Path(out)
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        torch.manual_seed(config.seed)
+        self.net = DetectorNet(config.width)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        meta = model.meta.detector
+        resuming = meta is not None and not meta.record.finished and "dtrain.step" in model.extra_tensors
+        self.record = meta.record if resuming and meta else TrainingRecord(total_steps=config.steps)
+        self.earlier = list(meta.earlier) if meta is not None and (resuming or config.fine_tune) else []
+        if config.fine_tune and not resuming:
+            if meta is None or not meta.record.finished:
+                raise DeepMorphError("--fine-tune needs a model whose detector training has finished")
+            stored_width = int(meta.config.get("width", 32))
+            if stored_width != config.width:
+                raise DeepMorphError(f"--fine-tune: the model's detector has width {stored_width}, not {config.width}")
+            self.net.load_state_dict(stored_weights(model.detector_state))
+            self.earlier.append({"config": meta.config, "record": meta.record.model_dump()})
+        self.record.total_steps = config.steps
+        self.record.threads = torch.get_num_threads()
+        if resuming:
+            self.net.load_state_dict(stored_weights(model.detector_state))
+            sd = self.opt.state_dict()
+            state: dict[int, dict[str, Any]] = {}
+            for key, val in model.extra_tensors.items():
+                if key.startswith("dtrain.opt."):
+                    _, _, pid, name = key.split(".", 3)
+                    state.setdefault(int(pid), {})[name] = val
+            sd["state"] = state
+            self.opt.load_state_dict(sd)
+            torch.set_rng_state(model.extra_tensors["dtrain.rng"])
+        self._batches: Iterator[tuple[Tensor, Tensor, Tensor, Tensor]] | None = None
+
+    def checkpoint(self) -> None:
+        """Write the bundle with the detector (and optimiser state until finished)."""
+        self.model.detector_state = {f"detector.{k}": v for k, v in self.net.state_dict().items()}
+        self.model.meta.detector = DetectorMeta(
+            name=CentreNetDetector.name, config=self.cfg.model_dump(), record=self.record, earlier=self.earlier
+        )
+        extra: dict[str, Tensor] = {}
+        if not self.record.finished:
+            extra["dtrain.step"] = torch.tensor([self.record.step])
+            extra["dtrain.rng"] = torch.get_rng_state()
+            for pid, st in self.opt.state_dict()["state"].items():
+                for key, val in st.items():
+                    extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+        else:
+            self.net.eval()
+        self.model.extra_tensors = {}
+        self.model.save(self.out, extra=extra)
+
+    def _lr(self) -> float:
+        progress = min(1.0, self.record.step / max(1, self.cfg.steps))
+        return self.cfg.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * progress)))
+
+    def step(self) -> dict[str, float]:
+        """One optimisation step on the next batch of scenes; its losses, centre recall and
+        corner error (pixels at the network's input size)."""
+        if self._batches is None:  # scene workers start with the first step
+            data = SceneBatches(self.model, self.cfg, self.record.step, self.cfg.steps)
+            workers = self.cfg.workers
+            self._batches = iter(
+                torch.utils.data.DataLoader(
+                    data,
+                    batch_size=None,
+                    num_workers=workers,
+                    multiprocessing_context="fork" if workers else None,
+                    prefetch_factor=4 if workers else None,
+                )
+            )
+            self.net.train()
+        img, heat, corners, mask = next(self._batches)
+        hl, cl = self.net(normalise_input(img))
+        lh = focal_loss(hl, heat)
+        lc = quad_loss(cl, corners, mask)
+        loss = lh + 0.5 * lc
+        for group in self.opt.param_groups:
+            group["lr"] = self._lr()
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt.step()
+        return {"loss": loss.item(), "heat": lh.item(), "corner": lc.item() * STRIDE,
+                "recall": _peak_recall(hl.detach(), heat)}  # fmt: skip
+
+
+def quad_loss(pred: Tensor, target: Tensor, mask: Tensor) -> Tensor:
+    """L1 between predicted and true corner offsets, under the best cyclic order of the corners.
+
+    Which corner is "top left" depends on the drawing's in-plane rotation, which a small
+    network at low resolution reads poorly; the outline of the frame is what it can learn well.
+    The order is settled afterwards by alignment (:mod:`deepmorph_detect.refine`), which tries
+    the four cyclic orders, so the loss does not ask the network for it.
+    """
+    B, _, h, w = pred.shape
+    t = target.view(B, 4, 2, h, w)
+    errs = torch.stack(
+        [torch.abs(pred - torch.roll(t, k, dims=1).reshape(B, 8, h, w)).sum(1) for k in range(4)], 0
+    )  # (4, B, h, w)
+    best = errs.min(0).values
+    return (best * mask[:, 0]).sum() / (mask.sum() * 8).clamp_min(1.0)
+
+
+def _peak_recall(logits: Tensor, heat: Tensor) -> float:
+    """Share of true centres with a predicted peak (p > 0.3) within one cell (training batch)."""
+    p = torch.sigmoid(logits)
+    peaks = (p == torch.nn.functional.max_pool2d(p, 3, 1, 1)) & (p > 0.3)
+    near = torch.nn.functional.max_pool2d(peaks.float(), 3, 1, 1) > 0
+    truth = heat >= 0.999
+    n = truth.sum().item()
+    return 1.0 if n == 0 else float((near & truth).sum().item() / n)
+
+
+def train_detector(
+    model_path: str | Path,
+    out: str | Path,
+    config: DetectorConfig | None = None,
+    resume: bool = False,
+    on_log: Callable[[dict[str, Any]], None] | None = None,
+) -> DetectorSummary:
+    """Add a trained detector to the bundle at ``model_path``, writing ``out``.
+
+    With ``resume``, ``model_path`` is an interrupted checkpoint and its stored configuration
+    is used (``config`` must then be ``None`` or equal). Without it, ``out`` must be new or the
+    model itself (the detector added in place): another existing file is refused before any
+    work, as ``deepmorph train`` refuses one.
+    """
+    if not resume and Path(out).exists() and not same_file(out, model_path):
+        raise DeepMorphError(
+            f"{out}: already exists; choose another --out, the model itself to add the detector in place,"
+            " or pass --resume to continue an interrupted run there"
+        )
+    model = DeepMorphModel.load(model_path)
+    if resume:
+        meta = model.meta.detector
+        if meta is None or meta.record.finished or "dtrain.step" not in model.extra_tensors:
+            raise DeepMorphError(f"{model_path}: no interrupted detector training to resume")
+        config = DetectorConfig(**meta.config)
+    config = config or DetectorConfig()
+    run = DetectorRun(model, config, Path(out))
+    loop = TrainingLoop(
+        Path(out).with_suffix(".detector.log.jsonl"),
+        config.log_every,
+        config.checkpoint_every,
+        f"checkpoint written to {out} (continue with --resume)",
+    )
+    summary = loop.run(run, on_log)
+    return DetectorSummary(Path(out), summary.log, summary.plot, summary.steps, summary.elapsed_s)
+
+
+__all__ = [
+    "DetectorConfig",
+    "DetectorSummary",
+    "DetectorRun",
+    "SceneBatches",
+    "quad_loss",
+    "targets_for",
+    "train_detector",
+]

@@ -1,0 +1,112 @@
+"""What the photo chain reports for each drawing it finds: :class:`Located`, with its :class:`Pose`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from deepmorph_core.model import Detection
+from deepmorph_detect.camera import Camera
+from deepmorph_detect.check import MorphFit
+from deepmorph_detect.synthesis import BitEvidence
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Where the camera is, in the drawing's own frame (:mod:`deepmorph_detect.camera`): origin
+    at the viewBox centre, x right, y down, z into the paper, in units of the printed width.
+
+    Attributes:
+        rvec: ``(3,)`` Rodrigues rotation, drawing frame -> camera.
+        tvec: ``(3,)`` the drawing's centre in camera coordinates (drawing widths).
+        camera: the intrinsics it was solved with (``assumed`` when none were given).
+    """
+
+    rvec: np.ndarray
+    tvec: np.ndarray
+    camera: Camera
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """``(3, 3)`` rotation matrix of :attr:`rvec`."""
+        matrix, _ = cv2.Rodrigues(self.rvec)
+        return matrix
+
+    @property
+    def distance(self) -> float:
+        """How far the drawing's centre is from the camera, in drawing widths."""
+        return float(np.linalg.norm(self.tvec))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "rvec": [round(float(v), 6) for v in self.rvec],
+            "tvec": [round(float(v), 6) for v in self.tvec],
+            "units": "drawing widths",
+            "camera": self.camera.to_json(),
+        }
+
+
+@dataclass
+class Located(Detection):
+    """A decoded drawing with where it is: corners, homography, keypoints and pose."""
+
+    corners: np.ndarray | None = None
+    homography: np.ndarray | None = None  # SVG units -> image pixels
+    correlation: float = 0.0
+    score: float = 0.0
+    rvec: np.ndarray | None = None
+    tvec: np.ndarray | None = None
+    camera: Camera | None = None
+    keypoints: dict[str, list[float]] = field(default_factory=dict)
+    source: str = "detector"
+    morph: MorphFit | None = None
+    bits: BitEvidence | None = None  # the per-bit check, when it ran (Locator.check_payload)
+    # "passed", "failed" (ok withdrawn), "contradicted" (the photo does not show its code bits,
+    # BitEvidence.agrees: ok withdrawn), "not run" (CRC failed); from Locator.track also
+    # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
+    # and "track conflict" (another payload than the track's passed: ok withdrawn)
+    morph_check: str = "not run"
+
+    @property
+    def pose(self) -> Pose | None:
+        """The camera's pose in the drawing's frame, when PnP gave one."""
+        if self.rvec is None or self.tvec is None or self.camera is None:
+            return None
+        return Pose(np.asarray(self.rvec, np.float64), np.asarray(self.tvec, np.float64), self.camera)
+
+    @property
+    def confirmed(self) -> bool:
+        """Whether the payload is read and confirmed on the print: ``ok``, and its morph check
+        passed in this frame or in an earlier one of its track (what :meth:`Locator.track`
+        follows)."""
+        return bool(self.result.ok) and self.aligned_to_morph
+
+    @property
+    def aligned_to_morph(self) -> bool:
+        """Whether the homography (and so the pose) comes from the alignment to the decoded
+        payload's morph: its check passed in this frame, or it was followed on its track."""
+        return self.morph_check in ("passed", "tracked")
+
+    def to_json(self) -> dict[str, Any]:
+        out = super().to_json()
+        out["score"] = round(self.score, 4)
+        out["alignment"] = round(self.correlation, 4)
+        out["found_by"] = self.source
+        out["morph_check"] = self.morph_check
+        if self.morph is not None:
+            out["morph_fit"] = round(self.morph.gain, 4)
+        if self.bits is not None:
+            out.update(self.bits.to_json())
+        out["pose_aligned_to"] = "decoded morph" if self.aligned_to_morph else "unmorphed drawing"
+        if self.corners is not None:
+            out["corners"] = np.round(self.corners, 2).tolist()
+        if self.homography is not None:
+            inv = np.linalg.inv(self.homography)
+            out["homography"] = (inv / inv[2, 2]).round(8).tolist()  # image -> drawing (SVG units)
+        out["keypoints"] = self.keypoints
+        if self.pose is not None:
+            out["pose"] = self.pose.to_json()
+        return out

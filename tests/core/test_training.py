@@ -1,0 +1,528 @@
+"""Training learns, checkpoints are exact, bundles round-trip and refuse bad files, and a
+small trained model survives encode -> real renderer -> decode."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.cli import application
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.image_io import save_gray
+from deepmorph_core.loop import Interrupted
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.morphable import INVISIBLE, MorphableDrawing, capacity_warning
+from deepmorph_core.networks import Encoder, spread_weights
+from deepmorph_core.payload import random_payloads
+from deepmorph_core.render import render_svg
+from deepmorph_core.train import train_model, variable_effects
+from deepmorph_detect.locate import Locator
+from tests.conftest import make_svg
+
+app = application()  # core's commands and every installed plugin's
+
+#: A tiny drawing with generous bounds: fast to render, easy to learn.
+TINY = make_svg(
+    """<g stroke="black" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2.5">
+  <polyline points="4 6 12 4 20 6"/>
+  <line x1="4" y1="12" x2="20" y2="12"/>
+  <polyline points="4 18 12 20 20 18"/>
+  <circle cx="12" cy="12" r="3" dm:move="1.5"/>
+  <polyline points="2 9 2 15" dm:move="1.5"/>
+  <polyline points="22 9 22 15" dm:move="1.5"/>
+</g>""",
+    style='stroke-linejoin="round"',
+)
+FAST = {"width": 40, "batch": 16, "severity": "none", "hard_fraction": 0.0, "log_every": 10, "threads": 1}
+
+
+@pytest.fixture(scope="module")
+def tiny_svg(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("d") / "tiny.svg"
+    path.write_bytes(TINY)
+    return path
+
+
+@pytest.fixture(scope="module")
+def trained(tiny_svg: Path, tmp_path_factory) -> Path:
+    """A 4-bit model trained for a few hundred steps (shared by the tests below). It uses
+    CRC-16: with CRC-8 about 1 % of failed reads pass the check by chance (docs/codec.md),
+    which no "never a wrong payload" assertion could survive."""
+    out = tmp_path_factory.mktemp("m") / "tiny.dmm"
+    train = {**FAST, "steps": 800, "severity": "none", "hard_fraction": 0.25, "width": 48, "seed": 1}
+    train_model(tiny_svg, out, payload_bits=4, crc_bits=16, ecc_t=0, train=train)
+    return out
+
+
+def soft_bit_accuracy(model: DeepMorphModel, n: int = 128, seed: int = 0) -> float:
+    gen = torch.Generator().manual_seed(seed)
+    bits = torch.randint(0, 2, (n, model.codec.spec.code_bits), generator=gen).float()
+    with torch.no_grad():
+        images = 1 - model.rasterizer()(model.morph_values(bits))
+        probs = model.probabilities(images)
+    return ((probs > 0.5) == (bits > 0.5)).float().mean().item()
+
+
+def test_short_training_learns(tiny_svg: Path, tmp_path: Path) -> None:
+    out = tmp_path / "short.dmm"
+    summary = train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train={**FAST, "steps": 150})
+    model = DeepMorphModel.load(out)
+    acc = soft_bit_accuracy(model)
+    assert acc > 0.8, acc  # chance is 0.5
+    assert summary.stage2_start is not None and 0 < summary.stage2_start < 150
+    log = [json.loads(line) for line in summary.log.read_text().splitlines()]
+    assert log[-1]["step"] == 150 and {1, 2} == {row["stage"] for row in log}
+    assert summary.plot is not None and summary.plot.stat().st_size > 1000
+
+
+def test_interrupt_and_resume_equal_an_uninterrupted_run(tiny_svg: Path, tmp_path: Path) -> None:
+    cfg = {**FAST, "steps": 60, "checkpoint_every": 10, "seed": 3}
+    straight = tmp_path / "straight.dmm"
+    train_model(tiny_svg, straight, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg)
+
+    broken = tmp_path / "broken.dmm"
+
+    def stop_at_30(total: int, done: int):
+        def on_log(m):
+            if m["step"] == 30:
+                raise KeyboardInterrupt
+
+        return on_log
+
+    with pytest.raises(Interrupted, match="interrupted at step 30/60"):
+        train_model(tiny_svg, broken, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_30)
+    checkpoint = DeepMorphModel.load(broken)
+    assert checkpoint.meta.record.step == 30 and not checkpoint.meta.record.finished
+    with pytest.raises(DeepMorphError, match="already exists"):
+        train_model(tiny_svg, broken, payload_bits=4, train=cfg)
+    train_model(tiny_svg, broken, resume=True)
+    a, b = DeepMorphModel.load(straight), DeepMorphModel.load(broken)
+    assert b.meta.record.finished and b.meta.record.step == 60
+    for (ka, va), (_kb, vb) in zip(a.decoder.state_dict().items(), b.decoder.state_dict().items()):
+        torch.testing.assert_close(va, vb, msg=ka)
+    torch.testing.assert_close(a.encoder.linear.weight, b.encoder.linear.weight)
+
+
+def test_bundle_round_trip(trained: Path, tmp_path: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    copy = tmp_path / "copy.dmm"
+    m.save(copy)
+    again = DeepMorphModel.load(copy)
+    payload = random_payloads(1, 4, np.random.default_rng(0))[0]
+    assert m.encode(payload) == again.encode(payload)
+    info = again.info()
+    assert info["payload_bits"] == 4 and info["code_bits"] == m.codec.spec.code_bits == 20
+    assert info["record"]["finished"] and info["versions"]["torch"]
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "corrupt or truncated"),
+        (b"\x89PNG\r\n\x1a\n" + b"\0" * 64, "corrupt or truncated"),
+        (b"hello world, definitely not a model file", "corrupt or truncated"),
+    ],
+)
+def test_corrupt_bundles_are_one_clear_error(tmp_path: Path, content: bytes, message: str) -> None:
+    bad = tmp_path / "bad.dmm"
+    bad.write_bytes(content)
+    with pytest.raises(DeepMorphError, match=message):
+        DeepMorphModel.load(bad)
+
+
+def test_truncated_and_foreign_bundles(trained: Path, tmp_path: Path) -> None:
+    from safetensors.torch import save_file
+
+    data = trained.read_bytes()
+    cut = tmp_path / "cut.dmm"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DeepMorphError, match="not a usable DeepMorph model file"):
+        DeepMorphModel.load(cut)
+    foreign = tmp_path / "foreign.safetensors"
+    save_file({"w": torch.zeros(2)}, str(foreign))
+    with pytest.raises(DeepMorphError, match="without DeepMorph metadata"):
+        DeepMorphModel.load(foreign)
+    other = tmp_path / "other.dmm"
+    save_file({"w": torch.zeros(2)}, str(other), metadata={"deepmorph": json.dumps({"format": "deepmorph-model/99"})})
+    with pytest.raises(DeepMorphError, match="format 'deepmorph-model/99'"):
+        DeepMorphModel.load(other)
+    with pytest.raises(DeepMorphError, match="cannot read model file"):
+        DeepMorphModel.load(tmp_path / "missing.dmm")
+
+
+def test_encode_real_render_decode_round_trip(trained: Path, tmp_path: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    rng = np.random.default_rng(7)
+    payloads = random_payloads(20, 4, rng)
+    ok = 0
+    for i, payload in enumerate(payloads):
+        render = render_svg(m.encode(payload), 160)  # a real renderer, larger than training
+        png = tmp_path / f"p{i}.png"
+        save_gray(render, png)
+        from deepmorph_core.image_io import read_image
+
+        found = Locator(m).locate(read_image(png))
+        assert len(found) <= 1, "one drawing, found twice"
+        # a morph of 10 % of the width may align to the unmorphed drawing below the bar: not found
+        for det in found:
+            if not det.result.ok:
+                continue
+            assert np.array_equal(det.result.payload, payload), "a wrong payload was reported ok"
+            ok += 1
+    assert ok >= 15, f"only {ok}/20 payloads recovered"
+
+
+def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(trained: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    bits = [1, 0, 1, 1]  # the trained model carries 4 payload bits
+    assert m.encode("0xB") == m.encode("1011") == m.encode(np.array(bits)) == m.encode(np.array(bits, bool))
+    for payload, message in [
+        ("0xA1B2C3", "has 6 hex digits"),
+        (np.full(4, 0.6), "only 0 and 1"),  # cast to uint8 this was 0000, silently
+        (np.ones(5, np.uint8), r"shape \(4,\)"),
+    ]:
+        with pytest.raises(DeepMorphError, match=message):
+            m.encode(payload)
+
+
+def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg: Path, tmp_path: Path) -> None:
+    """26 variables cannot carry a 24-bit payload's 32+ code bits (README: how many variables a
+    payload needs): the user is told before the run, not after minutes of training."""
+    base = ["train", str(tiny_svg), "--steps", "1", "--width", "32", "--batch", "2", "--threads", "1"]
+    res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
+    text = " ".join(res.stderr.split())
+    assert res.exit_code == 0 and "warning:" in text and "but the drawing only 26 visible variables" in text, text
+    res = runner.invoke(app, [*base, "--payload-bits", "8", "--out", str(tmp_path / "small.dmm")])
+    assert res.exit_code == 0 and "warning" not in res.stderr
+
+
+def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_path: Path) -> None:
+    """New trainings put the spatial transformer in front of the decoder; the flag leaves it out,
+    and ``info`` says which decoder a bundle has."""
+    base = ["train", str(tiny_svg), "--steps", "2", "--width", "32", "--batch", "2", "--threads", "1"]
+    for flag, expected in (([], True), (["--no-spatial-transformer"], False)):
+        out = tmp_path / f"m{expected}.dmm"
+        res = runner.invoke(app, [*base, *flag, "--payload-bits", "4", "--out", str(out)])
+        assert res.exit_code == 0, res.output
+        model = DeepMorphModel.load(out)
+        assert model.meta.decoder.spatial_transformer is expected and (model.decoder.align is not None) is expected
+        info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
+        assert info["decoder"]["spatial_transformer"] is expected
+        shown = " ".join(runner.invoke(app, ["info", str(out)]).stdout.split())
+        assert ("spatial transformer, then CNN" in shown) is expected, shown
+
+
+def test_resume_keeps_the_checkpoints_decoder(tiny_svg: Path, tmp_path: Path) -> None:
+    """A checkpoint without the transformer (``--no-spatial-transformer``, or one written before
+    it existed) resumes without it, whatever the new default is."""
+    out = tmp_path / "plain.dmm"
+    cfg = {**FAST, "steps": 20, "checkpoint_every": 5, "spatial_transformer": False}
+
+    def stop_at_10(total: int, done: int):
+        def on_log(m):
+            if m["step"] == 10:
+                raise KeyboardInterrupt
+
+        return on_log
+
+    with pytest.raises(Interrupted):
+        train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_10)
+    checkpoint = DeepMorphModel.load(out)
+    del checkpoint.meta.train["spatial_transformer"]  # as written before the transformer existed
+    checkpoint.save(out, extra=checkpoint.extra_tensors)
+    train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, resume=True)
+    done = DeepMorphModel.load(out)
+    assert done.meta.record.finished and done.meta.record.step == 20
+    assert done.meta.decoder.spatial_transformer is False and done.decoder.align is None
+    assert done.meta.train.get("spatial_transformer", False) is False
+
+
+def test_variables_a_renderer_does_not_show_do_not_count() -> None:
+    """Feather package: 40 variables at 2 %, but 6 move points along the straight lines through
+    them (0.00-0.03 of the median change); it read 40 % of 24-bit payloads (README). cpu: 40,
+    all visible (the weakest, pins pushed into the outline, at 0.4)."""
+    feather = Path(__file__).parent.parent / "data" / "feather"
+    package = MorphableDrawing.load(feather / "package.svg", move=0.48).visibility()
+    cpu = MorphableDrawing.load(feather / "cpu.svg", move=0.48).visibility()
+    assert len(package) == len(cpu) == 40 and (package <= INVISIBLE).sum() == 6 and (cpu <= INVISIBLE).sum() == 0
+    assert np.median(cpu) == pytest.approx(1.0) and cpu.min() > 0.3
+    warning = capacity_warning(38, package, "package.svg")  # 24 bits, CRC-8, t = 1
+    assert warning is not None and "only 34 visible variables (6 of its 40 variables change nothing" in warning
+    assert capacity_warning(38, cpu, "cpu.svg") is None and capacity_warning(34, package, "package.svg") is None
+
+
+def test_blank_image_has_no_detection(trained: Path) -> None:
+    m = DeepMorphModel.load(trained)
+    locator = Locator(m)
+    assert locator.locate(np.ones((100, 100), np.float32)) == []
+    assert locator.locate(np.full((100, 100), 0.3, np.float32)) == []
+
+
+runner = CliRunner()
+
+
+def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
+    info = runner.invoke(app, ["info", str(trained), "--json"])
+    assert info.exit_code == 0, info.output
+    assert json.loads(info.stdout)["payload_bits"] == 4
+    assert runner.invoke(app, ["info", str(trained)]).exit_code == 0
+
+    svg, png = tmp_path / "code.svg", tmp_path / "code.png"
+    enc = runner.invoke(
+        app,
+        [
+            "encode",
+            str(trained),
+            "--payload",
+            "0xA",
+            "--out",
+            str(svg),
+            "--png",
+            str(png),
+            "--width-mm",
+            "20",
+            "--dpi",
+            "200",
+        ],
+    )
+    assert enc.exit_code == 0, enc.output
+    assert svg.is_file() and png.is_file()
+    from PIL import Image
+
+    with Image.open(png) as img:
+        assert img.width == round(20 / 25.4 * 200)
+        assert round(img.info["dpi"][0]) == 200
+
+    blank = tmp_path / "blank.png"
+    save_gray(np.ones((50, 50)), blank)
+    dec = runner.invoke(app, ["decode", str(trained), str(png), str(blank), "--json"])
+    assert dec.exit_code == 0, dec.output
+    results = json.loads(dec.stdout)
+    assert [r["image"] for r in results] == [str(png), str(blank)]
+    (det,) = results[0]["detections"]
+    assert set(det) >= {"payload", "ok", "corrected_bits", "confidence", "bit_probabilities"}
+    assert set(det["payload"]) == {"hex", "bits"} and len(det["payload"]["bits"]) == 4
+    assert len(det["bit_probabilities"]) == DeepMorphModel.load(trained).codec.spec.code_bits
+    assert results[1]["detections"] == []
+    text = runner.invoke(app, ["decode", str(trained), str(png)])
+    assert text.exit_code == 0 and str(png) in text.stdout
+
+
+@pytest.mark.parametrize(
+    "payload, message",
+    [("0xA5", "hex"), ("0x", ""), ("010", "4"), ("hello", ""), ("01010", "4")],
+)
+def test_cli_wrong_payload_is_an_error(trained: Path, tmp_path: Path, payload: str, message: str) -> None:
+    result = runner.invoke(app, ["encode", str(trained), "--payload", payload, "--out", str(tmp_path / "x.svg")])
+    assert result.exit_code == 1
+    assert result.stderr.startswith("error: ") and message in result.stderr
+    assert not (tmp_path / "x.svg").exists()
+
+
+def test_cli_decode_bad_files(trained: Path, tmp_path: Path) -> None:
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image")
+    for args, message in (
+        (["decode", str(trained), str(junk)], "not an image"),
+        (["decode", str(trained), str(tmp_path / "nope.png")], "no such image file"),
+        (["decode", str(junk), str(junk)], "not a usable DeepMorph model file"),
+        (["info", str(tmp_path / "nope.dmm")], "cannot read model file"),
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 1 and message in result.stderr and result.stderr.count("\n") == 1
+
+
+def test_demo_runs_end_to_end_on_the_bundled_model(tmp_path: Path) -> None:
+    from deepmorph_core.bundled import BUNDLED_MODEL
+
+    assert BUNDLED_MODEL.is_file(), "the bundled demo model is missing"
+    result = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
+    assert result.exit_code == 0, result.output
+    for name in ("code.svg", "code.png", "overlay.png", "photo-easy.png", "photo-medium.png", "photo-hard.png"):
+        assert (tmp_path / "demo" / name).is_file(), name
+    assert result.stdout.count("decoded") + result.stdout.count("no drawing found") == 3
+    assert "WRONG" not in result.stdout  # a wrong payload must never pass the integrity check
+    res = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo" / "code.svg")])
+    assert res.exit_code == 1 and "is not a folder" in res.output and "Traceback" not in res.output
+
+
+def test_train_refuses_missing_or_broken_drawings(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.svg"
+    bad.write_bytes(b'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 9 9">\n<text>x</text></svg>')
+    for svg, message in (
+        (tmp_path / "missing.svg", "cannot read file"),
+        (bad, f"{bad}:2: unsupported: element <text>"),
+    ):
+        result = runner.invoke(app, ["train", str(svg), "--out", str(tmp_path / "m.dmm"), "--steps", "2"])
+        assert result.exit_code == 1 and message in result.stderr, result.output
+        assert result.stderr.count("\n") == 1
+    assert not (tmp_path / "m.dmm").exists()
+
+
+@pytest.mark.parametrize("n_vars, code_bits", [(58, 38), (40, 40), (26, 44), (5, 17)])
+def test_spread_weights_give_every_bit_its_own_full_range_variables(n_vars: int, code_bits: int) -> None:
+    gen = torch.Generator().manual_seed(0)
+    changes = torch.randn(n_vars, 300, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    changes *= torch.rand(n_vars, 1, generator=torch.Generator().manual_seed(2), dtype=torch.float64) + 0.2
+    changes[3] = -changes[1]  # a twin: the same move, mirrored (a closed path's repeated start)
+    effects = changes @ changes.T
+    weights = spread_weights(effects, code_bits, gen)
+    assert weights.shape == (n_vars, code_bits)
+    used = weights != 0
+    assert used.any(0).all(), "a code bit drives no variable"
+    assert used.any(1).all(), "a variable carries no bit"
+    # twins carry the same bits, signed so that their effects add up instead of cancelling
+    torch.testing.assert_close(weights[3], -weights[1])
+    groups = n_vars - 1
+    if groups >= code_bits:
+        assert (used.sum(1) == 1).all()  # each variable follows exactly one bit, at full strength
+        assert torch.allclose(weights.abs()[used], torch.tensor(4.0))
+        # dealt most visible first to the least loaded bit: the most and least visible bits
+        # differ by at most one group's visibility
+        visibility = effects.diagonal().clone()
+        visibility[1] = (changes[1] - changes[3]).pow(2).sum()
+        visibility[3] = 0
+        load = (used.double() * visibility[:, None]).sum(0)
+        assert load.max() - load.min() <= visibility.max() + 1e-6
+    else:
+        assert used.sum(1).max() <= -(-code_bits // groups)
+        torch.testing.assert_close(weights.abs().sum(1), torch.full((n_vars,), 4.0))
+    # distinct code words give distinct morphs: a decoder can tell them apart
+    bits = torch.randint(0, 2, (256, code_bits), generator=gen).float()
+    encoder = Encoder(code_bits, n_vars)
+    with torch.no_grad():
+        encoder.linear.weight.copy_(weights)
+        unit = encoder(bits)
+    if groups >= code_bits:
+        assert ((unit < 0.03) | (unit > 0.97)).float().mean() > 0.9  # bits move variables end to end
+    codes = {tuple(row) for row in bits.int().tolist()}
+    morphs = {tuple(row) for row in (unit * 1000).round().int().tolist()}
+    assert len(morphs) == len(codes)
+
+
+def test_the_ghosts_twin_variables_share_a_bit() -> None:
+    """The ghost's head is a half circle between two vertical strokes. Lowering its left end or
+    its right end turns the half circle about the same centre, which leaves the same circle:
+    the two moves look alike (the soft rasterizer and resvg agree). Two bits on them would be
+    told apart by nothing; the Gram matrix of picture changes finds them, so they share one."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    effects = variable_effects(model)
+    energy = effects.diagonal()
+    corr = effects / torch.sqrt(energy[:, None] * energy[None, :])
+    left, right = 3, 5  # move-y of the head's two ends (points 1 and 2 of the body path)
+    roles = [(v.role, v.point) for v in model.drawing.variables]
+    assert roles[left] == ("move-y", 1) and roles[right] == ("move-y", 2)
+    assert corr[left, right] > 0.99
+    others = corr.abs().fill_diagonal_(0)
+    others[left, right] = others[right, left] = 0
+    assert others.max() < 0.95  # no other pair is that alike
+    weights = spread_weights(effects, model.codec.spec.code_bits, torch.Generator().manual_seed(0))
+    torch.testing.assert_close(weights[left], weights[right])
+
+
+def test_training_starts_from_spread_weights_unless_asked_not_to(tiny_svg: Path, tmp_path: Path) -> None:
+    for init in ("spread", "random"):
+        out = tmp_path / f"{init}.dmm"
+        cfg = {**FAST, "steps": 1, "encoder_init": init, "seed": 2}
+        train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train=cfg)
+        density = (DeepMorphModel.load(out).encoder.linear.weight != 0).float().mean().item()
+        if init == "spread":
+            assert density < 0.2, density  # one (or a few) bits per variable
+        else:
+            assert density > 0.9, density  # the paper's dense random start
+
+
+def test_small_print_captures_are_blurred_enlargements_and_still_train(tiny_svg: Path, tmp_path: Path) -> None:
+    """``small_prints``: part of each batch is corrupted at 55-95 % of the width and enlarged
+    again, as a small print in a photo is. Training with half the batch so still learns."""
+    from deepmorph_core.train import SMALL_PRINT_SCALE, CodecRun, TrainConfig
+
+    out = tmp_path / "small.dmm"
+    train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train={**FAST, "steps": 150, "small_prints": 0.5})
+    model = DeepMorphModel.load(out)
+    assert model.meta.train["small_prints"] == 0.5
+    assert soft_bit_accuracy(model) > 0.8  # chance is 0.5
+
+    trainer = CodecRun(model, TrainConfig(**{**FAST, "steps": 10, "small_prints": 0.5}), tmp_path / "again.dmm")
+    clean = 1.0 - trainer.raster(model.drawing.neutral_values(4)).detach()
+    small = trainer.small_prints(clean)
+    assert small.shape == clean.shape and 0 <= float(small.min()) and float(small.max()) <= 1
+    sharpness = lambda x: (x[..., :, 1:] - x[..., :, :-1]).abs().mean().item()  # noqa: E731
+    assert sharpness(small) < 0.9 * sharpness(clean)  # detail lost at the small size
+    assert (small - clean).abs().mean() < 0.1  # but the same drawing
+    assert 0 < SMALL_PRINT_SCALE[0] < SMALL_PRINT_SCALE[1] <= 1
+    bits = torch.randint(0, 2, (16, model.codec.spec.code_bits), generator=torch.Generator().manual_seed(0)).float()
+    assert trainer.images(bits, train_encoder=False).shape == (16, 1, *model.image_size)
+
+
+def test_tune_decoder_keeps_the_encoder_and_records_the_run(trained: Path, tmp_path: Path) -> None:
+    """``deepmorph tune-decoder``: only the decoder changes (printed codes and the detector stay
+    valid), the training record is kept, the run is appended to ``tuning``, and it still reads."""
+    before = DeepMorphModel.load(trained)
+    out = tmp_path / "tuned.dmm"
+    result = CliRunner().invoke(
+        app,
+        ["tune-decoder", str(trained), "--out", str(out), "--steps", "30", "--small-prints", "0.5", "--threads", "1"],
+    )
+    assert result.exit_code == 0, result.output
+    after = DeepMorphModel.load(out)
+    for name, value in before.encoder.state_dict().items():
+        assert torch.equal(value, after.encoder.state_dict()[name]), name
+    changed = [n for n, v in before.decoder.state_dict().items() if not torch.equal(v, after.decoder.state_dict()[n])]
+    assert changed
+    assert after.meta.record == before.meta.record
+    (run,) = after.meta.tuning
+    assert run["steps"] == 30 and run["finished"] and run["small_prints"] == 0.5
+    assert soft_bit_accuracy(after) > 0.9
+    info = CliRunner().invoke(app, ["info", str(out)])
+    assert info.exit_code == 0 and "decoder tuned" in info.output
+
+    # refused: an existing --out, and a bundle whose training has not finished
+    again = CliRunner().invoke(app, ["tune-decoder", str(trained), "--out", str(out), "--steps", "1"])
+    assert again.exit_code != 0 and "already exists" in again.output
+    unfinished = tmp_path / "unfinished.dmm"
+    before.meta.record.finished = False
+    before.save(unfinished)
+    refused = CliRunner().invoke(app, ["tune-decoder", str(unfinished), "--out", str(tmp_path / "x.dmm")])
+    assert refused.exit_code != 0 and "not finished" in refused.output
+
+
+def test_an_interrupted_tuning_writes_what_it_has(
+    trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from deepmorph_core.train import CodecRun, tune_decoder
+
+    real_step = CodecRun.step
+
+    def step_then_stop(self: CodecRun):
+        if self.record.step == 7:
+            raise KeyboardInterrupt
+        return real_step(self)
+
+    monkeypatch.setattr(CodecRun, "step", step_then_stop)
+    out = tmp_path / "part.dmm"
+    with pytest.raises(Interrupted, match="step 7/50"):
+        tune_decoder(trained, out, steps=50, threads=1)
+    (run,) = DeepMorphModel.load(out).meta.tuning
+    assert run["steps"] == 7 and not run["finished"]
+
+
+def test_one_code_word_gives_the_batched_morph_values() -> None:
+    """The photo chain's numpy path for one code word (hard or soft bits) matches the batched
+    torch path, and refuses a word of the wrong length."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    rng = np.random.default_rng(3)
+    n_b = model.codec.spec.code_bits
+    for bits in (rng.integers(0, 2, n_b).astype(np.float32), rng.random(n_b).astype(np.float32)):
+        batched = model.morph_values(torch.from_numpy(bits)[None])[0].double().numpy()
+        np.testing.assert_allclose(model.morph_values_one(bits), batched, atol=2e-6)
+    with pytest.raises(ValueError, match="code bits"):
+        model.morph_values_one(np.zeros(n_b + 1))
+    with pytest.raises(ValueError, match="variables"):
+        model.drawing.space.values_from_unit_one(np.zeros(3))

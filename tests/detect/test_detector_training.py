@@ -1,0 +1,186 @@
+"""``deepmorph train-detector``: targets, a short run that learns, checkpoints and exact resume."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.cli import application
+from deepmorph_core.loop import Interrupted
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_detect.detector_training import DetectorConfig, SceneBatches, quad_loss, targets_for, train_detector
+from deepmorph_detect.network import (
+    INPUT_SIZE,
+    STRIDE,
+    DetectorNet,
+    fused_for_inference,
+    normalise_input,
+    standardise,
+    stored_weights,
+)
+from deepmorph_detect.scenes import SceneMaker
+
+app = application()  # core's commands and every installed plugin's
+
+runner = CliRunner()
+
+
+def test_targets_mark_each_drawing_centre_and_corners() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    scene = SceneMaker(model, INPUT_SIZE, "easy", seed=2).make(drawings=2, distractors=1)
+    heat, corners, mask = targets_for(scene.placements, INPUT_SIZE)
+    drawings = [p for p in scene.placements if p.kind == "drawing"]
+    assert heat.shape == (1, INPUT_SIZE[1] // STRIDE, INPUT_SIZE[0] // STRIDE)
+    assert int((heat >= 0.999).sum()) == len(drawings)
+    for y, x in zip(*np.nonzero(heat[0] >= 0.999)):
+        quad = corners[:, y, x].reshape(4, 2) * STRIDE + (np.array([x, y]) + 0.5) * STRIDE
+        assert any(np.allclose(quad, p.corners, atol=1e-3) for p in drawings)
+    assert mask.sum() <= 9 * len(drawings)
+
+
+def test_quad_loss_ignores_the_cyclic_order_of_corners() -> None:
+    target = torch.randn(1, 8, 3, 3)
+    mask = torch.ones(1, 1, 3, 3)
+    rolled = torch.roll(target.view(1, 4, 2, 3, 3), 1, dims=1).reshape(1, 8, 3, 3)
+    assert quad_loss(rolled, target, mask).item() < 1e-6
+    assert quad_loss(target + 1, target, mask).item() == pytest.approx(1.0)
+
+
+def test_folding_batch_norms_keeps_the_detector_outputs() -> None:
+    """The locator runs the detector with its batch norms folded into the convolutions: the
+    same heatmap and corners as the trained network, which itself is left as it was."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
+    net.load_state_dict(stored_weights(model.detector_state))
+    net.eval()
+    fused = fused_for_inference(net)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())
+    x = torch.randn(2, 1, INPUT_SIZE[1], INPUT_SIZE[0])
+    with torch.no_grad():
+        for a, b in zip(net(x), fused(x)):
+            torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
+
+
+def test_detector_input_is_standardised_as_the_network_was_trained() -> None:
+    rng = np.random.default_rng(0)
+    for gray in (rng.random((192, 256), dtype=np.float32), np.full((192, 256), 0.7, np.float32)):
+        torch.testing.assert_close(
+            torch.from_numpy(standardise(gray)), normalise_input(torch.from_numpy(gray)[None, None])[0, 0]
+        )
+
+
+def _config(steps: int) -> DetectorConfig:
+    return DetectorConfig(
+        steps=steps, batch=2, width=8, workers=0, threads=1, checkpoint_every=100, log_every=1, seed=4
+    )
+
+
+def test_scene_workers_make_each_step_once_and_in_order() -> None:
+    """With scene-making workers the loader gives the batches it gives without them: each step
+    once, in order, also from a resumed start (each worker used to make every step, so
+    ``--workers 2`` trained on every batch twice)."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    cfg = DetectorConfig(steps=5, batch=1, width=8, workers=2, threads=1, seed=3)
+
+    def images(workers: int) -> list[torch.Tensor]:
+        loader = torch.utils.data.DataLoader(
+            SceneBatches(model, cfg, 1, 5),
+            batch_size=None,
+            num_workers=workers,
+            multiprocessing_context="fork" if workers else None,
+        )
+        return [batch[0] for batch in loader]
+
+    alone, shared = images(0), images(2)
+    assert len(alone) == len(shared) == 4
+    for a, b in zip(alone, shared):
+        assert torch.equal(a, b)
+    assert not torch.equal(alone[0], alone[1])
+
+
+def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
+    straight = tmp_path / "straight.dmm"
+    train_detector(BUNDLED_MODEL, straight, _config(4))
+
+    cut = tmp_path / "cut.dmm"
+
+    def stop_at_2(m: dict) -> None:
+        if m["step"] == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match="--resume"):
+        train_detector(BUNDLED_MODEL, cut, _config(4), on_log=stop_at_2)
+    half = DeepMorphModel.load(cut)
+    assert half.meta.detector is not None and half.meta.detector.record.step == 2
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(cut), "--resume"])
+    assert res.exit_code == 0, res.output
+    a, b = DeepMorphModel.load(straight), DeepMorphModel.load(cut)
+    assert a.meta.detector.record.finished and b.meta.detector.record.step == 4
+    for key, val in a.detector_state.items():
+        assert torch.equal(val, b.detector_state[key]), key
+    # the codec networks are carried over untouched
+    base = DeepMorphModel.load(BUNDLED_MODEL)
+    for key, val in base.decoder.state_dict().items():
+        assert torch.equal(val, b.decoder.state_dict()[key])
+
+
+def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_path: Path) -> None:
+    """``--fine-tune`` trains the detector already in the bundle further (at a tiny learning
+    rate one step barely moves it, where a fresh start would replace it), records the run it
+    came from, and refuses another width with a clear error."""
+    base = tmp_path / "base.dmm"
+    train_detector(BUNDLED_MODEL, base, _config(2))
+    tuned = tmp_path / "tuned.dmm"
+    args = ["train-detector", str(base), "--out", str(tuned), "--steps", "1", "--batch", "2", "--width", "8"]
+    res = runner.invoke(app, [*args, "--workers", "0", "--fine-tune", "--lr", "1e-6", "--seed", "5"])
+    assert res.exit_code == 0, res.output
+    before, after = DeepMorphModel.load(base), DeepMorphModel.load(tuned)
+    for key, val in before.detector_state.items():
+        if val.is_floating_point() and "running" not in key:
+            torch.testing.assert_close(after.detector_state[key], val, atol=1e-4, rtol=0)
+    assert after.meta.detector.config["fine_tune"] and after.meta.detector.record.step == 1
+    (earlier,) = after.meta.detector.earlier
+    assert earlier["record"]["step"] == 2 and earlier["config"]["seed"] == 4
+    res = runner.invoke(app, ["info", str(tuned)])
+    assert "fine-tuned after 2 steps" in " ".join(res.output.split()), res.output
+    wider = ["train-detector", str(base), "--out", str(tmp_path / "wider.dmm"), "--steps", "1", "--width", "16"]
+    res = runner.invoke(app, [*wider, "--workers", "0", "--fine-tune"])
+    assert res.exit_code == 1 and "width 8, not 16" in " ".join(res.output.split()), res.output
+
+
+def test_an_existing_file_other_than_the_model_is_not_replaced(tmp_path: Path) -> None:
+    drawing = tmp_path / "ghost.svg"
+    drawing.write_text("<svg/>")
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(drawing), "--steps", "1"])
+    assert res.exit_code == 1 and "already exists" in " ".join(res.output.split()), res.output
+    assert drawing.read_text() == "<svg/>"
+
+
+def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(BUNDLED_MODEL), "--resume"])
+    assert res.exit_code == 1 and "no interrupted detector training" in res.output
+
+
+def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: Path) -> None:
+    """``--width`` picks the detector's channel width; the bundle records it, and the locator
+    builds the network at that width from the bundle alone."""
+    out = tmp_path / "slim.dmm"
+    args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--width", "8"]
+    res = runner.invoke(app, [*args, "--workers", "0"])
+    assert res.exit_code == 0, res.output
+    model = DeepMorphModel.load(out)
+    assert model.meta.detector.config["width"] == 8
+    assert model.detector_state["detector.stem.0.0.weight"].shape[0] == 4  # width // 2 channels
+    from deepmorph_detect.centrenet import CentreNetDetector
+
+    detector = CentreNetDetector.from_model(model)
+    image = SceneMaker(model, (320, 240), "easy", seed=1).make(drawings=1).image
+    assert isinstance(detector.detect(image), list)
+    res = runner.invoke(app, [*args[:-2], "--width", "4"])
+    assert res.exit_code != 0 and "--width" in res.output

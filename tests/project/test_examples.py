@@ -1,0 +1,22 @@
+"""The documented example runs as documented (docs/training.md points at it)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_encode_decode_example_runs() -> None:
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "encode_decode.py")], capture_output=True, text=True, timeout=600
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("trained in ")
+    decoded = [line for line in lines if line.startswith(("render:", "photo:"))]
+    assert len(decoded) == 2
+    assert any("0xA5 ok=True" in line for line in decoded)
+    assert not any("ok=True" in line and "0xA5" not in line for line in decoded)  # never a wrong payload
