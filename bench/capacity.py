@@ -6,8 +6,8 @@ Per (drawing, payload size) cell: train a model (or ``--reuse`` a kept bundle), 
 * **soft**: the soft rasterizer's renders, framed as in training (``canonicalize`` + ``render_moments``);
 * **real**: resvg renders (``real_renders``) of the same morphs, clean, framed the same way;
 * **real+aug**: those framed real renders through the differentiable training corruption at ``medium``;
-* **r400**: resvg at 400 px decoded through ``DeepMorphModel.decode_image`` (the user's path), clean;
-* **photo**: ``simulate_photo(render_at_400px, "medium")`` decoded through ``decode_image``;
+* **r400**: resvg at 400 px decoded through the photo chain (``Locator.locate``, the user's path), clean;
+* **photo**: ``close_up_photo(render_at_400px, "medium")`` decoded through the photo chain;
 
 reporting code-bit accuracy (the network's hard decisions against the sent code bits) and
 whole-payload success (codec ``ok`` and the payload equal to the one sent). ``ok`` with a wrong
@@ -94,8 +94,8 @@ def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int)
     """
     import cv2
     import numpy as np
+    from deepmorph_detect.scenes import close_up_photo
 
-    from deepmorph_core.capture import simulate_photo
     from deepmorph_core.render import render_svg
 
     rng = np.random.default_rng(seed)
@@ -111,7 +111,7 @@ def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int)
             out.append(("icon", np.pad(img, pad, constant_values=1.0)))
         for j in range(n_photo):
             path = icons[order[(n_clean + j) % len(icons)]]
-            out.append(("icon_photo", simulate_photo(render_svg(path.read_text(), 400), "medium", rng)))
+            out.append(("icon_photo", close_up_photo(render_svg(path.read_text(), 400), "medium", rng)))
     rest = n - len(out)
     n_noise = rest // 3
     for j in range(n_noise):
@@ -158,7 +158,7 @@ def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int)
                 pts = np.cumsum(rng.normal(0, size / 25, (12, 2)), 0) + np.array(p[0])
                 cv2.polylines(img, [np.clip(pts, 0, size - 1).astype(np.int32)], False, shade, width, cv2.LINE_AA)
         if j % 3 == 2:
-            out.append(("clutter_photo", simulate_photo(img, "medium", rng)))
+            out.append(("clutter_photo", close_up_photo(img, "medium", rng)))
         else:
             out.append(("clutter", img))
     return out
@@ -189,15 +189,17 @@ def _score(results: list[Any], probs: Any, code: Any, payloads: Any) -> dict[str
 def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any]]) -> dict[str, Any]:
     import numpy as np
     import torch
+    from deepmorph_detect.scenes import close_up_photo
 
-    from deepmorph_core.capture import simulate_photo
     from deepmorph_core.corruption import build_pipeline
     from deepmorph_core.framing import canonicalize, render_moments
     from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
     from deepmorph_core.train import real_renders
+    from deepmorph_detect.locate import Locator
 
     model.eval()
+    locator = Locator(model)
     codec = model.codec
     rng = np.random.default_rng(seed)
     payloads = random_payloads(samples, codec.spec.payload_bits, rng)
@@ -234,7 +236,7 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     out["real_aug"] = _score(codec.decode_batch(p), p, code, payloads)
     timings["real_aug"] = time.perf_counter() - t0
 
-    # the user's path: a larger render (clean, then print-and-photo) through decode_image
+    # the user's path: a larger render (clean, then print-and-photo) through the photo chain
     photo_rng = np.random.default_rng(seed + 2)
     res400, p400, res_photo, p_photo = [], [], [], []
     t0 = time.perf_counter()
@@ -244,8 +246,8 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
         for img, results, probs in ((render, res400, p400), (None, res_photo, p_photo)):
             t1 = time.perf_counter()
             if img is None:
-                img = simulate_photo(render, "medium", photo_rng)
-            dets = model.decode_image(img)
+                img = close_up_photo(render, "medium", photo_rng)
+            dets = locator.locate(img)
             results.append(dets[0].result if dets else None)
             probs.append(dets[0].probabilities if dets else np.full(codec.spec.code_bits, 0.5))
             if results is res_photo:
@@ -257,7 +259,7 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     t0 = time.perf_counter()
     fa: dict[str, dict[str, int]] = {}
     for kind, img in unrelated:
-        dets = model.decode_image(img)
+        dets = locator.locate(img)
         d = fa.setdefault(kind, {"n": 0, "found": 0, "ok": 0})
         d["n"] += 1
         d["found"] += bool(dets)
@@ -489,8 +491,8 @@ def main() -> None:
                 "soft": "soft rasterizer render, framed by canonicalize+render_moments",
                 "real": "resvg render (real_renders), framed the same way, clean",
                 "real_aug": "framed resvg render through the training augmentation at 'medium'",
-                "r400": "resvg at 400 px through DeepMorphModel.decode_image, clean",
-                "photo": "simulate_photo(resvg at 400 px, 'medium') through DeepMorphModel.decode_image",
+                "r400": "resvg at 400 px through the photo chain, clean",
+                "photo": "close_up_photo(resvg at 400 px, 'medium') through the photo chain",
             },
             "bit_acc": "code-bit accuracy of the network's hard decisions, over images where a drawing was found",
             "success": "codec ok and payload equal to the one sent, over all images",

@@ -157,6 +157,23 @@ def save_rgb(image: np.ndarray, path: str | Path) -> None:
     _save(Image.fromarray(arr, "RGB"), path)
 
 
+def save_bgr(image: np.ndarray, path: str | Path) -> None:
+    """Save an ``(H, W, 3)`` uint8 BGR (or ``(H, W)`` gray) image, the format by the path's
+    extension (OpenCV's encoders), written atomically.
+
+    Raises:
+        DeepMorphError: an extension OpenCV cannot write.
+    """
+    path = Path(path)
+    try:
+        ok, buf = cv2.imencode(path.suffix or ".png", np.ascontiguousarray(image))
+    except cv2.error:
+        ok = False
+    if not ok:
+        raise DeepMorphError(f"{path}: cannot write this image format (use .png or .jpg)")
+    atomic_write(path, buf.tobytes())
+
+
 def image_format(path: str | Path) -> str:
     """The image format Pillow writes for ``path``'s extension (check it before any work).
 

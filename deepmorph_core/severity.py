@@ -9,7 +9,8 @@ A severity names how rough a capture is. Two things read it:
   noise and compression at the decoder's size. Pixel-valued parameters are given for
   :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width.
 * **the photo simulator** (:mod:`deepmorph_detect.scenes`), through :attr:`Severity.photo`:
-  tilt, print size, blur, noise, light, shadows, contrast, motion and JPEG of a whole photo.
+  tilt, print size, blur, noise, light, shadows, contrast, motion and JPEG of a whole photo,
+  and how far a close-up (a print filling the frame) may turn.
 
 ``none`` corrupts nothing and has no photo settings.
 """
@@ -30,16 +31,48 @@ Step = tuple[str, float, dict[str, Any]]  # (augmentation name, probability, par
 
 
 @dataclass(frozen=True)
+class PhotoRanges:
+    """What a simulated photo of a print may be (angles in degrees, sizes as shares of the
+    frame width; each pair is a range drawn uniformly).
+
+    Attributes:
+        tilt_deg: the print's tilt away from the camera, at most.
+        size: the drawing's printed width in a scene.
+        blur: Gaussian blur sigma, pixels of a 640-pixel-wide photo.
+        noise: sensor noise sigma (intensity).
+        light: strength of the light gradient and fall-off.
+        shadow_p: chance of a soft shadow across the scene.
+        contrast: contrast factor.
+        jpeg: JPEG quality.
+        motion_p: chance of motion blur.
+        spin_deg: a close-up's in-plane turn, at most (scenes turn prints any way).
+    """
+
+    tilt_deg: float
+    size: tuple[float, float]
+    blur: tuple[float, float]
+    noise: tuple[float, float]
+    light: float
+    shadow_p: float
+    contrast: tuple[float, float]
+    jpeg: tuple[int, int]
+    motion_p: float
+    spin_deg: float
+
+
+@dataclass(frozen=True)
 class Severity:
     """One level of the table.
 
     Attributes:
         name: ``none``, ``easy``, ``medium`` or ``hard``.
         residual: the decoder-frame corruption steps ``(name, p, params)``.
+        photo: the photo simulator's ranges (``None`` for ``none``).
     """
 
     name: str
     residual: tuple[Step, ...] = field(default=())
+    photo: PhotoRanges | None = None
 
 
 SEVERITIES: dict[str, Severity] = {
@@ -59,6 +92,7 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.3, {"amount": [0.0, 0.003]}),
             ("jpeg", 0.5, {"quality": [70.0, 95.0]}),
         ),
+        photo=PhotoRanges(30, (0.25, 0.7), (0.2, 0.7), (0.003, 0.012), 0.15, 0.15, (0.8, 1.0), (80, 95), 0.0, 2),
     ),
     "medium": Severity(
         "medium",
@@ -75,6 +109,7 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.5, {"amount": [0.0, 0.01]}),
             ("jpeg", 0.8, {"quality": [40.0, 90.0]}),
         ),
+        photo=PhotoRanges(45, (0.15, 0.7), (0.3, 1.1), (0.008, 0.025), 0.3, 0.35, (0.6, 0.95), (55, 90), 0.15, 5),
     ),
     "hard": Severity(
         "hard",
@@ -92,11 +127,14 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.6, {"amount": [0.0, 0.02]}),
             ("jpeg", 0.9, {"quality": [20.0, 80.0]}),
         ),
+        photo=PhotoRanges(60, (0.10, 0.7), (0.4, 1.6), (0.015, 0.045), 0.45, 0.5, (0.45, 0.9), (35, 75), 0.35, 10),
     ),
 }
 
 #: Severities from mildest to roughest (training's curriculum climbs them).
 LADDER = tuple(SEVERITIES)
+#: The severities a photo can have.
+PHOTO_SEVERITIES = tuple(k for k, v in SEVERITIES.items() if v.photo is not None)
 
 
 def severity(name: str) -> Severity:
@@ -109,6 +147,19 @@ def severity(name: str) -> Severity:
     if found is None:
         raise DeepMorphError(f"unknown severity {name!r} (known: {', '.join(SEVERITIES)})")
     return found
+
+
+def photo_ranges(name: str) -> PhotoRanges:
+    """The photo simulator's ranges of a severity.
+
+    Raises:
+        DeepMorphError: an unknown severity, or ``none`` (a photo is never clean).
+    """
+    photo = severity(name).photo
+    if photo is None:
+        known = ", ".join(k for k, v in SEVERITIES.items() if v.photo is not None)
+        raise DeepMorphError(f"severity {name!r} has no photo settings (photos are {known})")
+    return photo
 
 
 def residual_steps(name: str, size: int | None = None) -> list[Step]:

@@ -207,11 +207,11 @@ def synth(
 ) -> None:
     """Make labelled synthetic photos of printed drawings (the capture simulator)."""
     from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.severity import PHOTO_SEVERITIES
     from deepmorph_detect.scene_folders import check_scene_folder, write_scenes
-    from deepmorph_detect.scenes import SCENE_SEVERITIES
 
-    if severity not in SCENE_SEVERITIES:
-        raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(SCENE_SEVERITIES)}")
+    if severity not in PHOTO_SEVERITIES:
+        raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(PHOTO_SEVERITIES)}")
     check_scene_folder(out_dir)
     m = DeepMorphModel.load(model)
     dims = _size(size)
@@ -326,14 +326,14 @@ def demo(
     import numpy as np
 
     from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
-    from deepmorph_core.capture import simulate_photo
     from deepmorph_core.fileio import output_folder
-    from deepmorph_core.image_io import save_gray, save_rgb
+    from deepmorph_core.image_io import save_bgr, save_gray, save_rgb
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.payload import format_payload, random_payloads
     from deepmorph_core.render import overlay, render_svg, render_svg_ink
     from deepmorph_core.train import train_model
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.scenes import close_up_photo
 
     output_folder(out_dir, f"--out {out_dir}")
     if retrain or not BUNDLED_MODEL.is_file():
@@ -355,8 +355,8 @@ def demo(
     out.print(f"encoded {format_payload(payload)['hex']} into {out_dir}/code.svg (and code.png, overlay.png)")
     locator = Locator(m)
     for severity in ("easy", "medium", "hard"):
-        photo = simulate_photo(render, severity, rng)
-        save_gray(photo / 255.0, out_dir / f"photo-{severity}.png")
+        photo = close_up_photo(render, severity, rng)
+        save_bgr(photo, out_dir / f"photo-{severity}.png")
         dets = locator.locate(photo)
         if not dets:
             out.print(f"photo-{severity}.png: no drawing found")
@@ -373,17 +373,17 @@ def demo(
 
 def _demo_scene(locator: Any, out_dir: Path, seed: int) -> None:
     """A cluttered synthetic photo with two prints: find, decode and pose both."""
-    import cv2
     import numpy as np
 
+    from deepmorph_core.image_io import save_bgr
     from deepmorph_core.payload import format_payload
     from deepmorph_detect.overlay import draw_overlay
     from deepmorph_detect.scenes import SceneMaker
 
     scene = SceneMaker(locator.model, severity="medium", seed=seed).make(drawings=2, distractors=1, aruco=True)
-    cv2.imwrite(str(out_dir / "scene.png"), scene.image)
+    save_bgr(scene.image, out_dir / "scene.png")
     dets = locator.locate(scene.image, camera=scene.camera)
-    cv2.imwrite(str(out_dir / "scene-overlay.png"), draw_overlay(scene.image, dets))
+    save_bgr(draw_overlay(scene.image, dets), out_dir / "scene-overlay.png")
     truths = [p for p in scene.placements if p.kind == "drawing"]
     out.print(f"scene.png: {len(truths)} printed codes among clutter, another icon and an ArUco marker")
     for d in dets:

@@ -1,4 +1,4 @@
-"""Synthetic scenes with exact ground truth: DeepMorph's own capture simulator.
+"""Synthetic photos with exact ground truth: DeepMorph's one capture simulator.
 
 A scene is a photo of one or more printed drawings. Each drawing is a payload morph rendered by
 the real renderer (resvg), printed on paper with a margin, placed in 3-D in front of a pinhole
@@ -10,6 +10,10 @@ corners and the camera pose of every drawing exactly.
 Scenes can also hold other drawings (bundled Feather icons, printed the same way), an ArUco
 marker and a QR code at the same printed size: the negatives and baselines of
 ``deepmorph bench-scenes``. The same generator, at a smaller size, feeds detector training.
+
+A close-up (:func:`close_up_photo`) is the same print and the same camera, framed so that the
+print fills most of the photo: a scan, or a phone held close. The ranges of every severity are
+:mod:`deepmorph_core.severity`'s.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.render import render_svg
+from deepmorph_core.severity import PhotoRanges, photo_ranges
 from deepmorph_detect.backgrounds import random_background
 from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners, viewbox_to_frame
 
@@ -33,28 +38,6 @@ if TYPE_CHECKING:
 
 DISTRACTOR_DIR = Path(__file__).parent / "data" / "distractors"
 ARUCO_DICT = cv2.aruco.DICT_6X6_250
-
-
-@dataclass(frozen=True)
-class SceneSeverity:
-    """Ranges of one severity level (angles in degrees, sizes as shares of the frame width)."""
-
-    tilt_deg: float
-    size: tuple[float, float]
-    blur: tuple[float, float]
-    noise: tuple[float, float]
-    light: float
-    shadow_p: float
-    contrast: tuple[float, float]
-    jpeg: tuple[int, int]
-    motion_p: float
-
-
-SCENE_SEVERITIES = {
-    "easy": SceneSeverity(30, (0.25, 0.7), (0.2, 0.7), (0.003, 0.012), 0.15, 0.15, (0.8, 1.0), (80, 95), 0.0),
-    "medium": SceneSeverity(45, (0.15, 0.7), (0.3, 1.1), (0.008, 0.025), 0.3, 0.35, (0.6, 0.95), (55, 90), 0.15),
-    "hard": SceneSeverity(60, (0.10, 0.7), (0.4, 1.6), (0.015, 0.045), 0.45, 0.5, (0.45, 0.9), (35, 75), 0.35),
-}
 
 
 @dataclass
@@ -144,7 +127,7 @@ class SceneMaker:
     Args:
         model: the trained model whose drawing is printed (payloads through its encoder).
         size: ``(width, height)`` of the photos.
-        severity: ``easy``, ``medium`` or ``hard`` (see :data:`SCENE_SEVERITIES`).
+        severity: ``easy``, ``medium`` or ``hard`` (:data:`deepmorph_core.severity.SEVERITIES`).
         seed: the random stream (same seed, same scenes).
         payload_pool: when set, payloads come from a fixed pool of this many random payloads
             whose renders are cached (detector training: fast); otherwise each is fresh.
@@ -158,11 +141,9 @@ class SceneMaker:
         seed: int = 0,
         payload_pool: int | None = None,
     ) -> None:
-        if severity not in SCENE_SEVERITIES:
-            raise DeepMorphError(f"severity must be one of {', '.join(SCENE_SEVERITIES)}, got {severity!r}")
+        self.severity = photo_ranges(severity)
         self.model = model
         self.size = size
-        self.severity = SCENE_SEVERITIES[severity]
         self.rng = np.random.default_rng(seed)
         self.viewbox = model.drawing.drawing.viewbox
         self._pool: list[np.ndarray] | None = None
@@ -176,46 +157,16 @@ class SceneMaker:
 
     def camera(self) -> Camera:
         """A random phone-like camera for this scene (60-75 degrees horizontal FOV)."""
-        W, H = self.size
-        f = (W / 2) / math.tan(math.radians(self.rng.uniform(60, 75)) / 2)
-        return Camera(f, f, W / 2 + self.rng.uniform(-0.01, 0.01) * W, H / 2 + self.rng.uniform(-0.01, 0.01) * H)
+        return _camera(self.size, self.rng)
 
     def _pose(
         self, cam: Camera, half_extent: np.ndarray, taken: list[np.ndarray]
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """A pose whose printed sheet (``half_extent`` in width units) lies inside the frame and
         clear of the sheets already placed; ``None`` when none is found."""
-        W, H = self.size
         sv = self.severity
-        hx, hy = half_extent
-        sheet = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-        for attempt in range(80):
-            # crowded scenes: after every 20 failed tries, prints get smaller
-            frac = self.rng.uniform(*sv.size) * 0.75 ** (attempt // 20)
-            dist = cam.fx / (frac * W)
-            tilt = math.radians(self.rng.uniform(0, sv.tilt_deg))
-            axis = self.rng.uniform(0, 2 * math.pi)
-            spin = self.rng.uniform(0, 2 * math.pi)
-            R_tilt, _ = cv2.Rodrigues(np.array([math.cos(axis), math.sin(axis), 0.0]) * tilt)
-            R_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, spin]))
-            R = R_tilt @ R_spin
-            px, py = self.rng.uniform(0.1, 0.9) * W, self.rng.uniform(0.1, 0.9) * H
-            ray = np.linalg.solve(cam.matrix, np.array([px, py, 1.0]))
-            tvec = ray / ray[2] * dist
-            rvec, _ = cv2.Rodrigues(R)
-            Hm = homography_from_pose(cam, rvec.reshape(3), tvec)
-            pts = np.column_stack([sheet, np.ones(4)]) @ Hm.T
-            if (pts[:, 2] <= 0).any():
-                continue
-            quad = pts[:, :2] / pts[:, 2:3]
-            if quad[:, 0].min() < 1 or quad[:, 1].min() < 1 or quad[:, 0].max() > W - 2 or quad[:, 1].max() > H - 2:
-                continue
-            box = np.array([quad[:, 0].min(), quad[:, 1].min(), quad[:, 0].max(), quad[:, 1].max()])
-            if any(_overlap(box, other) for other in taken):
-                continue
-            taken.append(box)
-            return rvec.reshape(3), tvec
-        return None
+        framing = _Framing(sv.size, sv.tilt_deg, (0.0, 2 * math.pi), (0.1, 0.9))
+        return _pose(cam, self.size, half_extent, framing, self.rng, taken)
 
     def _payload(self) -> tuple[int, np.ndarray]:
         if self._pool is not None:
@@ -308,6 +259,103 @@ class SceneMaker:
         return Scene(shots[0], cam, placements, shots, warps)
 
 
+def _camera(size: tuple[int, int], rng: np.random.Generator) -> Camera:
+    """A random phone-like camera (60-75 degrees horizontal field of view)."""
+    W, H = size
+    f = (W / 2) / math.tan(math.radians(rng.uniform(60, 75)) / 2)
+    return Camera(f, f, W / 2 + rng.uniform(-0.01, 0.01) * W, H / 2 + rng.uniform(-0.01, 0.01) * H)
+
+
+@dataclass(frozen=True)
+class _Framing:
+    """Where a print may lie in a photo: its width as a share of the frame's, its tilt (degrees,
+    at most), its in-plane turn (radians) and its centre (shares of the frame)."""
+
+    size: tuple[float, float]
+    tilt_deg: float
+    spin: tuple[float, float]
+    centre: tuple[float, float]
+
+
+def _pose(
+    cam: Camera,
+    size: tuple[int, int],
+    half_extent: np.ndarray,
+    framing: _Framing,
+    rng: np.random.Generator,
+    taken: list[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A pose (``rvec``, ``tvec``) whose printed sheet (``half_extent`` in drawing widths) lies
+    inside the frame and clear of the boxes in ``taken`` (its own is added); ``None`` when none
+    is found in 80 tries."""
+    W, H = size
+    hx, hy = half_extent
+    sheet = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    for attempt in range(80):
+        # crowded scenes: after every 20 failed tries, prints get smaller
+        frac = rng.uniform(*framing.size) * 0.75 ** (attempt // 20)
+        dist = cam.fx / (frac * W)
+        tilt = math.radians(rng.uniform(0, framing.tilt_deg))
+        axis = rng.uniform(0, 2 * math.pi)
+        spin = rng.uniform(*framing.spin)
+        R_tilt, _ = cv2.Rodrigues(np.array([math.cos(axis), math.sin(axis), 0.0]) * tilt)
+        R_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, spin]))
+        R = R_tilt @ R_spin
+        px, py = rng.uniform(*framing.centre) * W, rng.uniform(*framing.centre) * H
+        ray = np.linalg.solve(cam.matrix, np.array([px, py, 1.0]))
+        tvec = ray / ray[2] * dist
+        rvec, _ = cv2.Rodrigues(R)
+        Hm = homography_from_pose(cam, rvec.reshape(3), tvec)
+        pts = np.column_stack([sheet, np.ones(4)]) @ Hm.T
+        if (pts[:, 2] <= 0).any():
+            continue
+        quad = pts[:, :2] / pts[:, 2:3]
+        if quad[:, 0].min() < 1 or quad[:, 1].min() < 1 or quad[:, 0].max() > W - 2 or quad[:, 1].max() > H - 2:
+            continue
+        box = np.array([quad[:, 0].min(), quad[:, 1].min(), quad[:, 0].max(), quad[:, 1].max()])
+        if any(_overlap(box, other) for other in taken):
+            continue
+        taken.append(box)
+        return rvec.reshape(3), tvec
+    return None
+
+
+#: A close-up's print: the drawing 60-80 % of the frame's width, near its centre, tilted at most
+#: a third as much as a scene's prints, turned at most the severity's ``spin_deg``.
+CLOSE_UP_SIZE = (0.6, 0.8)
+CLOSE_UP_TILT_SHARE = 1 / 3
+
+
+def close_up_photo(
+    art: np.ndarray, severity: str, rng: np.random.Generator, size: int = 240, desk: float | None = None
+) -> np.ndarray:
+    """A photo in which one print fills most of the frame: a scan or a close phone photo.
+
+    ``art`` (``(H, W)`` float, 1 = white; a render of a code, or anything else) is printed on a
+    sheet with a margin and photographed as scenes are (:class:`SceneMaker`), but near-frontal,
+    filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk.
+
+    Returns:
+        ``(size, size, 3)`` uint8 BGR photo.
+    """
+    sv = photo_ranges(severity)
+    frame = (size, size)
+    cam = _camera(frame, rng)
+    ah, aw = art.shape
+    margin = rng.uniform(0.08, 0.15)
+    spin = math.radians(sv.spin_deg)
+    framing = _Framing(CLOSE_UP_SIZE, sv.tilt_deg * CLOSE_UP_TILT_SHARE, (-spin, spin), (0.47, 0.53))
+    pose = _pose(cam, frame, np.array([0.5 + margin, ah / (2 * aw) + margin]), framing, rng, [])
+    if pose is None:  # pragma: no cover - a frontal print of 60-80 % always fits after a few tries
+        raise DeepMorphError("no close-up pose fits the frame")
+    plane = homography_from_pose(cam, *pose)
+    tone = rng.uniform(0.55, 0.8) if desk is None else desk  # a desk darker than the paper
+    img = np.full((size, size, 3), tone, np.float32)
+    art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
+    _print_and_place(img, np.asarray(art, np.float32), plane @ art_to_frame, margin, aw, rng)
+    return _photograph(img, sv, rng)
+
+
 def _shake(rng: np.random.Generator, size: tuple[int, int], px: float) -> np.ndarray:
     """One random step of a hand-held camera: a shift, turn and zoom about the image centre
     that moves the corners by about ``px`` pixels."""
@@ -382,7 +430,7 @@ def _print_and_place(
     img += warped * mask[..., None]
 
 
-def _photograph(img: np.ndarray, sv: SceneSeverity, rng: np.random.Generator) -> np.ndarray:
+def _photograph(img: np.ndarray, sv: PhotoRanges, rng: np.random.Generator) -> np.ndarray:
     """Light, shadow, contrast, blur, motion, noise and JPEG: float BGR -> uint8 BGR."""
     H, W = img.shape[:2]
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
@@ -415,4 +463,4 @@ def _photograph(img: np.ndarray, sv: SceneSeverity, rng: np.random.Generator) ->
     return cv2.imdecode(buf, cv2.IMREAD_COLOR)
 
 
-__all__ = ["SCENE_SEVERITIES", "Placement", "Scene", "SceneMaker", "SceneSeverity", "distractor_svgs"]
+__all__ = ["CLOSE_UP_SIZE", "Placement", "Scene", "SceneMaker", "close_up_photo", "distractor_svgs"]

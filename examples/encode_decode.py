@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 import deepmorph
-from deepmorph_core.capture import simulate_photo
 from deepmorph_core.render import render_svg
+from deepmorph_detect.scenes import close_up_photo
 
 DRAWING = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" viewBox="0 0 24 24"
   fill="none" stroke="black" stroke-width="2.5" stroke-linecap="round" dm:move="2.5">
@@ -42,7 +42,7 @@ def main() -> None:
 
     # 3. Decode: from a real render, and from a simulated phone photo of a print.
     render = render_svg(code.svg, 300)
-    photo = simulate_photo(render, "easy", np.random.default_rng(0))
+    photo = close_up_photo(render, "easy", np.random.default_rng(0))
     for name, image in (("render", render), ("photo", photo)):
         for found in model.decode(image):
             r = found.result

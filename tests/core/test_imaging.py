@@ -10,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from deepmorph_core.bundled import BUNDLED_DRAWING
-from deepmorph_core.capture import simulate_photo
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.framing import (
     align_to_frame,
@@ -90,15 +89,6 @@ def test_blank_and_flat_images_have_no_drawing(ghost) -> None:
     assert align_to_frame(np.full((80, 80), 0.2, np.float32), (96, 96), target) is None
     noise = np.random.default_rng(0).uniform(0.97, 1.0, (80, 80)).astype(np.float32)
     assert align_to_frame(noise, (96, 96), target) is None
-
-
-def test_simulated_photo_is_framed_despite_desk_and_angle(ghost) -> None:
-    md, base = ghost
-    target = render_moments(torch.from_numpy(base)[None, None])[0]
-    photo = simulate_photo(render_svg(md.to_svg(md.neutral_values()[0]), 400), "medium", np.random.default_rng(1))
-    assert photo.dtype == np.uint8 and photo.shape == (240, 240)
-    frame, _ = align_to_frame(photo / 255.0, (96, 96), target)
-    assert np.abs(frame - base).mean() < 0.12  # same drawing, roughly registered
 
 
 def test_read_image_errors(tmp_path) -> None:

@@ -1,0 +1,44 @@
+"""The capture simulator: close-ups fill the frame and are read; the same seed
+gives the same photo; every severity of the one table makes a photo."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from deepmorph_core.bundled import BUNDLED_DRAWING
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.render import render_svg
+from deepmorph_core.severity import PHOTO_SEVERITIES
+from deepmorph_detect.scenes import close_up_photo
+
+
+@pytest.fixture(scope="module")
+def ghost_render() -> np.ndarray:
+    md = MorphableDrawing.load(BUNDLED_DRAWING)
+    return render_svg(md.to_svg(md.neutral_values()[0]), 400)
+
+
+def test_close_ups_of_codes_fill_the_frame_and_are_read(model, locator) -> None:
+    rng = np.random.default_rng(1)
+    for severity in PHOTO_SEVERITIES:
+        payload = rng.integers(0, 2, model.codec.spec.payload_bits).astype(np.uint8)
+        photo = close_up_photo(render_svg(model.encode(payload), 400), severity, rng)
+        assert photo.dtype == np.uint8 and photo.shape == (240, 240, 3)
+        (found,) = locator.locate(photo)
+        assert found.result.ok and np.array_equal(found.result.payload, payload), severity
+        x0, y0, x1, y1 = found.bbox
+        assert x1 - x0 > 0.5 * 240  # the drawing fills most of the frame
+
+
+def test_close_ups_are_seeded_and_every_photo_severity_makes_one(ghost_render) -> None:
+    render = ghost_render
+    a = close_up_photo(render, "hard", np.random.default_rng(5), size=128)
+    b = close_up_photo(render, "hard", np.random.default_rng(5), size=128)
+    assert np.array_equal(a, b)
+    assert PHOTO_SEVERITIES == ("easy", "medium", "hard")
+    darkest = [close_up_photo(render, s, np.random.default_rng(0), size=128).mean() for s in PHOTO_SEVERITIES]
+    assert all(10 < d < 245 for d in darkest)
+    with pytest.raises(DeepMorphError, match="'none' has no photo settings"):
+        close_up_photo(render, "none", np.random.default_rng(0))
