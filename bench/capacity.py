@@ -94,9 +94,9 @@ def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int)
     """
     import cv2
     import numpy as np
-    from deepmorph_detect.scenes import close_up_photo
 
     from deepmorph_core.render import render_svg
+    from deepmorph_detect.scenes import close_up_photo
 
     rng = np.random.default_rng(seed)
     out: list[tuple[str, Any]] = []
@@ -189,7 +189,6 @@ def _score(results: list[Any], probs: Any, code: Any, payloads: Any) -> dict[str
 def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any]]) -> dict[str, Any]:
     import numpy as np
     import torch
-    from deepmorph_detect.scenes import close_up_photo
 
     from deepmorph_core.corruption import build_pipeline
     from deepmorph_core.framing import canonicalize, render_moments
@@ -197,6 +196,7 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     from deepmorph_core.render import render_svg
     from deepmorph_core.train import real_renders
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.scenes import close_up_photo
 
     model.eval()
     locator = Locator(model)

@@ -39,7 +39,7 @@ def mask_moments(mask: Tensor) -> Tensor:
     return torch.where(empty[:, None], frame, torch.stack([cx, cy, sx, sy], 1))
 
 
-def ink_moments(mask: np.ndarray) -> np.ndarray:
+def mask_moments_one(mask: np.ndarray) -> np.ndarray:
     """:func:`mask_moments` of one ``(H, W)`` mask, by OpenCV: ``(4,)`` float64 cx, cy, sx, sy.
     The same numbers (to float rounding) about six times faster, for decoding one photo."""
     H, W = mask.shape
@@ -104,7 +104,7 @@ def align_to_frame(
     if found is None:
         return None
     mask, box = found
-    moments = ink_moments(mask)
+    moments = mask_moments_one(mask)
     goal = target.detach().cpu().numpy() if isinstance(target, Tensor) else np.asarray(target)
     src = norm
     shrink = float(goal[2]) / float(moments[2])

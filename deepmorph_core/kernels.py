@@ -16,6 +16,8 @@ import numpy as np
 # area_resize's own path: an axis shrunk by q/p in lowest terms with q at most this many (every
 # p source pixels give q output pixels) is resampled with one small matrix per period
 MAX_AREA_OUTPUTS_PER_PERIOD = 8
+#: A 3x3 square structuring element (dilations by one pixel, 3x3 local maxima).
+SQUARE_3X3 = np.ones((3, 3), np.uint8)
 
 
 @functools.lru_cache(maxsize=32)

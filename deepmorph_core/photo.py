@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.kernels import component_label_type, label_set, percentiles
+from deepmorph_core.kernels import SQUARE_3X3, component_label_type, label_set, percentiles
 
 # float images a little outside [0, 1] (noise, rounding) are clipped; beyond this they are on another scale
 FLOAT_RANGE_SLACK = 2.0
@@ -139,8 +139,5 @@ def ink_mask(gray: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]] |
         return None
     # The moments must see what training sees: pixels darker than 0.5 (here within the kept
     # components, grown by a pixel to undo the blur's shift of their edges).
-    grown = cv2.dilate(label_set(labels, n, keep, np.uint8), _SQUARE_3X3) > 0
+    grown = cv2.dilate(label_set(labels, n, keep, np.uint8), SQUARE_3X3) > 0
     return grown & (gray < 0.5), (int(x0), int(y0), int(x1), int(y1))
-
-
-_SQUARE_3X3 = np.ones((3, 3), np.uint8)

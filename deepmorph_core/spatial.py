@@ -25,7 +25,7 @@ REACH = 0.1  # scale of the predicted homography entries (normalised coordinates
 MIN_DEPTH = 0.25  # smallest projective denominator allowed (keeps the warp finite)
 
 
-def pixel_grid(height: int, width: int) -> Tensor:
+def normalised_grid(height: int, width: int) -> Tensor:
     """``(H, W, 3)`` homogeneous normalised coordinates of the pixel centres
     (``grid_sample``'s convention with ``align_corners=False``)."""
     ys = (torch.arange(height, dtype=torch.float32) * 2 + 1) / height - 1
@@ -38,7 +38,7 @@ def warp_homography(images: Tensor, homography: Tensor, grid: Tensor) -> Tensor:
     """Resample white-paper images through homographies in normalised coordinates.
 
     Shape: images ``(B, 1, H, W)`` (1 = white), homography ``(B, 3, 3)`` mapping output to
-    input coordinates, grid ``(H, W, 3)`` from :func:`pixel_grid` -> ``(B, 1, H, W)``.
+    input coordinates, grid ``(H, W, 3)`` from :func:`normalised_grid` -> ``(B, 1, H, W)``.
     Everything the warp brings in from outside the image reads as paper.
     """
     pts = torch.einsum("hwk,bjk->bhwj", grid, homography)
@@ -74,7 +74,7 @@ class SpatialTransformer(nn.Module):
         )
         nn.init.zeros_(self.head[-1].weight)
         nn.init.zeros_(self.head[-1].bias)
-        self.register_buffer("grid", pixel_grid(*image_size), persistent=False)
+        self.register_buffer("grid", normalised_grid(*image_size), persistent=False)
 
     def homography(self, images: Tensor) -> Tensor:
         """``(B, 3, 3)`` output -> input homographies in normalised coordinates."""
@@ -86,4 +86,4 @@ class SpatialTransformer(nn.Module):
         return warp_homography(images, self.homography(images), self.grid.to(images.dtype))
 
 
-__all__ = ["MIN_DEPTH", "REACH", "SpatialTransformer", "pixel_grid", "warp_homography"]
+__all__ = ["MIN_DEPTH", "REACH", "SpatialTransformer", "normalised_grid", "warp_homography"]

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import torch
 
-from deepmorph_core.kernels import area_resize
+from deepmorph_core.kernels import SQUARE_3X3, area_resize
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_core.protocols import Candidate
@@ -19,9 +19,6 @@ from deepmorph_detect.runtime import detector_graph, onnx_or_torch
 
 # x, y of the centres of a 3x3 block of heatmap cells, from its top-left cell
 _CELL_CENTRES = np.stack(np.mgrid[0:3, 0:3][::-1], -1).astype(np.float64) + 0.5
-
-
-_BLOCK = np.ones((3, 3), np.uint8)
 
 
 class CentreNetDetector:
@@ -69,7 +66,7 @@ class CentreNetDetector:
             heat, corners = self.net(x)
             p_np, c_np = torch.sigmoid(heat)[0, 0].numpy(), corners[0].numpy()
         # local maxima over 3x3 cells (the border counts as lower than any cell)
-        peaks = (p_np == cv2.dilate(p_np, _BLOCK)) & (p_np > self.threshold)
+        peaks = (p_np == cv2.dilate(p_np, SQUARE_3X3)) & (p_np > self.threshold)
         ys, xs = np.nonzero(peaks)
         order = np.argsort(-p_np[ys, xs])[: self.max_detections]
         out = []

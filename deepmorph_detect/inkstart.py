@@ -32,9 +32,10 @@ def _matrix_sqrt(cov: np.ndarray) -> np.ndarray | None:
     return v @ np.diag(np.sqrt(w)) @ v.T
 
 
-def ink_moments(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Mean ``(2,)`` and covariance ``(2, 2)`` of ``(N, 2)`` ink points; ``None`` when too few."""
-    if len(points) < MIN_INK_PIXELS:
+def point_moments(points: np.ndarray, min_points: int = MIN_INK_PIXELS) -> tuple[np.ndarray, np.ndarray] | None:
+    """Mean ``(2,)`` and covariance ``(2, 2)`` of ``(N, 2)`` points; ``None`` when fewer than
+    ``min_points`` (too few ink pixels give no moments worth matching)."""
+    if len(points) < max(min_points, 2):
         return None
     return points.mean(0), np.cov(points.T)
 
@@ -86,7 +87,7 @@ def ink_starts(
     (``drawing_ink``: mean and covariance in SVG units) onto those of the print's ink near
     ``quad``, one per turn in ``turns`` equal steps; empty when no ink moments are found."""
     points = print_ink(gray, quad)
-    found = None if points is None else ink_moments(points)
+    found = None if points is None else point_moments(points)
     if found is None:
         return []
     mean, cov = found
@@ -107,4 +108,4 @@ def ink_starts(
     return starts
 
 
-__all__ = ["INK_REACH", "ink_moments", "ink_starts", "print_ink"]
+__all__ = ["INK_REACH", "ink_starts", "point_moments", "print_ink"]

@@ -27,7 +27,7 @@ import numpy as np
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.icalign import InverseECC, inverse3
-from deepmorph_detect.inkstart import ink_starts
+from deepmorph_detect.inkstart import ink_starts, point_moments
 
 LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
@@ -83,8 +83,10 @@ class Template:
         finest = max(self.images)
         ys, xs = np.nonzero(self.images[finest] < 0.5)
         points = np.stack([xs, ys, np.ones_like(xs)], 0).astype(np.float64)
-        svg = (self.to_svg_units(finest) @ points)[:2].T
-        return svg.mean(0), np.cov(svg.T)
+        moments = point_moments((self.to_svg_units(finest) @ points)[:2].T, min_points=2)
+        if moments is None:  # a drawing of a single ink pixel: no spread to match
+            return np.asarray(self.viewbox[:2], np.float64), np.eye(2)
+        return moments
 
     def solver(self, width: int, smooth: int) -> InverseECC:
         """The inverse-compositional ECC solver for the level at ``width`` (made once)."""

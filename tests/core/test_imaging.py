@@ -15,8 +15,8 @@ from deepmorph_core.framing import (
     align_to_frame,
     canonicalize,
     canonicalize_one,
-    ink_moments,
     mask_moments,
+    mask_moments_one,
     render_moments,
 )
 from deepmorph_core.image_io import read_image, save_gray
@@ -68,7 +68,7 @@ def test_one_mask_moments_match_the_batched_ones(ghost) -> None:
     rng = np.random.default_rng(3)
     for mask in (base < 0.5, rng.random((70, 130)) < 0.1, np.zeros((40, 50), bool)):
         expected = mask_moments(torch.from_numpy(mask)[None])[0].numpy()
-        np.testing.assert_allclose(ink_moments(mask), expected, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(mask_moments_one(mask), expected, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("width, pad, tol", [(96, 0, 0.03), (300, 40, 0.03), (57, 5, 0.06)])

@@ -14,7 +14,7 @@ from deepmorph_core.bundle import BundleMeta
 from deepmorph_core.codec import CodecSpec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig
-from deepmorph_core.spatial import SpatialTransformer, pixel_grid, warp_homography
+from deepmorph_core.spatial import SpatialTransformer, normalised_grid, warp_homography
 from tests.conftest import make_svg
 
 
@@ -40,7 +40,7 @@ def test_a_translation_homography_shifts_by_whole_pixels_and_brings_in_paper() -
     shift = 3  # output pixel x reads input pixel x + 3
     H = torch.eye(3).repeat(2, 1, 1)
     H[:, 0, 2] = 2 * shift / 40  # normalised coordinates span 2 over the width
-    out = warp_homography(images, H, pixel_grid(40, 40))
+    out = warp_homography(images, H, normalised_grid(40, 40))
     assert torch.allclose(out[..., :-shift], images[..., shift:], atol=1e-5)
     assert torch.allclose(out[..., -shift:], torch.ones_like(out[..., -shift:]))  # from outside: paper
 
@@ -50,7 +50,7 @@ def test_warp_agrees_with_opencv_perspective() -> None:
     in pixels (pixel centres at +0.5)."""
     img = strokes(1, size=64, seed=4)
     H = torch.tensor([[1.03, 0.02, 0.01], [-0.01, 0.98, -0.02], [0.03, -0.02, 1.0]])
-    out = warp_homography(img, H[None], pixel_grid(64, 64))[0, 0].numpy()
+    out = warp_homography(img, H[None], normalised_grid(64, 64))[0, 0].numpy()
     # pixel (u, v) -> normalised (2u + 1) / 64 - 1, and back
     to_norm = np.array([[2 / 64, 0, 1 / 64 - 1], [0, 2 / 64, 1 / 64 - 1], [0, 0, 1]])
     H_px = np.linalg.inv(to_norm) @ H.numpy().astype(np.float64) @ to_norm  # output px -> input px
@@ -72,7 +72,7 @@ def test_the_transformer_learns_to_undo_a_shift() -> None:
     images = strokes(64, size=48, seed=1)
     H = torch.eye(3).repeat(64, 1, 1)
     H[:, 0, 2] = -2 * 2.5 / 48  # content moved 2.5 px to the right
-    shifted = warp_homography(images, H, pixel_grid(48, 48))
+    shifted = warp_homography(images, H, normalised_grid(48, 48))
     st = SpatialTransformer((48, 48))
     opt = torch.optim.Adam(st.parameters(), lr=3e-3)
     losses = []
