@@ -96,6 +96,10 @@ def decode(
     ] = None,
     every: Annotated[int, typer.Option("--every", min=1, help="Use every N-th frame of a video.")] = 1,
     hard_only: Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")] = False,
+    detector: Annotated[
+        Optional[str],
+        typer.Option("--detector", help="The detector plugin to propose drawings (default: the one the model names)."),
+    ] = None,
 ) -> None:
     """Find every drawing in photos, read its payload, and give its keypoints and camera pose."""
     import cv2
@@ -111,6 +115,7 @@ def decode(
     from deepmorph_detect.track import SequenceLocator
 
     m = DeepMorphModel.load(model)
+    locator = Locator(m, detector=detector)
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []
     for path in inputs:  # every input is checked before any work
@@ -124,7 +129,6 @@ def decode(
             _fits_camera(cam, path, (image.shape[1], image.shape[0]))
             jobs.append(("image", path, image))
     targets = _overlay_targets(overlay, [path for _, path, _ in jobs], model)
-    locator = Locator(m)
     soft = not hard_only
     results: list[dict[str, Any]] = []
 
