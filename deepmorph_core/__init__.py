@@ -1,5 +1,7 @@
-"""DeepMorph core: plugin spine, SVG reading and writing, bound-specs, morphs and the soft
-rasterizer. ``hookimpl`` is what plugins decorate their hook functions with."""
+"""DeepMorph core, the bottom layer the other packages build on: the plugin spine, SVG reading
+and writing, bound-specs, morphs and the soft rasterizer, the payload codec, the networks and
+their training, model bundles, photo preprocessing and the command-line frame. ``hookimpl`` is
+what plugins decorate their hook functions with."""
 
 from deepmorph_core.hookspecs import hookimpl
 

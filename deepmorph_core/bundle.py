@@ -53,8 +53,8 @@ class DetectorMeta(BaseModel):
     """The detector stored beside the codec networks (``deepmorph train-detector``).
 
     Attributes:
-        name: the registered detector that reads these weights (bundles from before the name
-            was stored hold the built-in ``centrenet``).
+        name: the registered detector that reads these weights (the built-in ``centrenet``
+            when a bundle stores no name).
     """
 
     model_config = ConfigDict(extra="forbid")

@@ -44,10 +44,9 @@ def area_resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     shrunk by a ratio like 640 -> 256 (to float rounding: 1e-7), in a fraction of the time.
 
     OpenCV's area resampling is quick at whole-number ratios but takes a slow general path at
-    others: 0.37 ms for the 640x480 -> 256x192 that every photo's detector input needs, 3.6 ms
-    from 1920x1080 and 28 ms from a 4032x3024 phone photo. The same averages, period by period,
-    are two small matrix products: 0.15, 0.63 and 4.1 ms. Whole-number ratios, other images and
-    long periods go to OpenCV.
+    others, such as the 640x480 -> 256x192 that every photo's detector input needs. The same
+    averages, period by period, are two small matrix products (about 7x faster from a phone
+    photo). Whole-number ratios, other images and long periods go to OpenCV.
 
     Args:
         size: ``(width, height)`` as OpenCV takes it.
@@ -73,8 +72,8 @@ def area_resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def percentiles(values: np.ndarray, qs: tuple[float, ...]) -> np.ndarray:
     """``np.percentile(values, qs)`` (linear interpolation), to the last bit, in a fraction of
     the time: the order statistics the percentiles fall between (:func:`order_statistics`) and
-    numpy's own interpolation formula, without its general machinery (0.44 against 0.08 ms for
-    a 192 px view, which every reading of a photo frames by its percentiles).
+    numpy's own interpolation formula, without its general machinery (about 5x faster on the
+    192 px view every reading of a photo frames by its percentiles).
 
     Returns:
         ``(len(qs),)`` float64.
@@ -156,7 +155,8 @@ def component_label_type(height: int, width: int) -> int:
 
 def label_set(labels: np.ndarray, n: int, chosen: list[int], dtype: type = bool) -> np.ndarray:
     """Where ``labels`` (``n`` components) is one of ``chosen`` (as ``dtype``: bool, or 0/1):
-    a table lookup (``np.isin`` sorts and took a third of :func:`ink_mask`'s time)."""
+    a table lookup (``np.isin`` sorts, which costs a third of
+    :func:`~deepmorph_core.photo.ink_mask`'s time)."""
     table = np.zeros(n, dtype=dtype)
     table[chosen] = 1
     return table[labels]

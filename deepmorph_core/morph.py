@@ -164,7 +164,7 @@ class MorphSpace:
     def values_from_unit_one(self, unit: np.ndarray) -> np.ndarray:
         """:meth:`values_from_unit` of one ``(N_v,)`` row, in numpy float64: the same numbers
         (to float rounding) without a dozen torch operations on a few dozen values, which the
-        photo chain paid for every payload it checks (about 0.3 ms of a 11 ms frame)."""
+        photo chain would pay for every payload it checks (about 3 % of a frame's time)."""
         unit = np.asarray(unit, dtype=np.float64).reshape(-1)
         if unit.shape[0] != self.n_variables:
             raise ValueError(f"expected {self.n_variables} variables, got shape {unit.shape}")
@@ -251,7 +251,7 @@ class MorphSpace:
 
     def _base_points_np(self, index: int) -> np.ndarray:
         """A primitive's unmorphed control points as float64 NumPy, made once: decoding a photo
-        writes a morph per payload read, and rebuilding them was a fifth of that."""
+        writes a morph per payload read, and rebuilding them each time costs a fifth of that."""
         return self._base_points(index, torch.float64, torch.device("cpu")).numpy()
 
     # -- writing back ---------------------------------------------------------------------

@@ -30,8 +30,8 @@ from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg_ink
 
-# a variable changing the picture by at most this share of the median variable is invisible: the
-# Feather package's and table's reach 0.03, the next ones 0.17; the bundled ghost's weakest, 0.49
+# a variable changing the picture by at most this share of the median variable is invisible: it
+# lies in the wide gap between variables a renderer does not show and the weakest ones it does
 INVISIBLE = 0.1
 
 
@@ -196,10 +196,7 @@ def capacity_warning(code_bits: int, visibility: np.ndarray, label: str) -> str 
     visible variables (``visibility`` from :meth:`MorphableDrawing.visibility`; those at
     :data:`INVISIBLE` or less do not count). Each code bit needs a variable of its own to be
     read reliably; with fewer, bits share variables as levels the decoder does not separate,
-    or land on variables no renderer shows. Measured (README, 24 bits, 38 code bits): the
-    Feather ``camera`` has 26 variables, 0 % read; ``package`` has 40, 6 of them invisible,
-    40 % read under medium corruption; ``cpu`` has 40, all visible, 93.5 %; ``codesandbox``
-    has 54, 48 visible, 97.4 % (its weakest visible variables carry the bits that fail)."""
+    or land on variables no renderer shows."""
     visible = int((np.asarray(visibility) > INVISIBLE).sum())
     if code_bits <= visible:
         return None

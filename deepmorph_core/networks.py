@@ -2,7 +2,7 @@
 CNN decoder (a few strided convolutions and a two-layer head).
 
 Both are plain ``nn.Module``s over batched tensors; the morph space, rasterizer and
-augmentations in between live in their own modules (:mod:`deepmorph_core.pipeline` wires them).
+augmentations in between live in their own modules (:mod:`deepmorph_core.train` wires them).
 """
 
 from __future__ import annotations
@@ -46,11 +46,10 @@ def spread_weights(
     """A sparse start for the encoder matrix ``A``: each code bit drives its own variables.
 
     Why: a dense random ``A`` mixes all ``N_b`` bits into every variable, so one bit moves each
-    variable by a tenth of its range and the decoder must undo a nonlinear mixture. Measured on
-    the bundled ghost (58 variables, 38 code bits, 2400 steps): 2.3 % of code bits read wrong
-    even on clean renders. Giving each bit whole variables, pushed to the ends of their bounds
-    (``sigmoid(+-strength)``, 98 % of the way for 4.0), makes every bit a full-range move: the
-    same training then reads about 99.5 % of bits right under medium capture corruption.
+    variable by a tenth of its range and the decoder must undo a nonlinear mixture, which it
+    does poorly even on clean renders. Giving each bit whole variables, pushed to the ends of
+    their bounds (``sigmoid(+-strength)``, 98 % of the way for 4.0), makes every bit a
+    full-range move.
 
     How:
 
@@ -131,8 +130,8 @@ class DecoderConfig(BaseModel):
         channels: output channels of each stride-2 convolution.
         hidden: width of the first fully connected layer.
         spatial_transformer: resample each image through a learned homography before reading
-            it (:class:`~deepmorph_core.spatial.SpatialTransformer`). Off in bundles written
-            before it existed.
+            it (:class:`~deepmorph_core.spatial.SpatialTransformer`). Off by default, so a
+            bundle without this field loads without one.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)

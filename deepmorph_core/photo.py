@@ -24,7 +24,7 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     Pixels may be uint8 (0-255), uint16 (0-65535), bool, or float in ``[0, 1]``; a float image
     on another scale (0-255, say) is an error rather than a silently white or black image. A
     2-D float32 image already in ``[0, 1]`` (say, this function's own output) comes back as it
-    is, not copied: the photo chain passes its gray frame on, and each copy cost a fifth of a
+    is, not copied: the photo chain passes its gray frame on, and each copy costs a fifth of a
     millisecond.
 
     Raises:

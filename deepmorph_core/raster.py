@@ -6,14 +6,14 @@ in pixels; black paints add, white paints subtract, and the sum is squashed with
 between runs of different colour, so that a white stroke over black strokes shows white
 (bottom-up layering).
 
-Three departures from a literal reading, all measured (``bench/``):
+Three departures from a literal reading (benchmarked in ``bench/``):
 
 * **Culling.** The paper names the rasterizer's memory as its bottleneck. A paint is evaluated
   only over the pixel rectangle its batch can reach (its outline's bounding box, padded by the
   stroke half-width and the sigmoid's reach). Strokes go further: every piece of every stroke in
   a run is paired with just the pixels within reach of it and evaluated in one vectorised pass
   (:mod:`deepmorph_core.flat`). Beyond the reach ``sigmoid(s * sdf)`` is below ``3.4e-4``, so the
-  result matches the dense reference to within ``2e-3`` (measured ``3.4e-4`` on the benchmark).
+  result matches the dense reference to within ``2e-3``.
 * **Soft union within a run.** Same-coloured paints are combined as ``1 - prod(1 - c_i)``
   (accumulated additively as ``sum log(1 - c_i)``) instead of ``sum c_i``: where the soft edges
   of two strokes overlap, a plain sum reads as solid ink beyond both edges (visible bulges at

@@ -65,18 +65,16 @@ class TrainConfig(BaseModel):
         small_prints: share of each batch captured as a small print: shrunk to
             :data:`SMALL_PRINT_SCALE` of the decoder's width, corrupted at that size (the
             preset scaled to it), and enlarged again. A print 60 px wide in a photo is blurred,
-            noised and compressed at 60 px, not at the decoder's width. The bundled ghost's
-            decoder tuned so (:func:`tune_decoder`) read more payloads from photo scenes, and
-            also let 2 wrong ones through CRC-8 in 300 hard scenes (``docs/training.md``).
+            noised and compressed at 60 px, not at the decoder's width. A decoder tuned so
+            (:func:`tune_decoder`) reads more payloads from photos, and lets a few more CRC
+            collisions through (``docs/training.md``).
         severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
             at the end of the curriculum.
         curriculum: share of ``steps`` over which corruption ramps up through the milder presets
-            (a decoder facing full corruption from a random start learns nothing: measured at
-            chance after 350 steps at ``medium``, against 82 % bit accuracy without corruption).
+            (a decoder facing full corruption from a random start stays at chance).
         encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
-            variables at full range (:func:`deepmorph_core.model.spread_weights`; on the bundled
-            ghost, bit errors under medium corruption fall from about 4 % to 0.5 %).
-            ``random``: the paper's dense random matrix.
+            variables at full range (:func:`deepmorph_core.networks.spread_weights`), for far
+            fewer bit errors under corruption. ``random``: the paper's dense random matrix.
         spatial_transformer: put a learned homography in front of the decoder
             (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
             perspective and turn that framing by ink moments leaves (``docs/training.md``).
@@ -402,7 +400,7 @@ def train_model(
             config = TrainConfig(
                 **{
                     **model.meta.train,
-                    # the checkpoint's decoder decides (one from before the transformer has none)
+                    # the checkpoint's decoder decides (one without a transformer keeps none)
                     "spatial_transformer": model.meta.decoder.spatial_transformer,
                     **{k: v for k, v in overrides.items() if k in ("steps", "threads")},
                 }

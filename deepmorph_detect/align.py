@@ -22,7 +22,7 @@ from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 # a detector outline aligned in the photo below this is aligned in flat light too, and the better
-# kept: a print cut by a sharp shadow aligned at 0.58 with its corners 7 px off, bent to the edge
+# kept: a sharp shadow across a print can bend the alignment to its edge and still pass the bar
 WEAK_ALIGNMENT = 0.65
 SAME_DRAWING = 0.3  # two alignments whose centres are closer than this share of the diagonal
 
@@ -111,10 +111,9 @@ class Aligner:
                 alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
                 missed = not self.accepts(alignment)
                 # a shadow edge across the print can make the alignment fail, or bend it and
-                # still leave it above the bar, or leave only a wider search's start to align
-                # (a tilted, blurred print reached 0.74 so and 0.87 in flat light): then it is
-                # aligned in flat light too, and that one is kept when the photo's failed or
-                # correlates worse
+                # still leave it above the bar, or leave only a wider search's start to align:
+                # then it is aligned in flat light too, and that one is kept when the photo's
+                # failed or correlates worse
                 if gray is not None and (missed or alignment.correlation < WEAK_ALIGNMENT or alignment.searched):
                     flat = self.in_flat_light(gray, cand.corners)
                     in_flat = refine(flat, start, self.template, orders=4, accept=self.min_correlation)
@@ -131,9 +130,8 @@ class Aligner:
         """The photo with shadows and light gradients divided out around a detector outline.
 
         A shadow edge across a print is an edge the drawing does not have: ECC bends to it or
-        diverges. Of 10 prints in 400 medium scenes that the detector outlined but alignment
-        missed, 7 aligned once the light was divided out (``flatten_illumination``, sized to
-        the thickest ink feature at the outline's scale).
+        diverges. The light is divided out by ``flatten_illumination``, sized to the thickest
+        ink feature at the outline's scale.
         """
         quad = np.asarray(corners, dtype=np.float64)
         size = max(np.linalg.norm(quad[1] - quad[0]), np.linalg.norm(quad[2] - quad[1]), 1.0)

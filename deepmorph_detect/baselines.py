@@ -29,10 +29,8 @@ class QrClock:
     holding one QR code, one call per :meth:`tick`, taking the frames in turn.
 
     A benchmark ticks it after each of its own frames, so that QR's median is taken over the
-    same stretch of the run as the chain's. Timed in a block after the chain's frames instead,
-    four runs in one process on the same 100 hard scenes put the chain at 1.08x (the first,
-    without a warm-up call), 0.78x, 0.87x and 0.82x QR's time: the machine's speed drifts
-    within a minute.
+    same stretch of the run as the chain's: the machine's speed drifts within a minute, so
+    timings taken in separate blocks do not compare.
     """
 
     def __init__(self, model: DeepMorphModel, size: tuple[int, int], frames: int) -> None:

@@ -8,8 +8,8 @@ measures, on the same images:
   the ArUco markers printed at the same size in the same scenes (found by ``cv2.aruco``);
 * time per frame on the current thread count: our locate+decode, ArUco detection on the same
   frames, and ``cv2.QRCodeDetector().detectAndDecode`` on same-size frames holding a QR code,
-  one QR call after each scene (:class:`~deepmorph_detect.baselines.QrClock`), so that both medians are taken over the
-  same minutes: the machine's speed drifts by a fifth within a run.
+  one QR call after each scene (:class:`~deepmorph_detect.baselines.QrClock`), so that both
+  medians are taken over the same minutes: a machine's speed can drift by a fifth within a run.
 
 :func:`tracking_rates` compares searching every frame of a filmed print with following it.
 """
@@ -178,7 +178,7 @@ def tracking_rates(
     model: DeepMorphModel, severity: str, sequences: int, frames: int = 10, shake_px: float = 8.0, seed: int = 0
 ) -> dict[str, Any]:
     """Videos of a hand-held camera, every frame searched (:meth:`Locator.locate`) against
-    drawings followed (:class:`~deepmorph_detect.tracking.SequenceLocator`), on the same frames.
+    drawings followed (:class:`~deepmorph_detect.track.SequenceLocator`), on the same frames.
 
     Each sequence films one print for ``frames`` frames; between frames the camera moves the
     image corners by about ``shake_px`` pixels (:meth:`SceneMaker.make`). Per mode: median ms

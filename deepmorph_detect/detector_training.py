@@ -112,8 +112,8 @@ class SceneBatches(torch.utils.data.IterableDataset):
 
     In a :class:`~torch.utils.data.DataLoader` with workers, worker ``k`` of ``n`` makes steps
     ``start + k``, ``start + k + n``, ...; the loader takes them from its workers in turn, so the
-    steps arrive once each and in order, as with no workers. (Without this split every worker
-    made every step: ``--workers 4`` trained on each batch four times.)
+    steps arrive once each and in order, as with no workers (without the split, every worker
+    would make every step and each batch would be trained on once per worker).
     """
 
     def __init__(self, model: DeepMorphModel, config: DetectorConfig, start: int, stop: int) -> None:

@@ -2,12 +2,11 @@
 
 resvg (:mod:`deepmorph_core.render`) is the reference renderer: scenes are printed with it and
 the tests check against it. Through its Python wheel every render comes back PNG-encoded, and
-encoding and decoding the PNG is most of the cost: 3.1 ms for the ghost at 128 px. Decoding a
-photo renders the drawing morphed with the payload it read (the morph check,
-:meth:`~deepmorph_detect.locate.Locator.fit_morph`), and that render was the largest single
-stage of a decoded frame. Skia (``skia-python``: Chrome's 2D engine and its SVG module) draws
-the same document straight into memory: in 8-bit gray at 4x the size and averaged down, about
-0.6 ms.
+encoding and decoding the PNG is most of the cost. Decoding a photo renders the drawing
+morphed with the payload it read (the morph check,
+:meth:`~deepmorph_detect.check.PayloadChecker.fit_morph`), one of the largest stages of a
+decoded frame. Skia (``skia-python``: Chrome's 2D engine and its SVG module) draws the same
+document straight into memory, in 8-bit gray at 4x the size and averaged down: about 5x faster.
 
 A renderer that draws a document differently from resvg would shift what the photo is
 compared with. :func:`template_renderer` therefore renders the drawing itself with both at
@@ -39,9 +38,8 @@ else:
 Renderer = Callable[[str, int, tuple[float, float, float, float]], np.ndarray]
 
 # Skia is kept for a drawing when its renders differ from resvg's by at most this much on
-# average (intensity in [0, 1]), at every width checked. The ghost differs by 0.005 and the
-# Feather icons by at most 0.010 (anti-aliasing along the edges); a document Skia draws
-# differently (markers, transform-origin) differs by 0.04 and more.
+# average (intensity in [0, 1]), at every width checked: above what anti-aliasing along the
+# edges gives, below a document Skia draws differently (markers, transform-origin: 0.04 and more)
 MAX_MEAN_DIFFERENCE = 0.015
 SUPERSAMPLE = 4  # Skia draws at this many times the size, then averages (see render_svg_skia)
 
@@ -53,8 +51,8 @@ def render_svg_skia(
 
     Drawn in 8-bit gray at ``supersample`` times the size, then area-averaged: Skia's own
     anti-aliasing at the final size puts edges up to 0.09 px off where an exact coverage puts
-    them, and an alignment to such a template turned the camera poses of 300 medium scenes
-    worse (median rotation error 0.142 against resvg's 0.123 degrees); at 4x it is 0.112.
+    them, which makes the poses aligned to such a template worse; supersampled, they are as
+    good as with resvg's.
 
     Returns:
         ``(H, W)`` float32 intensity in ``[0, 1]`` (1 = white), ``H`` from the viewBox's aspect.
@@ -85,8 +83,8 @@ def render_svg_skia(
 def _area_average(gray: np.ndarray, k: int) -> np.ndarray:
     """``(H * k, W * k)`` uint8 gray averaged over ``k x k`` blocks to ``(H, W)`` float32 in
     ``[0, 1]``: halved once in 8 bits where the factor is even and above 2 (OpenCV's quickest
-    path), the rest averaged in float. One 8-bit rounding, as the single 8-bit average had: 0.03
-    against 0.10 ms at 4x for a 128 px template."""
+    path), the rest averaged in float. One 8-bit rounding, as a single 8-bit average has, in
+    about a third of its time."""
     h, w = gray.shape[0] // k, gray.shape[1] // k
     if k > 2 and k % 2 == 0:
         gray = cv2.resize(gray, (gray.shape[1] // 2, gray.shape[0] // 2), interpolation=cv2.INTER_AREA)

@@ -12,13 +12,10 @@ normalised correlation, is the same.
 
 Where it is used: the finer levels of :func:`~deepmorph_detect.refine.refine` and the
 one-level refits (:func:`~deepmorph_detect.refine.refine_at`), which start within a pixel or
-two of the answer. On 199 such solves captured from 80 medium and hard scenes it reached
-the same correlation as OpenCV (median difference 0.0000; no solve on a drawing lower by
-more than 0.02) in 1.15 against 3.9 ms at 128 px. At the coarsest level, which starts from
-the detector's rough outline, a linearisation at the template has the narrower basin (on 133
-coarse solves, 7 that OpenCV took above 0.6 stayed below it), so a coarse solve that ends
-below a bar is done again by OpenCV's forward-additive ECC
-(:func:`~deepmorph_detect.refine._coarse_steps`).
+two of the answer; there it reaches the same correlation as OpenCV. At the coarsest level,
+which starts from the detector's rough outline, a linearisation at the template has the
+narrower basin, so a coarse solve that ends below a bar is done again by OpenCV's
+forward-additive ECC (:func:`~deepmorph_detect.refine._coarse_steps`).
 """
 
 from __future__ import annotations

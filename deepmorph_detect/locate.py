@@ -41,8 +41,7 @@ from deepmorph_detect.results import Located
 from deepmorph_detect.synthesis import MorphSynthesis
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
-# vouches for it (another icon with a face aligned at 0.56 in 1 of 4000 photos without the
-# drawing; the lowest unread true print in 600 hard scenes aligned at 0.60)
+# vouches for it, so another drawing aligning just above the bar is not reported
 UNREAD_MARGIN = 0.05
 
 
@@ -90,7 +89,7 @@ class Locator:
         self.viewbox = md.drawing.viewbox
         unmorphed = md.to_svg(md.neutral_values()[0])
         # Skia when it draws this drawing as resvg does: the morph check renders a morph per
-        # payload read, and resvg's PNG round trip made that the slowest stage of a frame
+        # payload read, and resvg's PNG round trip makes that render slow
         self.renderer_name, self.renderer = template_renderer(unmorphed, self.viewbox, LEVELS)
         self.template = Template.from_svg(unmorphed, self.viewbox, LEVELS, self.renderer)
         self.ink = InkFrame.of(self.template)

@@ -95,7 +95,7 @@ def normalise_input(gray: Tensor) -> Tensor:
 
 def standardise(gray: np.ndarray) -> np.ndarray:
     """:func:`normalise_input` for one ``(H, W)`` float32 image, in numpy: the same numbers
-    (to float rounding) without a torch operation per statistic, which cost four times as much
+    (to float rounding) without a torch operation per statistic, which costs four times as much
     on the 256x192 frame the detector reads."""
     mean, std = cv2.meanStdDev(gray)
     n = gray.size

@@ -31,14 +31,13 @@ from deepmorph_detect.inkstart import ink_starts, point_moments
 
 LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
-FINE_ITERATIONS = 4  # at each finer level (6: corners 0.337 -> 0.348 px at hard, the same payloads, 1.1x the time)
-REFIT_ITERATIONS = 4  # refine_at: one level, from an alignment that is already close (was 5)
+FINE_ITERATIONS = 4  # at each finer level: 6 give the same payloads and corners at 1.1x the time
+REFIT_ITERATIONS = 4  # refine_at: one level, from an alignment that is already close
 ECC_EPS = 1e-5  # ECC stops early when the correlation gains less than this in one iteration
 ORDER_MARGIN = 0.15  # a corner order this far behind the best in plain correlation is not tried
 SWEEP_TURNS = 24  # outline_sweep: turns of the detector's outline in 15-degree steps ...
-# ... each at these scales. The detector outlines some prints (cut by a shadow) at about 0.6x
-# their size; up to 1.85x, 400 scenes each side by side found 1 more print at medium and read 2
-# more at hard, with no detection on 1000 scenes without the drawing and under 1 ms more there
+# ... each at these scales: the detector outlines some prints (cut by a shadow) at about 0.6x
+# their size, so most scales enlarge the outline
 SWEEP_SCALES = (0.85, 1.0, 1.15, 1.35, 1.6, 1.85)
 SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain correlation)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
@@ -199,22 +198,14 @@ def _coarse_steps(
     wide: int | None = None,
 ) -> list[tuple[np.ndarray, float] | None]:
     """The coarsest level's solves from a detector's outline in one or two corner orders, or
-    from a wider search's starts (``(homography, crop)`` each): by inverse composition (about
-    0.4 ms for 15 iterations at 48 px), and when none of them reaches :data:`COARSE_FAST_BAR`,
-    again by OpenCV's forward-additive ECC from the same start (about 1.5 ms), whose basin is
-    wider: from each start (``wide`` None), or from the ``wide`` whose fast solves correlate
-    best.
+    from a wider search's starts (``(homography, crop)`` each): by inverse composition, and
+    when none of them reaches :data:`COARSE_FAST_BAR`, again by OpenCV's forward-additive ECC
+    from the same start (a wider basin, at about 4x the time): from each start (``wide``
+    None), or from the ``wide`` whose fast solves correlate best.
 
-    On prints the fast solve almost always gets there (302 of 654 coarse solves in 300 medium
-    scenes, about one per print); what falls back is mostly clutter and other drawings.
-    Side by side on 900 scenes (medium seeds 9811/9831, hard seed 9832) and 1300 without the
-    drawing: the same prints found and read, with the same corners, no detection without the
-    drawing either way, and the median photo 0.91x-0.95x the time (``docs/detection.md``).
-
-    The runner-up order is not solved by OpenCV once an order clears the bar: a quarter turn
-    off correlates below the right turn's fast solve. Solving it anyway (as each order was
-    until then) cost 1.5 ms on about one hard photo in ten, for the same prints found and
-    read with the same corners in 400 scenes.
+    On prints the fast solve almost always gets there; what falls back is mostly clutter and
+    other drawings. Once one order clears the bar, the runner-up is not solved by OpenCV: a
+    quarter turn off correlates below the right turn's fast solve.
     """
     fast = [_ecc_step(pyramid, H, template, width, iterations, smooth, crop) for H, crop in starts]
     if any(step is not None and step[1] >= COARSE_FAST_BAR for step in fast):
@@ -315,10 +306,8 @@ def refine(
 
     def from_outlines(tries: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, float] | None]:
         """A wider search's coarsest solves: OpenCV's only from the start whose fast solve
-        correlates best. Each start taking it, 368 OpenCV solves in the wider searches of 600
-        scenes reached 2 prints, both found from another start too, and cost about 0.9 ms a
-        photo; with none, a print in 100 was lost that only OpenCV reached, from the best fast
-        solve of its stage (docs/detection.md)."""
+        correlates best (from every start it finds nothing more for its time; from none, the
+        prints only OpenCV reaches are lost)."""
         return _coarse_steps(pyramid, tries, template, levels[0], its[0], 5, wide=1)
 
     scored = _plain_scores(pyramid, starts, template, levels[0])
@@ -334,8 +323,8 @@ def refine(
     elif accept is None:
         return None
     # else: an outline so far off that no corner order correlates at all (a detector's outline
-    # of the ink alone, turned and at 0.6-0.7x the frame): 4 of 500 medium prints were lost
-    # here before the sweep below was tried for them
+    # of the ink alone, turned and at 0.6-0.7x the frame): the wider searches below may still
+    # find the print
 
     if accept is None or (best is not None and best.correlation >= accept):
         return best
@@ -359,9 +348,8 @@ def refine(
             best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
         return best
 
-    # of the 22 drawings the detector proposed but alignment missed in 400 scenes (medium and
-    # hard), 7 were found this way: the detector's corner order was a quarter turn off, and
-    # plain correlation ranked the right order third or fourth
+    # the detector's corner order may be a quarter turn off, with plain correlation ranking the
+    # right order third or fourth: carry every other order through all levels
     others = [i for i, (start, _, _) in enumerate(scored) if i != chosen and start >= min_start]
     fresh = iter(from_outlines([scored[i][1:] for i in others if i >= len(coarse)]))
     for i in others:

@@ -65,7 +65,7 @@ class Located(Detection):
     morph: MorphFit | None = None
     bits: BitEvidence | None = None  # the per-bit check, when it ran (Locator.check_payload)
     # "passed", "failed" (ok withdrawn), "contradicted" (the photo does not show its code bits,
-    # BitEvidence.agrees: ok withdrawn), "not run" (CRC failed); from Locator.track also
+    # BitEvidence.agrees: ok withdrawn), "not run" (CRC failed); from deepmorph_detect.track also
     # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
     # and "track conflict" (another payload than the track's passed: ok withdrawn)
     morph_check: str = "not run"
@@ -80,8 +80,8 @@ class Located(Detection):
     @property
     def confirmed(self) -> bool:
         """Whether the payload is read and confirmed on the print: ``ok``, and its morph check
-        passed in this frame or in an earlier one of its track (what :meth:`Locator.track`
-        follows)."""
+        passed in this frame or in an earlier one of its track (what
+        :func:`~deepmorph_detect.track.track` follows)."""
         return bool(self.result.ok) and self.aligned_to_morph
 
     @property

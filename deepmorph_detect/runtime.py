@@ -3,8 +3,8 @@
 Both networks are small convolution stacks on one image at a time, where PyTorch's eager mode
 spends much of its time between the layers (dispatch, and oneDNN converting each feature map to
 its blocked layout and back). ONNX Runtime's CPU engine fuses each convolution with its ReLU,
-plans its memory once and keeps one layout throughout. On one core (this machine, 640x480
-frames) the decoder takes about 0.6 of torch's time and the detector about 0.75.
+plans its memory once and keeps one layout throughout: on one core the decoder takes about 0.6x
+torch's time, and the detector somewhat more.
 
 The graphs are built here, layer by layer, from the trained weights (:func:`detector_graph`,
 :func:`decoder_graph`) with ``onnx.helper``: no exporter is involved, since PyTorch's

@@ -21,12 +21,6 @@ Two uses (:class:`~deepmorph_detect.locate.Locator`):
   correlation) passes such near misses about half the time.
 * :meth:`MorphSynthesis.read` -- the last look at a drawing no view of which passes the CRC:
   the CNN's log-odds plus the evidence decide every bit again.
-
-Measured on 400 scenes per severity (``docs/detection.md``, with the flat-light alignment):
-payloads read 381 -> 394 at medium and 345 -> 363 at hard; the one wrong payload the old chain
-reported ok was caught, and one right payload (a print cut by a shadow) was lost. Given a
-one-bit-off payload on each of 877 drawings found (``bench/scenes.py``, seeds 0 and 5), the
-morph check passed more than half, the morph check and this one none.
 """
 
 from __future__ import annotations
@@ -44,25 +38,19 @@ from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 
-SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (96 read fewer small prints, slower)
+SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (wider reads fewer small prints, slower)
 BLUR_SIGMAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)  # print blur tried, in pixels at SYNTH_WIDTH
 MAX_CONTRADICTED = 2  # a checked code word may have at most this many bits the photo contradicts
-# ... and the evidence of its WEAKEST_BITS weakest bits must add up to MIN_WEAKEST_SUM or more.
-# On a blurred, steeply tilted print the evidence is noise of about +-0.6: a wrong word can then
-# show only two bits flipped and several barely supported (one passed, at hard, in 400 scenes).
-# Measured on 584 drawings found (300 medium and 300 hard scenes), each asked about its true word,
-# two one-bit-off words, a random one, and 760 CRC-passing words next to its first reading:
-# right words passed 574 (579 without this), wrong ones 0 (3 without). The wrong words' sums
-# reached at most -0.17 (one bit off) and -0.59 (next to the reading); the one that passed, -0.10.
+# ... and the evidence of its WEAKEST_BITS weakest bits must add up to MIN_WEAKEST_SUM or more:
+# on a blurred, steeply tilted print the evidence is noise of about +-0.6, and a wrong word can
+# show only two bits flipped and several barely supported
 WEAKEST_BITS = 5
 MIN_WEAKEST_SUM = 0.5
 # a bit whose evidence on the word's own real-renderer render falls below this is one the soft
 # rasterizer models wrongly (MorphSynthesis.evidence); its evidence is corrected by that error
 MIN_OWN_EVIDENCE = 0.5
 EVIDENCE_WEIGHT = 100.0  # evidence (+-1 scale) against the CNN's logits when reading
-# rounds of reading. On 22 hard-scene misreads 2, 3 and 4 rounds read 11, 11 and 10; on prints
-# with six confident misreadings, 4 rounds read 15 of 18 and 2 rounds 9
-READ_ROUNDS = 4
+READ_ROUNDS = 4  # rounds of reading: a print with several confident misreadings needs more than two
 ALIGN_ITERATIONS = 5  # ECC iterations of the alignment to the CNN's morph before reading
 LIGHT_DEGREE = 1  # degree of the smooth light fields (0: one contrast and brightness for the print)
 VARIANT_CACHE = 16  # code words whose one-bit variants stay rendered (videos repeat payloads)
@@ -203,10 +191,7 @@ class MorphSynthesis:
         error is taken off the photo's evidence (which is linear in the picture); above, the
         difference is within the measurement's noise and is left alone. It matters where a
         bit's change hides under another stroke, where the soft union and a renderer's painting
-        differ: a Feather ``cpu`` model's pins, pushed along themselves into the chip's
-        outline, showed down to -1.3 on clean renders, and the check withdrew right payloads
-        from 6 of 40 clean 400 px renders. On the bundled ghost the own render shows a bit
-        below 0.5 in 4 of 11,134 bit checks (150 medium and 150 hard scenes).
+        differ (pins of a chip pushed along themselves into its outline).
         """
         photo = self.rectified(pyramid, homography)
         renders = self.variants(code)
@@ -249,7 +234,7 @@ class MorphSynthesis:
         morph between the two values of an uncertain bit, which bends the alignment least);
         what misalignment is left, :meth:`evidence` discounts. Then each round asks the photo
         about every bit of the current hard decisions and decides again, until nothing changes.
-        Re-aligning every round to the new bits read no more drawings and took longer.
+        The alignment is not redone each round: that reads no more drawings and takes longer.
         """
         p = np.clip(np.asarray(probabilities, dtype=np.float64), 1e-4, 1 - 1e-4)
         cnn = np.log(p / (1 - p))
@@ -257,8 +242,8 @@ class MorphSynthesis:
         soft = p
         width = max(self.template.images)
         soft_morph = morph_template(self.model, self.template.viewbox, p, width, self.renderer)
-        # OpenCV's ECC: the faster inverse-compositional solve, against this blurry soft morph,
-        # left 2 of 100 hard prints unread that this reads
+        # OpenCV's ECC rather than the faster inverse-compositional solve: its wider basin reads
+        # more hard prints against this blurry soft morph
         aligned = refine_at(pyramid, homography, soft_morph, width, ALIGN_ITERATIONS, wide_basin=True)
         H = homography if aligned is None else aligned.homography
         for _ in range(READ_ROUNDS):

@@ -50,8 +50,7 @@ def track(
 
     Drawings whose payload was not read are not followed: every poor frame in which an
     unread drawing is aligned is one more chance for a wrong reading to pass CRC-8 and the
-    morph check. Following them too let one wrong payload through in 120 hard frames of a
-    trial; ``locate`` found nothing in that frame.
+    morph check.
     """
     gray, cam, pyramid = locator.frame(image, camera)
     found: list[Located] = []
