@@ -13,7 +13,6 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from deepmorph_core.svg.values import parse_numbers
 
-DM_NS = "urn:deepmorph:1"
 ATTRIBUTES = ("move", "shift", "scale", "rotate", "fixed")
 
 

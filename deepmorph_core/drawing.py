@@ -1,8 +1,11 @@
 """Parsing an SVG into a :class:`Drawing`: placed primitives, morphable groups, bounds.
 
 The walk resolves transforms (CTMs), styles and ``dm:`` bound-specs, asks the registry which
-primitive kind reads each element, and keeps the lxml tree so that a morph can be written back
-with everything it does not touch left as it was.
+primitive kind reads each element, and holds every element to the allow-list of
+:mod:`deepmorph_core.svg.policy`: what DeepMorph cannot model is an ``unsupported:`` error with
+its line (or, with ``drop_unsupported``, left out and listed in :attr:`Drawing.dropped`), and
+scripts and event handlers are errors always. The lxml tree is kept so that a morph can be
+written back (:meth:`Drawing.write`), as a fresh document of the modelled parts only.
 """
 
 from __future__ import annotations
@@ -13,19 +16,23 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from deepmorph_core.bounds import DM_NS, BoundSpec, parse_bounds
+from deepmorph_core.bounds import BoundSpec, parse_bounds
 from deepmorph_core.errors import BoundsError, SvgError
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Primitive
+from deepmorph_core.svg import policy
+from deepmorph_core.svg.policy import DM_NS
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.secure import SVG_NS, parse_svg_bytes, read_svg_bytes
 from deepmorph_core.svg.style import Style, compute_style, declarations
 from deepmorph_core.svg.values import parse_numbers, parse_transform
 
-#: Elements that draw nothing and are passed over with their content.
-NON_RENDERING = {"title", "desc", "metadata", "defs"}
-#: Elements that would draw something DeepMorph cannot model: an error, not a silent skip.
-CONTAINERS = {"g", "a"}
+#: The largest ratio of a viewBox's longer side to its shorter: what renders at a sane size.
+MAX_ASPECT = 20.0
+#: Limits that keep every accepted drawing quick to read and to train: primitives and control
+#: points (a morph variable pair each).
+MAX_PRIMITIVES = 2_000
+MAX_CONTROL_POINTS = 10_000
 
 
 @dataclass
@@ -85,6 +92,9 @@ class Drawing:
         primitives: drawable primitives in document (paint) order.
         groups: morphable groups.
         skipped: ``(line, reason)`` for elements passed over (invisible ones).
+        dropped: ``(line, what)`` for what DeepMorph cannot model and left out
+            (``drop_unsupported``); empty otherwise, since such input is an error.
+        styles: every kept element's ``style=""`` reduced to the properties DeepMorph reads.
     """
 
     source: str
@@ -93,6 +103,20 @@ class Drawing:
     primitives: list[PlacedPrimitive] = field(default_factory=list)
     groups: list[MorphGroup] = field(default_factory=list)
     skipped: list[tuple[int | None, str]] = field(default_factory=list)
+    dropped: list[tuple[int | None, str]] = field(default_factory=list)
+    styles: dict[etree._Element, str] = field(default_factory=dict)
+
+    def write(self, root: etree._Element, twin: dict[etree._Element, etree._Element]) -> str:
+        """The document under ``root`` (this drawing's tree, or a copy of it with a morph
+        written in; ``twin`` maps this drawing's elements to that copy's) as SVG text holding
+        only what DeepMorph models (:func:`deepmorph_core.svg.policy.sanitized`)."""
+        shapes = {}
+        for prim in self.primitives:
+            node = twin[prim.element]
+            tag = etree.QName(node).localname
+            shapes[node] = (*policy.GEOMETRY.get(tag, ()), *getattr(prim.primitive, "attributes", ()))
+        styles = {twin[el]: style for el, style in self.styles.items() if el in twin}
+        return etree.tostring(policy.sanitized(root, shapes, styles), encoding="unicode")
 
     def pixel_size(self, width: int) -> tuple[int, int]:
         """``(height, width)`` in pixels for a raster ``width`` pixels wide (aspect kept)."""
@@ -113,6 +137,7 @@ def load_drawing(
     defaults: BoundSpec | None = None,
     registry: Registry | None = None,
     label: str | None = None,
+    drop_unsupported: bool = False,
 ) -> Drawing:
     """Read an SVG file (path) or document (bytes) into a :class:`Drawing`.
 
@@ -121,6 +146,9 @@ def load_drawing(
         defaults: bounds for primitives that have none (below the root's own ``dm:`` defaults).
         registry: plugin registry (default: every installed plugin).
         label: name used in messages when ``source`` is bytes.
+        drop_unsupported: leave out what DeepMorph cannot model (CSS, filters, patterns, text,
+            images ...) and list it in :attr:`Drawing.dropped`, instead of refusing the file.
+            Scripts and event handlers are refused either way.
 
     Raises:
         SvgError: malformed, hostile or unsupported input, with file and line.
@@ -130,24 +158,47 @@ def load_drawing(
     else:
         data, name = read_svg_bytes(source), str(source)
     root = parse_svg_bytes(data, name)
-    return _Walker(name, registry or default_registry(), defaults or BoundSpec()).run(root)
+    return _Walker(name, registry or default_registry(), defaults or BoundSpec(), drop_unsupported).run(root)
 
 
 class _Walker:
-    def __init__(self, source: str, registry: Registry, defaults: BoundSpec):
+    def __init__(self, source: str, registry: Registry, defaults: BoundSpec, drop_unsupported: bool = False):
         self.reader = ElementReader(source, registry)
         self.source = source
         self.registry = registry
         self.cli_defaults = defaults
+        self.drop = drop_unsupported
+        self.control_points = 0
+
+    def unsupported(self, drawing: Drawing, element: etree._Element, what: str) -> None:
+        """Refuse what cannot be modelled, or (``drop_unsupported``) record that it is left out."""
+        if not self.drop:
+            self.reader.unsupported(element, what)
+        drawing.dropped.append((element.sourceline, what))
+
+    def check_attributes(self, drawing: Drawing, element: etree._Element) -> None:
+        """Event handlers and script links are errors; conditional processing is unsupported."""
+        for key, value in element.attrib.items():
+            q = etree.QName(key)
+            if policy.is_event_handler(q.localname):
+                raise self.error(
+                    element, f"unsupported: event handler attribute {q.localname} (scripts are never kept)"
+                )
+            if policy.is_script_url(value) and q.localname in ("href", "src", "action", "formaction", "values", "to"):
+                raise self.error(element, f"unsupported: {q.localname}={value[:40]!r} (script links are never kept)")
+            if q.namespace is None and q.localname in policy.CONDITIONAL:
+                self.unsupported(drawing, element, f"conditional attribute {q.localname}")
 
     def error(self, element: etree._Element, message: str) -> SvgError:
         return SvgError(message, self.source, element.sourceline)
 
     def run(self, root: etree._Element) -> Drawing:
         drawing = Drawing(self.source, root, self._viewbox(root))
+        self._frame(root, drawing.viewbox)
         root_bounds = self._bounds(root)
         self.defaults = root_bounds.over(self.cli_defaults)
-        style = self._style(root, Style())
+        self.check_attributes(drawing, root)
+        style = self._style(drawing, root, Style())
         self._walk(root, drawing, style, np.eye(3), (), move=None, fixed=bool(self.defaults.fixed), depth=0)
         for group in drawing.groups:
             group.centre = self._group_centre(drawing, group)
@@ -170,6 +221,14 @@ class _Walker:
             raise self.error(root, "<svg> width and height must be positive")
         return 0.0, 0.0, w, h
 
+    def _frame(self, root: etree._Element, viewbox: tuple[float, float, float, float]) -> None:
+        """Refuse a frame no render can hold: one side over :data:`MAX_ASPECT` times the other."""
+        w, h = viewbox[2], viewbox[3]
+        if max(w / h, h / w) > MAX_ASPECT:
+            raise self.error(
+                root, f"the drawing's frame is {w:g} x {h:g}: one side is more than {MAX_ASPECT:g} times the other"
+            )
+
     def _bounds(self, element: etree._Element) -> BoundSpec:
         attrs = {}
         for key, value in element.attrib.items():
@@ -181,9 +240,26 @@ class _Walker:
         except ValueError as exc:
             raise BoundsError(str(exc), self.source, element.sourceline) from None
 
-    def _style(self, element: etree._Element, parent: Style) -> Style:
+    def _style(self, drawing: Drawing, element: etree._Element, parent: Style) -> Style:
+        """The element's computed style, its properties held to the policy; records the
+        ``style=""`` that will be written (the modelled properties only)."""
         try:
-            return compute_style(declarations(dict(element.attrib), element.get("style")), parent)
+            props = declarations(dict(element.attrib), element.get("style"))
+        except ValueError as exc:
+            raise self.error(element, str(exc)) from None
+        own = declarations({}, element.get("style")) if element.get("style") else {}
+        kept = {}
+        for name, value in props.items():
+            verdict = policy.property_verdict(name, value)
+            if verdict == "unsupported" and (name in own or name in policy.DEFAULT_ONLY):
+                self.unsupported(drawing, element, f"{name}={value!r}")
+                continue
+            if verdict == "modelled":
+                kept[name] = value
+        if own:
+            drawing.styles[element] = "; ".join(f"{k}: {v}" for k, v in own.items() if k in kept)
+        try:
+            return compute_style(kept, parent)
         except ValueError as exc:
             raise self.error(element, str(exc)) from None
 
@@ -214,14 +290,28 @@ class _Walker:
             if q.namespace not in (SVG_NS, None):
                 continue  # foreign metadata (editors' namespaces) draws nothing
             name = q.localname
-            if name in NON_RENDERING:
+            if name in policy.HOSTILE_ELEMENTS:
+                raise self.error(el, f"unsupported: element <{name}> (scripts are never kept)")
+            if name in policy.TEXT_ELEMENTS or name in policy.INERT_ELEMENTS:
                 continue
-            style = self._style(el, parent_style)
+            if name == "defs":  # nothing DeepMorph draws refers to definitions
+                for child in el:
+                    if isinstance(child.tag, str) and etree.QName(child).namespace in (SVG_NS, None):
+                        inner = etree.QName(child).localname
+                        if inner in policy.HOSTILE_ELEMENTS:
+                            raise self.error(child, f"unsupported: element <{inner}> (scripts are never kept)")
+                        self.unsupported(drawing, child, f"<{inner}> in <defs>")
+                continue
+            if name == "style":
+                self.unsupported(drawing, el, "CSS <style> (style elements and their rules)")
+                continue
+            self.check_attributes(drawing, el)
+            style = self._style(drawing, el, parent_style)
             bounds = self._bounds(el)
             el_ctm = ctm @ self._transform(el)
             el_fixed = fixed or bool(bounds.fixed)
             el_move = bounds.move if bounds.move is not None else move
-            if name in CONTAINERS:
+            if name in policy.CONTAINERS:
                 if not style.displayed:
                     drawing.skipped.append((el.sourceline, f"<{name}> not displayed"))
                     continue
@@ -235,7 +325,8 @@ class _Walker:
                 continue
             kinds = self.registry.primitives_for_tag(name)
             if not kinds:
-                self.reader.unsupported(el, f"element <{name}>")
+                self.unsupported(drawing, el, f"element <{name}>")
+                continue
             if not style.visible:
                 drawing.skipped.append((el.sourceline, f"<{name}> invisible"))
                 continue
@@ -255,6 +346,13 @@ class _Walker:
             inherited = BoundSpec(move=el_move) if el_move is not None else BoundSpec()
             effective = bounds.over(inherited).over(self.defaults)
             pts = primitive.control_points().numpy()
+            self.control_points += len(pts)
+            if len(drawing.primitives) >= MAX_PRIMITIVES or self.control_points > MAX_CONTROL_POINTS:
+                raise self.error(
+                    el,
+                    f"the drawing has more than {MAX_PRIMITIVES} shapes or {MAX_CONTROL_POINTS} control points;"
+                    " simplify it (a code needs far fewer)",
+                )
             centre = (pts.min(0) + pts.max(0)) / 2
             drawing.primitives.append(
                 PlacedPrimitive(

@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 from deepmorph_core.bundle import TrainingRecord
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write
+from deepmorph_core.fileio import append_line, atomic_write
 
 
 class Interrupted(DeepMorphError):
@@ -128,8 +128,7 @@ class TrainingLoop:
                         line["elapsed_s"] = round(rec.elapsed_s, 2)
                         sums, count = {}, 0
                         history.append(line)
-                        with self.log_path.open("a") as fh:
-                            fh.write(json.dumps(line) + "\n")
+                        append_line(self.log_path, json.dumps(line))
                         rec.metrics = {k: line[k] for k in line if k not in ("step", "stage", "elapsed_s")}
                         if on_log:
                             on_log(line)

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from lxml import etree
 from torch import Tensor
 
 from deepmorph_core.drawing import Drawing
@@ -257,7 +256,8 @@ class MorphSpace:
     # -- writing back ---------------------------------------------------------------------
 
     def write_svg(self, values: Tensor) -> str:
-        """The drawing with one morph baked in, as SVG text; untouched elements stay as they were.
+        """The drawing with one morph baked in, as SVG text holding only what DeepMorph models
+        (:meth:`Drawing.write <deepmorph_core.drawing.Drawing.write>`).
 
         Args:
             values: ``(N_v,)`` or ``(1, N_v)`` morph values (from :meth:`values_from_unit`).
@@ -266,8 +266,8 @@ class MorphSpace:
         if v.shape[0] != self.n_variables:
             raise ValueError(f"expected {self.n_variables} values, got {v.shape[0]}")
         ext = torch.cat([v, v.new_zeros(1)]).numpy()
-        tree = copy.deepcopy(self.drawing.root.getroottree())  # keeps the prolog and comments
-        twin = dict(zip(self.drawing.root.iter(), tree.getroot().iter()))
+        copy_root = copy.deepcopy(self.drawing.root)
+        twin = dict(zip(self.drawing.root.iter(), copy_root.iter()))
         for group, idx in zip(self.drawing.groups, self._group_affine):
             morph = _element_morph(ext[idx], group.centre)
             if not morph.is_identity:
@@ -279,7 +279,7 @@ class MorphSpace:
                 continue
             points = self._base_points_np(prim.index) + delta
             prim.primitive.write(twin[prim.element], points, morph)
-        return etree.tostring(tree, encoding="unicode")
+        return self.drawing.write(copy_root, twin)
 
 
 def _affine(params: Tensor, centre: np.ndarray | Tensor) -> Tensor:

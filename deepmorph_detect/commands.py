@@ -11,7 +11,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli.frame import JsonOpt, ModelArg, SeedOpt, err, out, progress_bar, write_text_atomic
+from deepmorph_core.cli.frame import JsonOpt, ModelArg, SeedOpt, err, out, print_json, progress_bar, write_text_atomic
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
 
@@ -169,7 +169,7 @@ def decode(
         results.append(entry)
         save_overlay(path, *last)
     if as_json:
-        out.print_json(json.dumps(results))
+        print_json(results)
         return
     for r in results:
         name = r.get("image") or f"{r['sequence']} ({r['frames']} frames)"
@@ -257,7 +257,7 @@ def bench_scenes_cmd(
     if report_path is not None:
         atomic_write(report_path, json.dumps(report, indent=1).encode())
     if as_json:
-        out.print_json(json.dumps(report))
+        print_json(report)
     else:
         out.print(format_report(report))
 

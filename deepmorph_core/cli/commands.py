@@ -25,6 +25,8 @@ from deepmorph_core.cli.frame import (
     err,
     out,
     parse_pair,
+    print_json,
+    safe,
     step_progress,
     write_text_atomic,
 )
@@ -35,6 +37,9 @@ if TYPE_CHECKING:
     import numpy as np
 
     from deepmorph_core.morphable import MorphableDrawing
+
+
+TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
 
 def _load(svg: Path, move: float | None, shift: str | None, scale: str | None, rotate: str | None) -> MorphableDrawing:
@@ -68,7 +73,7 @@ def list_primitives(as_json: JsonOpt = False) -> None:
             }
         )
     if as_json:
-        out.print_json(json.dumps(rows))
+        print_json(rows)
         return
     table = Table(title="DeepMorph primitives")
     for col in ("kind", "reads", "plugin", "distribution", "morphable parameters"):
@@ -90,12 +95,12 @@ def inspect(
     md = _load(svg, move, shift, scale, rotate)
     info = md.describe()
     if as_json:
-        out.print_json(json.dumps(info))
+        print_json(info)
         return
-    table = Table(title=f"{svg}: {len(info['primitives'])} primitives, N_v = {info['n_variables']}")
+    table = Table(title=f"{safe(svg)}: {len(info['primitives'])} primitives, N_v = {info['n_variables']}")
     for col in ("#", "kind", "line", "points", "variables", "bounds", "paints"):
         table.add_column(col, overflow="fold")
-    for p in info["primitives"]:
+    for p in info["primitives"][:TABLE_ROWS]:
         bounds = "fixed" if p["fixed"] else (", ".join(f"{k}={v}" for k, v in p["bounds"].items()) or "none")
         table.add_row(
             str(p["index"]),
@@ -107,6 +112,8 @@ def inspect(
             " ".join(p["paints"]),
         )
     out.print(table)
+    if len(info["primitives"]) > TABLE_ROWS:
+        out.print(f"... and {len(info['primitives']) - TABLE_ROWS} more primitives (--json lists every one)")
     for g in info["groups"]:
         out.print(f"group at line {g['line']}: {g['variables']} variables, bounds {g['bounds']}")
     for s in info["skipped"]:
@@ -273,9 +280,9 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
 
     data = DeepMorphModel.load(model).info()
     if as_json:
-        out.print_json(json.dumps(data))
+        print_json(data)
         return
-    table = Table(title=str(model), show_header=False)
+    table = Table(title=safe(model), show_header=False)
     table.add_column("field")
     table.add_column("value", overflow="fold")
     codec = data["codec"]
@@ -329,7 +336,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
             )
         )
     for k, v in rows:
-        table.add_row(k, v)
+        table.add_row(k, safe(v))
     out.print(table)
 
 
@@ -365,25 +372,26 @@ def encode(
     dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of the PNG.")] = 300,
 ) -> None:
     """Hide a payload in the model's drawing and write the morphed SVG (and a print-ready PNG)."""
-    from deepmorph_core.image_io import image_format, save_gray
+    from deepmorph_core.code import print_pixels
+    from deepmorph_core.fileio import atomic_write_all
     from deepmorph_core.model import DeepMorphModel
-    from deepmorph_core.payload import format_payload, parse_payload_text
-    from deepmorph_core.render import render_svg_ink
 
     refuse_to_overwrite(out_path, "--out", [("model file", model)])
+    if out_path.suffix.lower() != ".svg":
+        raise DeepMorphError(f"--out {out_path}: the code is written as SVG; name it .svg")
     if png is not None:
         refuse_to_overwrite(png, "--png", [("model file", model), ("SVG given with --out", out_path)])
-        image_format(png)
+        if png.suffix.lower() != ".png":
+            raise DeepMorphError(f"--png {png}: the print image is a PNG; name it .png")
+        px = print_pixels(width_mm, dpi)  # refused here, before any work, when too large
     m = DeepMorphModel.load(model)
-    bits = parse_payload_text(payload, m.codec.spec.payload_bits)
-    svg_text = m.encode(bits)
-    write_text_atomic(out_path, svg_text)
-    msg = f"wrote {out_path} carrying {format_payload(bits)['hex']}"
+    code = m.code(payload)
+    files = [(out_path, code.svg.encode("utf-8"))]
+    msg = f"wrote {out_path} carrying {code.payload.hex}"
     if png is not None:
-        px = max(16, round(width_mm / 25.4 * dpi))
-        img = render_svg_ink(svg_text, px)
-        save_gray(1.0 - img, png, dpi=dpi)
+        files.append((png, code.png(width_mm, dpi)))
         msg += f" and {png} ({px} px wide = {width_mm:g} mm at {dpi} dpi)"
+    atomic_write_all(files)  # both or neither
     out.print(msg)
 
 

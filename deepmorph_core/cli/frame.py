@@ -7,6 +7,7 @@ Commands (core's own in :mod:`deepmorph_core.cli.commands`, plugins' through the
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,15 +20,49 @@ from rich.text import Text
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 
-out = Console()
-err = Console(stderr=True)
+_UNPRINTABLE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069]")
+
+
+def safe(text: object) -> str:
+    """``text`` with control characters (terminal escapes, bidirectional overrides) shown as
+    ``\\xNN`` escapes: what a path or a bundle's metadata holds is printed, never obeyed."""
+    return _UNPRINTABLE.sub(_escape, str(text))
+
+
+def _escape(m: re.Match[str]) -> str:
+    code = ord(m.group())
+    return f"\\x{code:02x}" if code < 256 else f"\\u{code:04x}"
+
+
+class _Console(Console):
+    """A console that never reads markup in what it prints and escapes control characters in
+    every string it is given (paths and names come from users and from files)."""
+
+    def print(self, *objects: Any, **kwargs: Any) -> None:  # noqa: A003 - rich's name
+        kwargs.setdefault("markup", False)
+        kwargs.setdefault("highlight", False)
+        super().print(*(safe(o) if isinstance(o, str) else o for o in objects), **kwargs)
+
+
+out = _Console(markup=False, highlight=False, emoji=False)
+err = _Console(stderr=True, markup=False, highlight=False, emoji=False)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def print_json(data: Any) -> None:
+    """``data`` as JSON on stdout, one document, no colour (fast for large results, and what a
+    program reading the output expects)."""
+    import json
+    import sys
+
+    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    sys.stdout.flush()
+
+
 def print_error(exc: BaseException) -> None:
     """One line on stderr, never interpreted as markup, never wrapped."""
-    err.print(Text.assemble(("error: ", "bold red"), str(exc)), soft_wrap=True, highlight=False)
+    err.print(Text.assemble(("error: ", "bold red"), safe(exc)), soft_wrap=True, highlight=False)
 
 
 def friendly(fn: F) -> F:

@@ -1,9 +1,10 @@
 """Loading SVG bytes into an lxml tree without trusting them.
 
 Nothing here touches the network or the file system beyond the one file asked for: no DTD is
-loaded, no entity is expanded (documents that declare entities are refused outright, which
-stops "billion laughs" and external-entity attacks before the parser sees them), and size,
-element count and nesting depth are capped.
+loaded and no entity is expanded. A document that declares entities ("billion laughs",
+external entities) or has an internal DTD subset is refused outright, whatever its encoding; a
+public DOCTYPE that only names the SVG DTD (older editors write one) is never fetched, and
+nothing DeepMorph writes carries it. Size, element count and nesting depth are capped.
 """
 
 from __future__ import annotations
@@ -20,7 +21,13 @@ MAX_BYTES = 8 * 1024 * 1024
 MAX_ELEMENTS = 20_000
 MAX_DEPTH = 64
 
-_ENTITY = re.compile(rb"<!ENTITY", re.IGNORECASE)
+# an entity declaration in UTF-8/ASCII, UTF-16 (either byte order) or UTF-32: refused
+# before the parser sees it (the parse below also refuses any DOCTYPE it finds)
+_DECLARATIONS = [
+    re.compile(re.escape(word.encode(codec)), re.IGNORECASE)
+    for word in ("<!ENTITY",)
+    for codec in ("ascii", "utf-16-le", "utf-16-be", "utf-32-le", "utf-32-be")
+]
 
 
 def _line_of(data: bytes, offset: int) -> int:
@@ -50,13 +57,14 @@ def parse_svg_bytes(data: bytes, label: str) -> etree._Element:
     """
     if len(data) > MAX_BYTES:
         raise SvgError(f"document is {len(data)} bytes; the limit is {MAX_BYTES} bytes", label)
-    m = _ENTITY.search(data)
-    if m:
-        raise SvgError(
-            "entity declarations are not allowed (they can expand without bound or read external files)",
-            label,
-            _line_of(data, m.start()),
-        )
+    for pattern in _DECLARATIONS:
+        m = pattern.search(data)
+        if m:
+            raise SvgError(
+                "entity declarations are not allowed (they can expand without bound or read files)",
+                label,
+                _line_of(data, m.start()),
+            )
     parser = etree.XMLParser(
         resolve_entities=False,
         no_network=True,
@@ -77,6 +85,9 @@ def parse_svg_bytes(data: bytes, label: str) -> etree._Element:
         raise SvgError(f"malformed XML: {exc}", label) from None
     if root is None:
         raise SvgError("empty document", label)
+    subset = root.getroottree().docinfo.internalDTD
+    if subset is not None and (any(True for _ in subset.iterentities()) or any(True for _ in subset.iterelements())):
+        raise SvgError("an internal DTD subset is not allowed (it can declare entities)", label, 1)
     if etree.QName(root).localname != "svg" or etree.QName(root).namespace not in (SVG_NS, None):
         raise SvgError(f"root element is <{etree.QName(root).localname}>, not <svg>", label, root.sourceline)
     count = 0

@@ -15,19 +15,6 @@ BLACK, WHITE, NONE = 1, -1, 0
 
 #: Properties this module reads; of these, all but display/opacity inherit.
 INHERITED = ("fill", "stroke", "stroke-width", "stroke-linecap", "stroke-linejoin", "fill-rule", "visibility", "color")
-#: Properties that change the rendering in ways DeepMorph does not model: using them is an error.
-UNSUPPORTED = (
-    "stroke-dasharray",
-    "clip-path",
-    "mask",
-    "filter",
-    "marker",
-    "marker-start",
-    "marker-mid",
-    "marker-end",
-    "paint-order",
-    "vector-effect",
-)
 _NAMED = {
     "black": BLACK,
     "#000": BLACK,
@@ -109,12 +96,12 @@ def _colour(value: str, current: int, prop: str) -> int:
 def compute_style(props: dict[str, str], parent: Style) -> Style:
     """Apply one element's declarations on top of its parent's computed style.
 
+    Only the properties this module reads are looked at; which others a drawing may hold is
+    :mod:`deepmorph_core.svg.policy`'s decision.
+
     Raises:
-        ValueError: an unsupported property or value (the caller adds file and line).
+        ValueError: an unsupported value (the caller adds file and line).
     """
-    for name in UNSUPPORTED:
-        if name in props and props[name].strip().lower() not in ("none", "", "normal", "auto"):
-            raise ValueError(f"{name} is not supported")
     style = parent
     if "color" in props:
         style = replace(style, color=_colour(props["color"], parent.color, "color"))

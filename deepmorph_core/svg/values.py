@@ -15,7 +15,7 @@ import numpy as np
 #: overflow float32 geometry.
 MAX_ABS = 1e6
 
-_NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUMBER = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits: renderers read no others
 _NUMBER_RE = re.compile(_NUMBER)
 _LENGTH_RE = re.compile(rf"^\s*({_NUMBER})\s*(px)?\s*$")
 _SEPARATOR_RE = re.compile(r"^[\s,]*$")

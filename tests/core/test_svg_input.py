@@ -6,9 +6,11 @@ import time
 
 import numpy as np
 import pytest
+import torch
 
 from deepmorph_core.drawing import load_drawing
 from deepmorph_core.errors import SvgError, UnsupportedFeatureError
+from deepmorph_core.morph import MorphSpace
 from tests.conftest import make_svg
 
 LINE = '<line x1="1" y1="1" x2="9" y2="9" stroke="black"/>'
@@ -92,6 +94,8 @@ def test_public_doctype_is_not_fetched(builtin_registry) -> None:
     )
     drawing = load_drawing(data, registry=builtin_registry)
     assert [p.primitive.kind for p in drawing.primitives] == ["line"]
+    space = MorphSpace(drawing)
+    assert "DOCTYPE" not in space.write_svg(torch.zeros(space.n_variables))
 
 
 def test_styles_inherit_and_invisible_elements_are_skipped(builtin_registry) -> None:
