@@ -3,7 +3,13 @@ and writing, bound-specs, morphs and the soft rasterizer, the payload codec, the
 their training, model bundles, photo preprocessing and the command-line frame. ``hookimpl`` is
 what plugins decorate their hook functions with."""
 
+import os
+
 from deepmorph_core.hookspecs import hookimpl
+
+# OpenCV refuses an image whose header claims more pixels than this before decoding it, for every
+# format it reads; it reads the setting once, when it is first imported (image_io.MAX_IMAGE_PIXELS)
+os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", "80000000")
 
 __version__ = "0.1.0"
 

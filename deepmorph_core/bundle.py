@@ -12,6 +12,7 @@ truncated or foreign file) is one :class:`~deepmorph_core.errors.DeepMorphError`
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -31,6 +32,9 @@ from deepmorph_core.networks import DecoderConfig
 FORMAT = "deepmorph-model/1"
 _META_KEY = "deepmorph"
 MAX_BUNDLE_BYTES = 512 * 1024 * 1024
+MAX_HEADER_BYTES = 16 * 1024 * 1024  # the safetensors header: tensor table and our metadata
+MAX_NAME_CHARS = 256
+MAX_DRAWING_CHARS = 8 * 1024 * 1024
 
 
 class TrainingRecord(BaseModel):
@@ -74,8 +78,8 @@ class BundleMeta(BaseModel):
 
     format: Literal["deepmorph-model/1"] = FORMAT
     versions: dict[str, str]
-    drawing_name: str
-    drawing_svg: str
+    drawing_name: str = Field(max_length=MAX_NAME_CHARS)
+    drawing_svg: str = Field(max_length=MAX_DRAWING_CHARS)
     bounds_defaults: dict[str, Any]
     n_variables: int = Field(ge=1)
     codec: CodecSpec
@@ -119,19 +123,30 @@ def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:
         raise _bad(path, "not a regular file")
     if size > MAX_BUNDLE_BYTES:
         raise _bad(path, f"{size} bytes is larger than any model")
-    data = path.read_bytes()
     try:
-        tensors = load_bytes(data)
-        header_len = int.from_bytes(data[:8], "little")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise DeepMorphError(f"{path}: cannot read model file: {exc.strerror or exc}") from None
+    header_len = int.from_bytes(data[:8], "little") if len(data) >= 8 else -1
+    if not 0 < header_len <= min(MAX_HEADER_BYTES, len(data) - 8):
+        raise _bad(path, "corrupt or truncated: no tensor table where one should be")
+    try:
         header = json.loads(data[8 : 8 + header_len])
+        tensors = load_bytes(data)
+    except RecursionError:
+        raise _bad(path, "its metadata is nested too deeply") from None
     except (SafetensorError, ValueError, UnicodeDecodeError, OverflowError) as exc:
         raise _bad(path, f"corrupt or truncated: {str(exc).splitlines()[0][:120]}") from None
+    if not isinstance(header, dict):
+        raise _bad(path, "corrupt or truncated: the tensor table is not a table")
     raw = (header.get("__metadata__") or {}).get(_META_KEY)
     if raw is None:
         raise _bad(path, "a safetensors file without DeepMorph metadata")
     try:
         fmt = json.loads(raw).get("format")
-    except (ValueError, AttributeError):
+    except RecursionError:
+        raise _bad(path, "its metadata is nested too deeply") from None
+    except (ValueError, AttributeError, TypeError):
         raise _bad(path, "its metadata is not JSON") from None
     if fmt != FORMAT:
         raise _bad(path, f"format {fmt!r}, this version reads {FORMAT!r}")
@@ -140,6 +155,32 @@ def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:
     except ValidationError as exc:
         raise _bad(path, format_validation_error(exc).replace("dm:", "")) from None
     return meta, tensors
+
+
+def check_weights(path: str | Path, what: str, expected: Mapping[str, Tensor], given: Mapping[str, Tensor]) -> None:
+    """Refuse weights that do not fit a network before they are loaded into it: a missing or
+    unexpected tensor, another shape or type (an int8 tensor would be cast without a word),
+    or a value that is not finite.
+
+    Raises:
+        DeepMorphError: naming the file, the network and the first tensor at fault.
+    """
+    missing = sorted(set(expected) - set(given))
+    extra = sorted(set(given) - set(expected))
+    if missing or extra:
+        name = missing[0] if missing else extra[0]
+        why = "is missing" if missing else "is not part of it"
+        raise _bad(path, f"the {what}'s weights do not fit: {name} {why}")
+    for name, want in expected.items():
+        got = given[name]
+        if tuple(got.shape) != tuple(want.shape) or got.dtype != want.dtype:
+            raise _bad(
+                path,
+                f"the {what}'s weights do not fit: {name} is {got.dtype} {tuple(got.shape)}, "
+                f"expected {want.dtype} {tuple(want.shape)}",
+            )
+        if got.is_floating_point() and not bool(torch.isfinite(got).all()):
+            raise _bad(path, f"the {what}'s weights are not finite ({name})")
 
 
 def versions() -> dict[str, str]:

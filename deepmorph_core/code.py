@@ -16,7 +16,7 @@ from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.payload import Payload
-from deepmorph_core.render import render_svg
+from deepmorph_core.render import raster_size, render_svg
 
 MM_PER_INCH = 25.4
 MAX_RASTER_SIDE = 16_384  # pixels: a larger print is what the SVG (or a PDF) is for
@@ -61,6 +61,7 @@ class Code:
     def png(self, width_mm: float = 50.0, dpi: int = 300) -> bytes:
         """A PNG of the code ``width_mm`` wide at ``dpi`` dots per inch (recorded in the file)."""
         px = print_pixels(width_mm, dpi)
+        raster_size(self.viewbox, px)  # refused before rendering when too large
         gray = np.clip(np.rint(self.render(px) * 255), 0, 255).astype(np.uint8)
         buf = io.BytesIO()
         Image.fromarray(gray, "L").save(buf, format="PNG", dpi=(dpi, dpi))

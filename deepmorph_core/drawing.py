@@ -20,6 +20,7 @@ from deepmorph_core.bounds import BoundSpec, parse_bounds
 from deepmorph_core.errors import BoundsError, SvgError
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Primitive
+from deepmorph_core.render import raster_size
 from deepmorph_core.svg import policy
 from deepmorph_core.svg.policy import DM_NS
 from deepmorph_core.svg.reader import ElementReader
@@ -119,9 +120,12 @@ class Drawing:
         return etree.tostring(policy.sanitized(root, shapes, styles), encoding="unicode")
 
     def pixel_size(self, width: int) -> tuple[int, int]:
-        """``(height, width)`` in pixels for a raster ``width`` pixels wide (aspect kept)."""
-        vb_w, vb_h = self.viewbox[2], self.viewbox[3]
-        return max(1, round(width * vb_h / vb_w)), width
+        """``(height, width)`` in pixels for a raster ``width`` pixels wide (aspect kept).
+
+        Raises:
+            DeepMorphError: a raster larger than DeepMorph makes (:func:`~deepmorph_core.render.raster_size`).
+        """
+        return raster_size(self.viewbox, width)
 
     def pixel_matrix(self, width: int) -> np.ndarray:
         """``(3, 3)`` map from user units to pixel coordinates for a raster ``width`` wide."""

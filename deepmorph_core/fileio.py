@@ -66,7 +66,8 @@ def check_target(path: str | Path, label: str | None = None) -> Path:
 def _clean_stray_temps(folder: Path) -> None:
     """Remove temporary files of processes that no longer run (a ``kill -9`` mid-write)."""
     try:
-        entries = list(os.scandir(folder))
+        with os.scandir(folder) as listing:
+            entries = list(listing)
     except OSError:
         return
     for entry in entries:

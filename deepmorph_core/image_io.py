@@ -9,7 +9,13 @@ half an image behind.
 from __future__ import annotations
 
 import io
+import os
+import re
+import sys
+import tempfile
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +27,8 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 from deepmorph_core.photo import to_gray
 
-MAX_IMAGE_PIXELS = 80_000_000
+MAX_IMAGE_PIXELS = 80_000_000  # also OpenCV's own limit (OPENCV_IO_MAX_IMAGE_PIXELS, set by deepmorph_core)
+MAX_IMAGE_BYTES = 256 * 1024 * 1024
 
 
 EXIF_ORIENTATION = 0x0112  # the EXIF tag of how a viewer turns the stored pixels
@@ -49,17 +56,27 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
         DeepMorphError: missing, empty, corrupt, too large, too small or non-image files.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DeepMorphError(f"{path}: no such image file")
-    data = np.fromfile(path, dtype=np.uint8)
+    try:
+        if not path.is_file():
+            raise DeepMorphError(f"{path}: no such image file")
+        if path.stat().st_size > MAX_IMAGE_BYTES:
+            raise DeepMorphError(f"{path}: {path.stat().st_size} bytes is larger than any photo DeepMorph reads")
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:
+        raise DeepMorphError(f"{path}: cannot read: {exc.strerror or exc}") from None
     if data.size == 0:
         raise DeepMorphError(f"{path}: empty file, not an image")
     size, orientation = _peek_header(data, path)
     if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:  # refused before it is decoded
         raise DeepMorphError(f"{path}: {size[0]}x{size[1]} pixels is too large to decode")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    with _stderr_captured() as said:
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        except cv2.error:  # OpenCV's own pixel limit, from the header (deepmorph_core sets it)
+            raise DeepMorphError(f"{path}: its header claims too many pixels to decode") from None
     if img is None:
-        raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format)")
+        why = f" ({said[0].strip().splitlines()[-1][:120]})" if said and said[0].strip() else ""
+        raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format){why}")
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
         raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
     img = _upright(img, orientation)
@@ -105,6 +122,41 @@ def image_input(source: Any, bgr: bool = False) -> np.ndarray:
     return np.ascontiguousarray(source)
 
 
+@contextmanager
+def _stderr_captured() -> Iterator[list[str]]:
+    """What the image libraries print on stderr while decoding (libpng's and libjpeg's
+    warnings), caught instead of shown: a file's problems are reported in one error line, or
+    not at all when the image decodes. Yields a list that holds the text afterwards."""
+    said: list[str] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no file descriptor 2 to redirect (an embedding host)
+        yield said
+        return
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            said.append(sink.read(4096).decode("utf-8", "replace"))
+
+
+def _radiance_or_pfm_size(data: np.ndarray) -> tuple[int, int] | None:
+    """``(width, height)`` from a Radiance HDR or PFM header (formats Pillow does not read)."""
+    head = data[:4096].tobytes()
+    if head.startswith((b"#?RADIANCE", b"#?RGBE")):
+        m = re.search(rb"\n\s*[-+]Y\s+(\d+)\s+[-+]X\s+(\d+)", head)
+        return (int(m.group(2)), int(m.group(1))) if m else None
+    if head[:2] in (b"PF", b"Pf"):
+        m = re.match(rb"P[Ff]\s+(\d+)\s+(\d+)", head)
+        return (int(m.group(1)), int(m.group(2))) if m else None
+    return None
+
+
 def _peek_header(data: np.ndarray, path: Path) -> tuple[tuple[int, int] | None, int]:
     """``((width, height), EXIF orientation)`` from an image file's header, without decoding
     its pixels (Pillow opens lazily); ``(None, 1)`` where Pillow cannot tell, and then OpenCV's
@@ -115,14 +167,14 @@ def _peek_header(data: np.ndarray, path: Path) -> tuple[tuple[int, int] | None, 
             :data:`MAX_IMAGE_PIXELS`), before any pixel is decoded.
     """
     try:
-        with warnings.catch_warnings():  # the size is judged by the caller, not by Pillow's warning
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        with warnings.catch_warnings():  # the size is judged by the caller, and a damaged
+            warnings.simplefilter("ignore")  # header's metadata warnings are not the user's concern
             with Image.open(io.BytesIO(data.tobytes())) as img:
                 return img.size, int(img.getexif().get(EXIF_ORIENTATION, 1) or 1)
     except Image.DecompressionBombError:
         raise DeepMorphError(f"{path}: its header claims far too many pixels to decode") from None
     except Exception:  # not a format Pillow knows, or a header it cannot parse: OpenCV decides
-        return None, 1
+        return _radiance_or_pfm_size(data), 1
 
 
 def _upright(img: np.ndarray, orientation: int) -> np.ndarray:

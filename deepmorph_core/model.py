@@ -16,17 +16,26 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from deepmorph_core.bundle import BundleMeta, TrainingRecord, load_bundle, save_bundle, versions
+from deepmorph_core.bundle import BundleMeta, TrainingRecord, check_weights, load_bundle, save_bundle, versions
 from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, SvgError
 from deepmorph_core.framing import align_to_frame, render_moments
 from deepmorph_core.morphable import MorphableDrawing
-from deepmorph_core.networks import Decoder, DecoderConfig, Encoder
+from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters
 from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.photo import to_gray
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg
+
+#: What a drawing to train on may have: the analysis before training renders every variable's
+#: extremes (its time grows with variables times shapes), and a step renders every shape. At
+#: these limits it takes about 15 s and a step about 3 times a Feather icon's.
+MAX_TRAIN_PRIMITIVES = 200
+MAX_TRAIN_VARIABLES = 400
+#: No DeepMorph decoder comes near this many weights (the default one at 96 px has about 0.4
+#: million): a bundle asking for more is refused before anything is allocated.
+MAX_DECODER_PARAMETERS = 50_000_000
 
 
 @dataclass
@@ -98,6 +107,13 @@ class DeepMorphModel:
             raise DeepMorphError(
                 f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
             )
+        shapes = len(md.drawing.primitives)
+        if shapes > MAX_TRAIN_PRIMITIVES or md.n_variables > MAX_TRAIN_VARIABLES:
+            raise DeepMorphError(
+                f"{drawing_name}: {shapes} shapes and {md.n_variables} variables; a drawing to train on may have at "
+                f"most {MAX_TRAIN_PRIMITIVES} shapes and {MAX_TRAIN_VARIABLES} variables (mark the elements that "
+                "need not morph dm:fixed=\"true\", or simplify the drawing)"
+            )
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()
         meta = BundleMeta(
@@ -137,6 +153,12 @@ class DeepMorphModel:
                 f"{meta.n_variables} (a primitive plugin is missing or changed?)"
             )
         height, _ = md.drawing.pixel_size(meta.image_width)
+        size = decoder_parameters(meta.codec.code_bits, (height, meta.image_width), meta.decoder)
+        if size > MAX_DECODER_PARAMETERS:
+            raise DeepMorphError(
+                f"{path}: not a usable DeepMorph model file (its decoder would have {size:,} weights, "
+                f"more than any DeepMorph decoder: {MAX_DECODER_PARAMETERS:,})"
+            )
         model = cls(
             md,
             PayloadCodec(meta.codec),
@@ -150,12 +172,10 @@ class DeepMorphModel:
         model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets and k not in model.detector_state}
         if meta.detector is not None and not model.detector_state:
             raise DeepMorphError(f"{path}: not a usable DeepMorph model file (detector weights are missing)")
-        try:
-            model.encoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("encoder.")})
-            model.decoder.load_state_dict({k[8:]: v for k, v in nets.items() if k.startswith("decoder.")})
-        except RuntimeError as exc:
-            first = str(exc).splitlines()[0][:160]
-            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (weights do not fit: {first})") from None
+        for name, network in (("encoder", model.encoder), ("decoder", model.decoder)):
+            given = {k[len(name) + 1 :]: v for k, v in nets.items() if k.startswith(name + ".")}
+            check_weights(path, name, network.state_dict(), given)
+            network.load_state_dict(given)
         model.eval()
         return model
 

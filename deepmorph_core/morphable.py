@@ -71,13 +71,22 @@ class MorphableDrawing:
         rotate: tuple[float, float] | None = None,
         registry: Registry | None = None,
         label: str | None = None,
+        drop_unsupported: bool = False,
     ) -> MorphableDrawing:
         """Parse an SVG file or document; keyword bounds apply where the SVG says nothing.
 
-        ``label`` names a bytes source in error messages (a path names itself).
+        ``label`` names a bytes source in error messages (a path names itself);
+        ``drop_unsupported`` leaves out what DeepMorph cannot model instead of refusing it
+        (:func:`~deepmorph_core.drawing.load_drawing`; what was left out is in ``drawing.dropped``).
         """
         defaults = bound_defaults(move, shift, scale, rotate)
-        drawing = load_drawing(source, defaults=defaults, registry=registry or default_registry(), label=label)
+        drawing = load_drawing(
+            source,
+            defaults=defaults,
+            registry=registry or default_registry(),
+            label=label,
+            drop_unsupported=drop_unsupported,
+        )
         return cls(drawing, MorphSpace(drawing))
 
     @property

@@ -8,6 +8,7 @@ augmentations in between live in their own modules (:mod:`deepmorph_core.train` 
 from __future__ import annotations
 
 import math
+from typing import Annotated
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field
@@ -137,9 +138,34 @@ class DecoderConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     stem: int = Field(default=16, ge=0, le=256)
-    channels: tuple[int, ...] = Field(default=(32, 48, 64, 64), min_length=2, max_length=6)
+    channels: tuple[Annotated[int, Field(ge=1, le=512)], ...] = Field(
+        default=(32, 48, 64, 64), min_length=2, max_length=6
+    )
     hidden: int = Field(default=128, ge=8, le=2048)
     spatial_transformer: bool = False
+
+
+def decoder_parameters(code_bits: int, image_size: tuple[int, int], config: DecoderConfig) -> int:
+    """How many weights a :class:`Decoder` of this shape has, without making one (so that a
+    bundle asking for an absurd network is refused before anything is allocated)."""
+    total, c_in = 0, 1
+    if config.stem:
+        total += 9 * c_in * config.stem + 3 * config.stem
+        c_in = config.stem
+    h, w = image_size
+    for c_out in config.channels:
+        total += 9 * c_in * c_out + 3 * c_out
+        c_in, h, w = c_out, (h + 1) // 2, (w + 1) // 2
+    total += c_in * h * w * config.hidden + config.hidden + config.hidden * code_bits + code_bits
+    if config.spatial_transformer:  # its localisation network, at half resolution
+        c_in, h, w = 1, image_size[0] // 2, image_size[1] // 2
+        for c_out in SpatialTransformer.CHANNELS:
+            total += 9 * c_in * c_out + 3 * c_out
+            c_in, h, w = c_out, (h + 1) // 2, (w + 1) // 2
+        total += (
+            c_in * h * w * SpatialTransformer.HIDDEN + SpatialTransformer.HIDDEN + SpatialTransformer.HIDDEN * 8 + 8
+        )
+    return total
 
 
 class Decoder(nn.Module):

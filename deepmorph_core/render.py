@@ -15,6 +15,27 @@ from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
 
+#: The largest side of any raster DeepMorph makes, and the most pixels: what a print at 2400 dpi
+#: and 17 cm takes; larger prints are what the SVG (or a PDF) is for.
+MAX_RASTER_SIDE = 16_384
+MAX_RASTER_PIXELS = 100_000_000
+
+
+def raster_size(viewbox: tuple[float, float, float, float], width: int) -> tuple[int, int]:
+    """``(height, width)`` in pixels of a drawing rendered ``width`` pixels wide (its viewBox's
+    aspect kept).
+
+    Raises:
+        DeepMorphError: a side over :data:`MAX_RASTER_SIDE` or more than :data:`MAX_RASTER_PIXELS`.
+    """
+    height = max(1, round(width * viewbox[3] / viewbox[2]))
+    if max(width, height) > MAX_RASTER_SIDE or width * height > MAX_RASTER_PIXELS:
+        raise DeepMorphError(
+            f"a raster of {width} x {height} pixels is larger than DeepMorph makes "
+            f"({MAX_RASTER_SIDE} pixels a side, {MAX_RASTER_PIXELS:,} in all); ask for fewer pixels"
+        )
+    return height, width
+
 
 def render_svg(svg_text: str, width: int) -> np.ndarray:
     """Render SVG text with resvg on white paper.

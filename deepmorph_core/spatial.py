@@ -59,7 +59,10 @@ class SpatialTransformer(nn.Module):
     bilinear sample at the pixel centres returns the image unchanged).
     """
 
-    def __init__(self, image_size: tuple[int, int], channels: tuple[int, ...] = (8, 16, 32), hidden: int = 64):
+    CHANNELS = (8, 16, 32)
+    HIDDEN = 64
+
+    def __init__(self, image_size: tuple[int, int], channels: tuple[int, ...] = CHANNELS, hidden: int = HIDDEN):
         super().__init__()
         layers: list[nn.Module] = [nn.AvgPool2d(2)]
         h, w = image_size[0] // 2, image_size[1] // 2

@@ -37,11 +37,12 @@ from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.bundle import TrainingRecord
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.corruption import build_pipeline
-from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import canonicalize, render_moments
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.morphable import bound_defaults, capacity_warning
+from deepmorph_core.morphable import MorphableDrawing, bound_defaults, capacity_warning
 from deepmorph_core.networks import DecoderConfig, spread_weights
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.render import render_svg
@@ -365,6 +366,7 @@ def train_model(
     overwrite: bool = False,
     on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
     on_warning: Callable[[str], None] | None = None,
+    drop_unsupported: bool = False,
 ) -> TrainingSummary:
     """Train (or resume) a model for a drawing and write its bundle.
 
@@ -379,21 +381,26 @@ def train_model(
         on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback (progress bars).
         on_warning: ``on_warning(text)`` for a warning before training starts (default:
             :func:`warnings.warn`), such as :func:`~deepmorph_core.morphable.capacity_warning`'s.
+        drop_unsupported: train on the drawing with what DeepMorph cannot model left out (a
+            warning names each part); the bundle holds that drawing.
     """
-    out = Path(out)
+    out = check_target(out, f"--out {out}")  # before any work: a folder that cannot be written, say
     overrides = {k: v for k, v in (train or {}).items() if v is not None}
     if isinstance(svg, bytes):
         data, label = svg, "<drawing>"
     else:
         data, label = read_svg_bytes(svg), str(svg)
-    try:
-        svg_text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        raise SvgError("the drawing is not UTF-8 text", label) from None
+    warn = on_warning or (lambda text: warnings.warn(text, stacklevel=3))
+    # the bundle holds the drawing as DeepMorph writes it: what it models, nothing else (read
+    # first, so that hostile or unsupported input is refused before anything else)
+    md = MorphableDrawing.load(data, label=label, drop_unsupported=drop_unsupported and not resume)
+    for line, what in md.drawing.dropped:
+        warn(f"{label}:{line}: left out {what}")
+    svg_text = md.to_svg(md.neutral_values()[0])
     try:
         if resume:
             model = DeepMorphModel.load(out)
-            if model.meta.drawing_svg != svg_text:
+            if model.meta.drawing_svg not in (svg_text, data.decode("utf-8", "replace")):
                 raise DeepMorphError(f"{out}: the checkpoint was trained on another drawing than {svg}")
             if model.meta.record.finished:
                 raise DeepMorphError(f"{out}: training already finished; nothing to resume")
@@ -402,7 +409,7 @@ def train_model(
                     **model.meta.train,
                     # the checkpoint's decoder decides (one without a transformer keeps none)
                     "spatial_transformer": model.meta.decoder.spatial_transformer,
-                    **{k: v for k, v in overrides.items() if k in ("steps", "threads")},
+                    **{k: v for k, v in overrides.items() if k in ("steps", "threads", "checkpoint_every")},
                 }
             )
         else:
@@ -429,7 +436,7 @@ def train_model(
         raise _settings_error("training settings", exc) from None
     warning = None if resume else capacity_warning(model.codec.spec.code_bits, model.drawing.visibility(), label)
     if warning:
-        (on_warning or (lambda text: warnings.warn(text, stacklevel=3)))(warning)
+        warn(warning)
     run = CodecRun(model, config, out)
     loop = TrainingLoop(
         out.with_suffix(".log.jsonl"),

@@ -9,6 +9,8 @@ import cv2
 import numpy as np
 import torch
 
+from deepmorph_core.bundle import check_weights
+from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.kernels import SQUARE_3X3, area_resize
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
@@ -18,6 +20,7 @@ from deepmorph_detect.propose import quad_bbox
 from deepmorph_detect.runtime import detector_graph, onnx_or_torch
 
 # x, y of the centres of a 3x3 block of heatmap cells, from its top-left cell
+MIN_WIDTH, MAX_WIDTH = 8, 256  # the detector's channel widths (DetectorConfig's bounds)
 _CELL_CENTRES = np.stack(np.mgrid[0:3, 0:3][::-1], -1).astype(np.float64) + 0.5
 
 
@@ -46,10 +49,19 @@ class CentreNetDetector:
     @classmethod
     def from_model(cls, model: DeepMorphModel) -> CentreNetDetector | None:
         """The detector stored in a bundle, or ``None`` when it has none (or one of another kind)."""
-        if model.meta.detector is None or model.meta.detector.name != cls.name:
+        meta = model.meta.detector
+        if meta is None or meta.name != cls.name:
             return None
-        net = DetectorNet(int(model.meta.detector.config.get("width", 32)))
-        net.load_state_dict(stored_weights(model.detector_state))
+        width = meta.config.get("width", 32)
+        if not isinstance(width, int) or not MIN_WIDTH <= width <= MAX_WIDTH:
+            raise DeepMorphError(
+                f"{model.meta.drawing_name}: the model's detector has width {width!r} "
+                f"(a detector is {MIN_WIDTH} to {MAX_WIDTH} channels wide)"
+            )
+        net = DetectorNet(width)
+        weights = stored_weights(model.detector_state)
+        check_weights(model.meta.drawing_name, "detector", net.state_dict(), weights)
+        net.load_state_dict(weights)
         return cls(net)
 
     def detect(self, image: np.ndarray) -> list[Candidate]:

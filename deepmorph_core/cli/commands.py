@@ -13,6 +13,7 @@ import typer
 from rich.table import Table
 
 from deepmorph_core.cli.frame import (
+    DropOpt,
     JsonOpt,
     ModelArg,
     MoveOpt,
@@ -28,6 +29,7 @@ from deepmorph_core.cli.frame import (
     print_json,
     safe,
     step_progress,
+    warn_dropped,
     write_text_atomic,
 )
 from deepmorph_core.errors import DeepMorphError
@@ -42,16 +44,21 @@ if TYPE_CHECKING:
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
 
-def _load(svg: Path, move: float | None, shift: str | None, scale: str | None, rotate: str | None) -> MorphableDrawing:
+def _load(
+    svg: Path, move: float | None, shift: str | None, scale: str | None, rotate: str | None, drop: bool = False
+) -> MorphableDrawing:
     from deepmorph_core.morphable import MorphableDrawing
 
-    return MorphableDrawing.load(
+    md = MorphableDrawing.load(
         svg,
         move=move,
         shift=parse_pair(shift, "shift", single_ok=True),
         scale=parse_pair(scale, "scale"),
         rotate=parse_pair(rotate, "rotate"),
+        drop_unsupported=drop,
     )
+    warn_dropped(md.drawing)
+    return md
 
 
 def list_primitives(as_json: JsonOpt = False) -> None:
@@ -89,10 +96,11 @@ def inspect(
     shift: ShiftOpt = None,
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
+    drop: DropOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Show the primitives of a drawing, its variables N_v and their bounds."""
-    md = _load(svg, move, shift, scale, rotate)
+    md = _load(svg, move, shift, scale, rotate, drop)
     info = md.describe()
     if as_json:
         print_json(info)
@@ -135,12 +143,13 @@ def morph(
     shift: ShiftOpt = None,
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
+    drop: DropOpt = False,
 ) -> None:
     """Write a morph of a drawing (inside its bounds) as a new SVG."""
     if not random:
         raise DeepMorphError("nothing to do: pass --random (payloads are encoded with 'deepmorph encode')")
     refuse_to_overwrite(out_path, "--out", [("input drawing", svg)])
-    md = _load(svg, move, shift, scale, rotate)
+    md = _load(svg, move, shift, scale, rotate, drop)
     if md.n_variables == 0:
         raise DeepMorphError(f"{svg}: the drawing has 0 variables; add dm: bounds or pass --move 0.5")
     values = md.values_from_unit(md.random_unit(1, seed))
@@ -156,6 +165,7 @@ def render(
     overlay_base: Annotated[
         Optional[Path], typer.Option("--overlay", help="Draw this base drawing in red under the SVG.")
     ] = None,
+    drop: DropOpt = False,
 ) -> None:
     """Render a drawing with the real renderer (resvg) or the soft rasterizer."""
     from deepmorph_core.image_io import image_format, save_gray, save_rgb
@@ -163,22 +173,22 @@ def render(
 
     refuse_to_overwrite(out_path, "--out", [("input drawing", svg), ("overlay's base drawing", overlay_base)])
     image_format(out_path)
-    ink = _render_ink(svg, size, soft)
+    ink = _render_ink(svg, size, soft, drop)
     if overlay_base is None:
         save_gray(1.0 - ink, out_path)
     else:
-        base = _render_ink(overlay_base, size, soft)
+        base = _render_ink(overlay_base, size, soft, drop)
         if base.shape != ink.shape:
             raise DeepMorphError(f"{overlay_base}: its aspect ratio differs from {svg}'s; cannot overlay")
         save_rgb(overlay(base, ink), out_path)
     out.print(f"wrote {out_path} ({ink.shape[1]}x{ink.shape[0]}, {'soft' if soft else 'resvg'})")
 
 
-def _render_ink(svg: Path, size: int, soft: bool) -> np.ndarray:
-    from deepmorph_core.morphable import MorphableDrawing
+def _render_ink(svg: Path, size: int, soft: bool, drop: bool = False) -> np.ndarray:
     from deepmorph_core.render import render_svg_ink
 
-    md = MorphableDrawing.load(svg)  # validates the file (hostile input never reaches resvg)
+    md = _load(svg, None, None, None, None, drop)  # validates the file: hostile input never reaches resvg
+    md.drawing.pixel_size(size)  # refused before rendering when too large
     if soft:
         return md.render_soft(md.neutral_values(), size).detach()[0, 0].numpy()
     return render_svg_ink(md.to_svg(md.neutral_values()[0]), size)
@@ -227,10 +237,14 @@ def train(
     device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
     threads: ThreadsOpt = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+    checkpoint_every: Annotated[
+        int, typer.Option("--checkpoint-every", min=1, help="Steps between checkpoints (a crash loses at most these).")
+    ] = 250,
     move: MoveOpt = None,
     shift: ShiftOpt = None,
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
+    drop: DropOpt = False,
 ) -> None:
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
     from deepmorph_core.train import train_model
@@ -264,9 +278,11 @@ def train(
                 "threads": threads,
                 "hard_fraction": hard_fraction,
                 "small_prints": small_prints,
+                "checkpoint_every": checkpoint_every,
             },
             on_start=on_start,
-            on_warning=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
+            on_warning=lambda text: err.print(f"warning: {text}"),
+            drop_unsupported=drop,
         )
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "

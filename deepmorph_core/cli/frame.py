@@ -94,6 +94,13 @@ ScaleOpt = Annotated[Optional[str], typer.Option("--scale", help='Default dm:sca
 RotateOpt = Annotated[Optional[str], typer.Option("--rotate", help='Default dm:rotate in degrees: "LO,HI".')]
 
 
+DropOpt = Annotated[
+    bool,
+    typer.Option(
+        "--drop-unsupported",
+        help="Leave out what DeepMorph cannot model (CSS, filters, text, images ...) instead of refusing the file.",
+    ),
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 
 
@@ -152,6 +159,12 @@ def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[Callab
     finally:
         if progress.live.is_started:
             progress.stop()
+
+
+def warn_dropped(drawing: Any) -> None:
+    """One warning line per thing ``--drop-unsupported`` left out of a drawing."""
+    for line, what in getattr(drawing, "dropped", []):
+        err.print(f"warning: {drawing.source}:{line}: left out {what}")
 
 
 def write_text_atomic(path: Path, text: str) -> None:

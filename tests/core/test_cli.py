@@ -149,7 +149,11 @@ def test_no_output_replaces_an_input(tmp_path: Path) -> None:
         ([*enc, "--out", model], "--out", "refusing to overwrite the model file"),
         ([*enc, "--out", tmp_path / "code.svg", "--png", model], "--png", "refusing to overwrite the model file"),
         ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.svg"], "--png", "SVG given with --out"),
-        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.xyz"], "c.xyz", "the print image is a PNG; name it .png"),
+        (
+            [*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.xyz"],
+            "c.xyz",
+            "the print image is a PNG; name it .png",
+        ),
         ([*enc, "--out", tmp_path / "c.pdf"], "c.pdf", "the code is written as SVG; name it .svg"),
         (["render", drawing, "--out", drawing], "--out", "refusing to overwrite the input drawing"),
         (["decode", model, photo, "--overlay", tmp_path / "ann.xyz"], "--overlay", "cannot write this image format"),
