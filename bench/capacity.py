@@ -4,7 +4,7 @@ Per (drawing, payload size) cell: train a model (or ``--reuse`` a kept bundle), 
 ``--samples`` freshly drawn random payloads and decode them under
 
 * **soft**: the soft rasterizer's renders, framed as in training (``canonicalize`` + ``render_moments``);
-* **real**: resvg renders (``real_renders``) of the same morphs, clean, framed the same way;
+* **real**: resvg renders (``DeepMorphModel.real_renders``) of the same morphs, clean, framed the same way;
 * **real+aug**: those framed real renders through the differentiable training corruption at ``medium``;
 * **r400**: resvg at 400 px decoded through the photo chain (``Locator.locate``, the user's path), clean;
 * **photo**: ``close_up_photo(render_at_400px, "medium")`` decoded through the photo chain;
@@ -194,7 +194,6 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     from deepmorph_core.framing import canonicalize, render_moments
     from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
-    from deepmorph_core.train import real_renders
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import close_up_photo
 
@@ -223,7 +222,7 @@ def evaluate(model: Any, samples: int, seed: int, unrelated: list[tuple[str, Any
     timings["soft"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    real = framed(real_renders(model, values))
+    real = framed(model.real_renders(values))
     p = net(real)
     out["real"] = _score(codec.decode_batch(p), p, code, payloads)
     timings["real"] = time.perf_counter() - t0
@@ -489,7 +488,7 @@ def main() -> None:
             "unrelated": kinds,
             "conditions": {
                 "soft": "soft rasterizer render, framed by canonicalize+render_moments",
-                "real": "resvg render (real_renders), framed the same way, clean",
+                "real": "resvg render (DeepMorphModel.real_renders), framed the same way, clean",
                 "real_aug": "framed resvg render through the training augmentation at 'medium'",
                 "r400": "resvg at 400 px through the photo chain, clean",
                 "photo": "close_up_photo(resvg at 400 px, 'medium') through the photo chain",

@@ -28,6 +28,7 @@ from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 from deepmorph_core.networks import DecoderConfig
+from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 FORMAT = "deepmorph-model/1"
 _META_KEY = "deepmorph"
@@ -51,6 +52,38 @@ class TrainingRecord(BaseModel):
     device: str = "cpu"
     threads: int = 1
     metrics: dict[str, float] = Field(default_factory=dict)
+
+
+class ValidationRecord(BaseModel):
+    """How a trained model read fresh payloads (:mod:`deepmorph_core.validation`).
+
+    Attributes:
+        name: which validation (``renders``: real renders under the training corruption;
+            ``close-ups``: simulated photos of prints filling the frame, through the photo chain).
+        description: what was read, in a line.
+        severity: the corruption or photo severity.
+        samples: payloads tried.
+        read: payloads read whole (the codec vouched and the payload was the one sent).
+        wrong: payloads the codec vouched for that were not the one sent.
+        bit_accuracy: share of code bits the network read right (where it read any).
+        seconds: how long it took.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, max_length=64)
+    description: str = Field(max_length=200)
+    severity: str = Field(max_length=16)
+    samples: int = Field(ge=1)
+    read: int = Field(ge=0)
+    wrong: int = Field(ge=0)
+    bit_accuracy: float | None = Field(default=None, ge=0.0, le=1.0)
+    seconds: float = Field(ge=0.0)
+
+    @property
+    def rate(self) -> float:
+        """Share of payloads read whole."""
+        return self.read / self.samples
 
 
 class DetectorMeta(BaseModel):
@@ -81,6 +114,9 @@ class BundleMeta(BaseModel):
     drawing_name: str = Field(max_length=MAX_NAME_CHARS)
     drawing_svg: str = Field(max_length=MAX_DRAWING_CHARS)
     bounds_defaults: dict[str, Any]
+    # the morph geometry the model was trained with (deepmorph_core.svg.reader.GEOMETRY_VERSION);
+    # bundles written before it was recorded used version 1
+    geometry: int = Field(default=1, ge=1, le=GEOMETRY_VERSION)
     n_variables: int = Field(ge=1)
     codec: CodecSpec
     image_width: int = Field(ge=16, le=1024)
@@ -91,6 +127,8 @@ class BundleMeta(BaseModel):
     record: TrainingRecord
     detector: DetectorMeta | None = None
     tuning: list[dict[str, Any]] = Field(default_factory=list)  # decoder tunings after training, oldest first
+    # the last validation of the codec as it now is (after training, tuning or `deepmorph validate`)
+    validation: list[ValidationRecord] = Field(default_factory=list, max_length=16)
 
 
 def _bad(path: Path | str, why: str) -> DeepMorphError:

@@ -17,13 +17,13 @@ import numpy as np
 from lxml import etree
 
 from deepmorph_core.bounds import BoundSpec, parse_bounds
-from deepmorph_core.errors import BoundsError, SvgError
+from deepmorph_core.errors import BoundsError, DeepMorphError, SvgError
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Primitive
 from deepmorph_core.render import raster_size
 from deepmorph_core.svg import policy
 from deepmorph_core.svg.policy import DM_NS
-from deepmorph_core.svg.reader import ElementReader
+from deepmorph_core.svg.reader import GEOMETRY_VERSION, GEOMETRY_VERSIONS, ElementReader
 from deepmorph_core.svg.secure import SVG_NS, parse_svg_bytes, read_svg_bytes
 from deepmorph_core.svg.style import Style, compute_style, declarations
 from deepmorph_core.svg.values import parse_numbers, parse_transform
@@ -96,6 +96,8 @@ class Drawing:
         dropped: ``(line, what)`` for what DeepMorph cannot model and left out
             (``drop_unsupported``); empty otherwise, since such input is an error.
         styles: every kept element's ``style=""`` reduced to the properties DeepMorph reads.
+        geometry: the morph geometry version it was read for
+            (:data:`~deepmorph_core.svg.reader.GEOMETRY_VERSION`).
     """
 
     source: str
@@ -106,6 +108,7 @@ class Drawing:
     skipped: list[tuple[int | None, str]] = field(default_factory=list)
     dropped: list[tuple[int | None, str]] = field(default_factory=list)
     styles: dict[etree._Element, str] = field(default_factory=dict)
+    geometry: int = GEOMETRY_VERSION
 
     def write(self, root: etree._Element, twin: dict[etree._Element, etree._Element]) -> str:
         """The document under ``root`` (this drawing's tree, or a copy of it with a morph
@@ -142,6 +145,7 @@ def load_drawing(
     registry: Registry | None = None,
     label: str | None = None,
     drop_unsupported: bool = False,
+    geometry: int = GEOMETRY_VERSION,
 ) -> Drawing:
     """Read an SVG file (path) or document (bytes) into a :class:`Drawing`.
 
@@ -153,6 +157,8 @@ def load_drawing(
         drop_unsupported: leave out what DeepMorph cannot model (CSS, filters, patterns, text,
             images ...) and list it in :attr:`Drawing.dropped`, instead of refusing the file.
             Scripts and event handlers are refused either way.
+        geometry: the morph geometry version (:data:`~deepmorph_core.svg.reader.GEOMETRY_VERSION`;
+            older bundles name an older one).
 
     Raises:
         SvgError: malformed, hostile or unsupported input, with file and line.
@@ -161,13 +167,24 @@ def load_drawing(
         data, name = source, label or "<string>"
     else:
         data, name = read_svg_bytes(source), str(source)
+    if geometry not in GEOMETRY_VERSIONS:
+        raise DeepMorphError(f"{name}: unknown morph geometry version {geometry} (known: {list(GEOMETRY_VERSIONS)})")
     root = parse_svg_bytes(data, name)
-    return _Walker(name, registry or default_registry(), defaults or BoundSpec(), drop_unsupported).run(root)
+    walker = _Walker(name, registry or default_registry(), defaults or BoundSpec(), drop_unsupported, geometry)
+    return walker.run(root)
 
 
 class _Walker:
-    def __init__(self, source: str, registry: Registry, defaults: BoundSpec, drop_unsupported: bool = False):
-        self.reader = ElementReader(source, registry)
+    def __init__(
+        self,
+        source: str,
+        registry: Registry,
+        defaults: BoundSpec,
+        drop_unsupported: bool = False,
+        geometry: int = GEOMETRY_VERSION,
+    ):
+        self.reader = ElementReader(source, registry, geometry=geometry)
+        self.geometry = geometry
         self.source = source
         self.registry = registry
         self.cli_defaults = defaults
@@ -197,7 +214,7 @@ class _Walker:
         return SvgError(message, self.source, element.sourceline)
 
     def run(self, root: etree._Element) -> Drawing:
-        drawing = Drawing(self.source, root, self._viewbox(root))
+        drawing = Drawing(self.source, root, self._viewbox(root), geometry=self.geometry)
         self._frame(root, drawing.viewbox)
         root_bounds = self._bounds(root)
         self.defaults = root_bounds.over(self.cli_defaults)

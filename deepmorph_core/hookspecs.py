@@ -23,6 +23,8 @@ import pluggy
 if TYPE_CHECKING:
     import typer
 
+    from deepmorph_core.bundle import ValidationRecord
+    from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Register
 
 PROJECT = "deepmorph"
@@ -73,4 +75,16 @@ def deepmorph_register_commands(cli: typer.Typer) -> None:
     not at the top of the plugin module, so that ``deepmorph --help`` stays fast. A command
     reports a failure by raising :class:`~deepmorph_core.errors.DeepMorphError`, which the
     command line prints as one ``error:`` line with exit status 1.
+    """
+
+
+@hookspec
+def deepmorph_validate_model(model: DeepMorphModel, samples: int, seed: int) -> ValidationRecord | None:
+    """Validate a trained model on fresh payloads, in a way of the plugin's own.
+
+    Called after training and tuning (and by ``deepmorph validate``), after core's own
+    validation on real renders (:mod:`deepmorph_core.validation`). Draw ``samples`` random
+    payloads from ``seed``, read them back the plugin's way (the photo chain reads simulated
+    photos), and return a :class:`~deepmorph_core.bundle.ValidationRecord`, or ``None`` to add
+    nothing. The records are stored in the bundle and shown by ``deepmorph info``.
     """

@@ -27,6 +27,7 @@ from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.photo import to_gray
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg
+from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 #: What a drawing to train on may have: the analysis before training renders every variable's
 #: extremes (its time grows with variables times shapes), and a step renders every shape. At
@@ -102,7 +103,12 @@ class DeepMorphModel:
         label: str | None = None,
     ) -> DeepMorphModel:
         """A fresh (untrained) model for a drawing (``label`` names it in SVG errors)."""
-        md = MorphableDrawing.load(drawing_svg.encode(), label=label or drawing_name, **_bound_kwargs(bounds_defaults))
+        md = MorphableDrawing.load(
+            drawing_svg.encode(),
+            label=label or drawing_name,
+            geometry=GEOMETRY_VERSION,
+            **_bound_kwargs(bounds_defaults),
+        )
         if md.n_variables == 0:
             raise DeepMorphError(
                 f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
@@ -121,6 +127,7 @@ class DeepMorphModel:
             drawing_name=drawing_name,
             drawing_svg=drawing_svg,
             bounds_defaults=bounds_defaults,
+            geometry=GEOMETRY_VERSION,
             n_variables=md.n_variables,
             codec=codec,
             image_width=width,
@@ -144,7 +151,9 @@ class DeepMorphModel:
         """Load a bundle (``.dmm``); one clear error for anything unusable."""
         meta, tensors = load_bundle(path)
         try:
-            md = MorphableDrawing.load(meta.drawing_svg.encode(), **_bound_kwargs(meta.bounds_defaults))
+            md = MorphableDrawing.load(
+                meta.drawing_svg.encode(), geometry=meta.geometry, **_bound_kwargs(meta.bounds_defaults)
+            )
         except SvgError as exc:
             raise DeepMorphError(f"{path}: the drawing inside the model cannot be read: {exc.message}") from None
         if md.n_variables != meta.n_variables:
@@ -234,6 +243,15 @@ class DeepMorphModel:
         value = Payload.of(payload, self.codec.spec.payload_bits)
         return Code(value, self.encode(value), self.drawing.drawing.viewbox)
 
+    def real_renders(self, values: Tensor) -> Tensor:
+        """resvg renders ``(k, 1, H, W)`` (paper white) of ``(k, N_v)`` morph values at the
+        decoder's width."""
+        h, w = self.image_size
+        out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
+        for i in range(values.shape[0]):
+            out[i, 0] = render_svg(self.drawing.to_svg(values[i].detach().cpu()), w)
+        return torch.from_numpy(out).to(values.device)
+
     # -- decoding -------------------------------------------------------------------------
 
     def canonical_moments(self) -> Tensor:
@@ -279,6 +297,7 @@ class DeepMorphModel:
             "versions": m.versions,
             "detector": None if m.detector is None else m.detector.model_dump(),
             "tuning": m.tuning,
+            "validation": [r.model_dump() for r in m.validation],
         }
 
 

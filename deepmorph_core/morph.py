@@ -3,7 +3,8 @@
 Variables come in blocks:
 
 * per-point moves: two variables per control point, mapped onto a disk of radius ``dm:move``
-  (a smooth square-to-disk map, so every value of the encoder's sigmoid lands inside);
+  (a smooth square-to-disk map, so every value of the encoder's sigmoid lands inside), shrunk
+  per point so that no ink moves further than ``dm:move`` (:func:`ink_reach`, geometry 2);
 * element- and group-level affines: shift x/y (within +-R), scale and rotation (within
   ``[lo, hi]``), about the element's or group's centre.
 
@@ -54,6 +55,22 @@ class Variable:
 _AFFINE_ROLES = ("shift-x", "shift-y", "scale", "rotate")
 
 
+def ink_reach(primitive: object, n_points: int) -> np.ndarray:
+    """``(n,)`` how far a primitive's ink can move, at most, per unit move of each control point
+    (every point moving within the same radius): 1 where the ink moves no further than the points
+    (lines, polygons, Bezier curves, which stay in the hull of their points), more where it
+    swings further (an arc's bulge). A point's move radius is the artist's ``dm:move`` divided by
+    this, so that the bound holds in the ink. Primitives say so through an optional
+    ``ink_reach()`` method; without one, 1."""
+    method = getattr(primitive, "ink_reach", None)
+    if method is None:
+        return np.ones(n_points)
+    reach = np.asarray(method(), dtype=np.float64).reshape(-1)
+    if reach.shape != (n_points,) or not np.isfinite(reach).all() or (reach < 1.0 - 1e-9).any():
+        raise ValueError(f"{type(primitive).__name__}.ink_reach() must give {n_points} factors >= 1, got {reach}")
+    return reach
+
+
 class MorphSpace:
     """Variables and bounds of a drawing, and the differentiable map from values to geometry.
 
@@ -75,11 +92,11 @@ class MorphSpace:
             if not prim.fixed:
                 radius = prim.bounds.move or 0.0
                 if radius > 0:
+                    reach = ink_reach(prim.primitive, n) if drawing.geometry >= 2 else np.ones(n)
                     for k in range(n):
+                        r = radius / reach[k]
                         for axis, role in enumerate(("move-x", "move-y")):
-                            moves[k, axis] = self._add(
-                                Variable("primitive", prim.index, role, k, -radius, radius, prim.line)
-                            )
+                            moves[k, axis] = self._add(Variable("primitive", prim.index, role, k, -r, r, prim.line))
             self._prim_moves.append(moves)
             affine = (
                 np.full(4, -1, dtype=np.int64)

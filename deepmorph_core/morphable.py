@@ -29,6 +29,7 @@ from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg_ink
+from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 # a variable changing the picture by at most this share of the median variable is invisible: it
 # lies in the wide gap between variables a renderer does not show and the weakest ones it does
@@ -72,12 +73,14 @@ class MorphableDrawing:
         registry: Registry | None = None,
         label: str | None = None,
         drop_unsupported: bool = False,
+        geometry: int = GEOMETRY_VERSION,
     ) -> MorphableDrawing:
         """Parse an SVG file or document; keyword bounds apply where the SVG says nothing.
 
         ``label`` names a bytes source in error messages (a path names itself);
         ``drop_unsupported`` leaves out what DeepMorph cannot model instead of refusing it
-        (:func:`~deepmorph_core.drawing.load_drawing`; what was left out is in ``drawing.dropped``).
+        (:func:`~deepmorph_core.drawing.load_drawing`; what was left out is in ``drawing.dropped``);
+        ``geometry`` is the morph geometry version (the newest unless a bundle names an older one).
         """
         defaults = bound_defaults(move, shift, scale, rotate)
         drawing = load_drawing(
@@ -86,6 +89,7 @@ class MorphableDrawing:
             registry=registry or default_registry(),
             label=label,
             drop_unsupported=drop_unsupported,
+            geometry=geometry,
         )
         return cls(drawing, MorphSpace(drawing))
 

@@ -135,6 +135,26 @@ class Registry:
         """Let every plugin add its commands to the command line ``cli`` (a ``typer.Typer``)."""
         self.plugin_manager.hook.deepmorph_register_commands(cli=cli)
 
+    def validate_model(self, model: Any, samples: int, seed: int) -> list[Any]:
+        """Every plugin's validation of a trained model (``ValidationRecord`` s, in plugin order).
+
+        Raises:
+            PluginError: a plugin returned something other than a validation record.
+        """
+        from deepmorph_core.bundle import ValidationRecord
+
+        records = []
+        for impl in self.plugin_manager.hook.deepmorph_validate_model.get_hookimpls():
+            record = impl.function(model=model, samples=samples, seed=seed)
+            if record is None:
+                continue
+            if not isinstance(record, ValidationRecord):
+                got = type(record).__name__
+                got = type(record).__name__
+                raise PluginError(f"plugin {impl.plugin_name!r}: deepmorph_validate_model returned a {got}")
+            records.append(record)
+        return records
+
 
 class Register:
     """Handed to registration hooks; checks what a plugin registers and names it in errors."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -34,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from torch import Tensor, nn
 
 from deepmorph_core.bounds import format_validation_error
-from deepmorph_core.bundle import TrainingRecord
+from deepmorph_core.bundle import TrainingRecord, ValidationRecord
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.errors import DeepMorphError
@@ -44,10 +44,11 @@ from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults, capacity_warning
 from deepmorph_core.networks import DecoderConfig, spread_weights
+from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
-from deepmorph_core.render import render_svg
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
+from deepmorph_core.validation import default_samples, validate, validation_warning
 
 
 class TrainConfig(BaseModel):
@@ -118,15 +119,6 @@ CODEC_PANELS = (
     Panel("loss", ("loss",), log_scale=True),
     Panel("accuracy (training batches)", ("bit_acc", "word_acc"), unit_range=True),
 )
-
-
-def real_renders(model: DeepMorphModel, values: Tensor) -> Tensor:
-    """resvg renders ``(k, 1, H, W)`` (paper white) of ``(k, N_v)`` morph values."""
-    h, w = model.image_size
-    out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
-    for i in range(values.shape[0]):
-        out[i, 0] = render_svg(model.drawing.to_svg(values[i].detach().cpu()), w)
-    return torch.from_numpy(out).to(values.device)
 
 
 def variable_effects(model: DeepMorphModel, chunk: int = 64) -> Tensor:
@@ -246,7 +238,7 @@ class CodecRun:
             soft = values[k:]
             images = 1.0 - self.raster(soft) if len(soft) else values.new_empty((0, 1, *self.model.image_size))
         if k:
-            images = torch.cat([real_renders(self.model, values[:k]), images], 0)
+            images = torch.cat([self.model.real_renders(values[:k]), images], 0)
         images = canonicalize(images, render_moments(images), self.target, self.model.image_size)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
@@ -347,6 +339,7 @@ class TrainingSummary:
     steps: int
     stage2_start: int | None
     elapsed_s: float
+    validation: list[ValidationRecord] = field(default_factory=list)
 
 
 def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
@@ -367,6 +360,8 @@ def train_model(
     on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
     on_warning: Callable[[str], None] | None = None,
     drop_unsupported: bool = False,
+    validation_samples: tuple[int, int] | None = None,
+    on_validation: Callable[[], None] | None = None,
 ) -> TrainingSummary:
     """Train (or resume) a model for a drawing and write its bundle.
 
@@ -383,6 +378,11 @@ def train_model(
             :func:`warnings.warn`), such as :func:`~deepmorph_core.morphable.capacity_warning`'s.
         drop_unsupported: train on the drawing with what DeepMorph cannot model left out (a
             warning names each part); the bundle holds that drawing.
+        validation_samples: fresh payloads read from renders and from photos once training
+            has finished (:mod:`deepmorph_core.validation`; default
+            :func:`~deepmorph_core.validation.default_samples`); the records are stored in the
+            bundle, and a model reading fewer than 99 % gets a warning. ``(0, 0)``: none.
+        on_validation: called when validation starts (a progress message).
     """
     out = check_target(out, f"--out {out}")  # before any work: a folder that cannot be written, say
     overrides = {k: v for k, v in (train or {}).items() if v is not None}
@@ -446,7 +446,34 @@ def train_model(
     )
     on_log = on_start(config.steps, model.meta.record.step) if on_start else None
     summary: LoopSummary = loop.run(run, on_log)
-    return TrainingSummary(out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s)
+    records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, on_validation)
+    return TrainingSummary(
+        out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records
+    )
+
+
+def _validate_and_store(
+    model: DeepMorphModel,
+    out: Path,
+    label: str,
+    samples: tuple[int, int] | None,
+    seed: int,
+    warn: Callable[[str], None],
+    on_validation: Callable[[], None] | None,
+) -> list[ValidationRecord]:
+    """Validate a trained (or tuned) model, store the records in its bundle and warn when weak."""
+    renders, photos = samples if samples is not None else default_samples()
+    if renders <= 0:
+        return []
+    if on_validation:
+        on_validation()
+    records = validate(model, default_registry(), renders, photos, seed=seed)
+    model.meta.validation = records
+    model.save(out)
+    warning = validation_warning(records, label)
+    if warning:
+        warn(warning)
+    return records
 
 
 class TuningRun(CodecRun):
@@ -462,7 +489,7 @@ class TuningRun(CodecRun):
     def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path):
         if not config.freeze_encoder:
             raise ValueError("a tuning run trains the decoder alone: config.freeze_encoder must be set")
-        self._trained = model.meta.record
+        self.trained_record = model.meta.record
         self._earlier = list(model.meta.tuning)
         model.meta.record = TrainingRecord()
         super().__init__(model, config, out)
@@ -484,7 +511,7 @@ class TuningRun(CodecRun):
         self.entry.update(steps=rec.step, finished=rec.finished, elapsed_s=round(rec.elapsed_s, 1))
         if self._window:
             self.entry["bit_acc"] = round(float(np.mean(self._window)), 5)
-        self.model.meta.record = self._trained
+        self.model.meta.record = self.trained_record
         self.model.meta.tuning = [*self._earlier, self.entry]
         self.model.decoder.eval()
         self.model.save(self.out)
@@ -502,6 +529,9 @@ def tune_decoder(
     threads: int | None = None,
     overwrite: bool = False,
     on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
+    validation_samples: tuple[int, int] | None = None,
+    on_validation: Callable[[], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Train a trained bundle's decoder further, encoder frozen, and write the result to ``out``.
 
@@ -516,6 +546,8 @@ def tune_decoder(
         model_path: a bundle whose training has finished.
         out: where to write the tuned bundle (may be ``model_path`` itself).
         on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback.
+        validation_samples, on_validation, on_warning: the tuned decoder is validated as after
+            training (:func:`train_model`).
 
     Returns:
         The bundle's new ``tuning`` entry.
@@ -549,4 +581,7 @@ def tune_decoder(
         f"the decoder tuned so far is in {out}",
     )
     loop.run(run, on_start(config.steps, 0) if on_start else None)
+    model.meta.record = run.trained_record
+    warn = on_warning or (lambda text: warnings.warn(text, stacklevel=3))
+    _validate_and_store(model, out, str(model_path), validation_samples, seed, warn, on_validation)
     return run.entry

@@ -1,6 +1,6 @@
 """The photo chain's plugin module, loaded through the ``deepmorph`` entry point
-(``builtin_detectors``) exactly as third-party plugins are: the built-in detector and the
-photo commands."""
+(``builtin_detectors``) exactly as third-party plugins are: the built-in detector, the photo
+commands, and the validation of trained models on close-up photos."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ from deepmorph_core import hookimpl
 if TYPE_CHECKING:
     import typer
 
+    from deepmorph_core.bundle import ValidationRecord
+    from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Register
 
 
@@ -28,3 +30,11 @@ def deepmorph_register_commands(cli: typer.Typer) -> None:
     from deepmorph_detect import commands
 
     commands.register(cli)
+
+
+@hookimpl
+def deepmorph_validate_model(model: DeepMorphModel, samples: int, seed: int) -> ValidationRecord:
+    """Close-up photos of fresh codes through the photo chain (:mod:`deepmorph_detect.photo_validation`)."""
+    from deepmorph_detect.photo_validation import validate_close_ups
+
+    return validate_close_ups(model, samples, seed)

@@ -97,7 +97,7 @@ class Path(BasePrimitive):
 
     kind = "path"
     tags = ("path",)
-    morphable = "every vertex and handle; arcs keep radii"
+    morphable = "every vertex and handle; arcs follow their chords"
 
     def __init__(self, points: np.ndarray, subpaths: list[Subpath], cap: int):
         self.points = points
@@ -133,6 +133,19 @@ class Path(BasePrimitive):
             if ring is not None:
                 b.ring(torch.cat(ring, 1))
         return b.build()
+
+    def ink_reach(self) -> np.ndarray:
+        """Per control point, the most any segment through it moves its ink per unit move (see
+        :func:`deepmorph_core.morph.ink_reach`); segments that say nothing count 1."""
+        reach = np.ones(len(self.points))
+        for sub in self.subpaths:
+            for seg, idx in sub.segments:
+                method = getattr(seg, "ink_reach", None)
+                if method is None:
+                    continue
+                for point, r in zip((idx[0], idx[-1]), method()):
+                    reach[point] = max(reach[point], float(r))
+        return reach
 
     def write(self, element: etree._Element, points: np.ndarray, morph: ElementMorph) -> None:
         p = apply_affine(morph.matrix(), points)
@@ -181,6 +194,11 @@ class HalfCircle(BasePrimitive):
 
     def control_points(self) -> Tensor:
         return as_points(self.points)
+
+    def ink_reach(self) -> np.ndarray:
+        """The top of a half circle moves by ``|d0 + d1| / 2 + |d0 - d1| / 2``, at most sqrt(2)
+        times its end points' move."""
+        return np.full(2, math.sqrt(2.0))
 
     def outline(self, frame: Frame) -> Outline:
         b = builder_for(frame)

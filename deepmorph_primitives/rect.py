@@ -53,6 +53,11 @@ class Rect(BasePrimitive):
     def control_points(self) -> Tensor:
         return as_points(self.corners)
 
+    def ink_reach(self) -> np.ndarray:
+        """The other two corners take x from one control point and y from the other, so they
+        move by up to sqrt(2) times the points' move."""
+        return np.full(2, math.sqrt(2.0))
+
     def outline(self, frame: Frame) -> Outline:
         b = builder_for(frame)
         lo = torch.minimum(frame.local[:, 0], frame.local[:, 1])

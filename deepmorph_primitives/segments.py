@@ -84,21 +84,25 @@ class RestArc:
 
 
 class ArcSegment:
-    """An elliptical arc; its end points morph, radii and flags stay (radii follow element
-    scale), and the centre is recomputed as SVG renderers do.
+    """An elliptical arc whose end points morph.
 
-    Arcs drawn as (nearly) half an ellipse are special: SVG's centre formula has a square-root
-    singularity at exactly half, so there a tiny move of an end point swings the centre and the
-    gradient explodes. Such arcs *follow their chord*: the arc moves as a similarity that takes
-    its rest chord onto the morphed chord (centre, radii and axis angle included). At rest it is
-    exactly the arc in the file, the map is smooth, and it is written back with the radii and
-    angle scaled and turned by that similarity, which SVG's own centre formula reproduces.
+    In morph geometry 2 (:data:`~deepmorph_core.svg.reader.GEOMETRY_VERSION`) every arc *follows
+    its chord*: it moves as the similarity that takes its rest chord onto the morphed chord
+    (centre, radii and axis angle included), so its shape is kept and its ink moves boundedly
+    (:meth:`ink_reach`). At rest it is exactly the arc in the file, the map is smooth, and it is
+    written back with the radii and angle scaled and turned by that similarity, which SVG's own
+    centre formula reproduces.
+
+    In geometry 1 (older bundles) an arc keeps its radii and flags (radii follow element scale)
+    and its centre is recomputed as SVG renderers do, except arcs of (nearly) half an ellipse,
+    which follow their chord there too: SVG's centre formula has a square-root singularity at
+    exactly half, where a tiny move of an end point swings the centre and the gradient explodes.
     """
 
     kind = "path-arc"
     commands = "Aa"
     svgpath_types = (SvgArc,)
-    morphable = "end point; radii follow element scale"
+    morphable = "end point; the arc follows its chord (a similarity)"
 
     #: |sqrt(lambda) - 1| below which an arc follows its chord.
     NEAR_HALF = 0.02
@@ -113,9 +117,30 @@ class ArcSegment:
         arc = cls(segment.radius.real, segment.radius.imag, segment.rotation, bool(segment.arc), bool(segment.sweep))
         p = np.array([[segment.start.real, segment.start.imag], [segment.end.real, segment.end.imag]])
         near_half = not arc.is_straight and abs(arc._radius_scale(p) - 1.0) < cls.NEAR_HALF
-        if near_half and np.linalg.norm(p[1] - p[0]) > 1e-9:
+        follows = near_half or (reader.geometry >= 2 and not arc.is_straight)
+        if follows and np.linalg.norm(p[1] - p[0]) > 1e-9:
             arc.rest = RestArc.of(arc, p)
         return arc, [segment.end]
+
+    def ink_reach(self) -> tuple[float, float]:
+        """How far the arc's ink moves, at most, per unit move of its two end points.
+
+        An arc that follows its chord moves every point ``z`` by ``d0 + w (d1 - d0)`` with
+        ``w = (z - p0) / (p1 - p0)`` (complex numbers), so by at most ``|1 - w| + |w|`` times the
+        end points' move: 1 on the chord, about 1.41 at the top of a half circle, more for arcs
+        that bulge further. Arcs that keep their radius have no such bound (1 is claimed).
+        """
+        r = self.rest
+        if r is None:
+            return (1.0, 1.0)
+        t = r.theta0 + np.linspace(0.0, 1.0, 65) * r.dtheta
+        c, s = math.cos(math.radians(self.rotation)), math.sin(math.radians(self.rotation))
+        ex, ey = r.rx * np.cos(t), r.ry * np.sin(t)
+        z = (r.centre[0] + c * ex - s * ey) + 1j * (r.centre[1] + s * ex + c * ey)
+        p0, p1 = complex(*r.start), complex(*r.end)
+        w = (z - p0) / (p1 - p0)
+        reach = float(np.max(np.abs(1 - w) + np.abs(w)))
+        return (max(reach, 1.0), max(reach, 1.0))
 
     def _radius_scale(self, points: np.ndarray) -> float:
         """sqrt(lambda) of SVG F.6.6: how much the radii must grow to span the end points."""

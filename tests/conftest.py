@@ -54,6 +54,18 @@ def isolated_plugins(builtin_registry: Registry) -> Iterator[None]:
         set_default_registry(None)
 
 
+@pytest.fixture(autouse=True, scope="session")
+def small_validations() -> Iterator[None]:
+    """Training validates on 1000 renders and 200 photos; tests train tiny models many times,
+    so they validate on a few (tests/core/test_validation.py checks the real thing)."""
+    import deepmorph_core.validation as validation
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(validation, "RENDER_SAMPLES", 24)
+        patch.setattr(validation, "PHOTO_SAMPLES", 2)
+        yield
+
+
 @pytest.fixture
 def with_bezier(bezier_registry: Registry) -> Registry:
     """Make the process-wide registry the built-ins plus the Bézier plugin."""

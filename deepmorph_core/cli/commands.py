@@ -23,6 +23,7 @@ from deepmorph_core.cli.frame import (
     ShiftOpt,
     SvgArg,
     ThreadsOpt,
+    ValidationOpt,
     err,
     out,
     parse_pair,
@@ -245,6 +246,7 @@ def train(
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
     drop: DropOpt = False,
+    validation: ValidationOpt = None,
 ) -> None:
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
     from deepmorph_core.train import train_model
@@ -283,11 +285,46 @@ def train(
             on_start=on_start,
             on_warning=lambda text: err.print(f"warning: {text}"),
             drop_unsupported=drop,
+            validation_samples=_validation_samples(validation),
+            on_validation=lambda: err.print("validating on fresh payloads ..."),
         )
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
+    _print_validation([r.model_dump() for r in summary.validation])
+
+
+def _validation_samples(text: str | None) -> tuple[int, int] | None:
+    """``--validation R,P``: payloads read from renders and from photos (``0`` for none);
+    ``None`` for the defaults."""
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        counts = [int(p) for p in parts]
+    except ValueError:
+        counts = []
+    if len(counts) not in (1, 2) or min(counts) < 0 or max(counts) > 100_000:
+        raise typer.BadParameter(f"expected R,P (two counts from 0 to 100000), got {text!r}", param_hint="--validation")
+    return (counts[0], counts[1] if len(counts) == 2 else 0)
+
+
+def _validation_lines(records: list[dict[str, Any]]) -> list[str]:
+    """One line per validation record: what was read, and how well."""
+    lines = []
+    for r in records:
+        acc = "" if r["bit_accuracy"] is None else f", code-bit accuracy {r['bit_accuracy']:.4f}"
+        lines.append(
+            f"{r['name']} ({r['severity']}): {r['read']}/{r['samples']} read ({r['read'] / r['samples']:.1%}), "
+            f"{r['wrong']} wrong{acc}; {r['seconds']:.0f} s"
+        )
+    return lines
+
+
+def _print_validation(records: list[dict[str, Any]]) -> None:
+    for line in _validation_lines(records):
+        out.print(f"validation: {safe(line)}")
 
 
 def info(model: ModelArg, as_json: JsonOpt = False) -> None:
@@ -351,6 +388,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
                 + ("" if run["finished"] else " (interrupted)"),
             )
         )
+    for line in _validation_lines(data["validation"]) or ["none (run `deepmorph validate MODEL --save`)"]:
+        rows.append(("validated", line))
     for k, v in rows:
         table.add_row(k, safe(v))
     out.print(table)
@@ -367,14 +406,59 @@ def tune_decoder(
     lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1e-1, help="Start learning rate (cosine to 10 %).")] = 3e-4,
     seed: SeedOpt = 0,
     threads: ThreadsOpt = None,
+    validation: ValidationOpt = None,
 ) -> None:
     """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
+    from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.train import tune_decoder as tune
 
     with step_progress("tuning", lambda m: f"decoder bit acc {m['bit_acc']:.4f}") as on_start:
-        run = tune(model, out_path, steps=steps, small_prints=small_prints, lr=lr, seed=seed, threads=threads,
-                   on_start=on_start)  # fmt: skip
+        run = tune(
+            model,
+            out_path,
+            steps=steps,
+            small_prints=small_prints,
+            lr=lr,
+            seed=seed,
+            threads=threads,
+            on_start=on_start,
+            validation_samples=_validation_samples(validation),
+            on_validation=lambda: err.print("validating on fresh payloads ..."),
+            on_warning=lambda text: err.print(f"warning: {text}"),
+        )
     out.print(f"wrote {out_path} ({run['steps']} steps in {run['elapsed_s']:.0f} s, bit acc {run['bit_acc']:.4f})")
+    _print_validation(DeepMorphModel.load(out_path).info()["validation"])
+
+
+def validate(
+    model: ModelArg,
+    samples: Annotated[int, typer.Option("--samples", min=1, max=100_000, help="Payloads read from renders.")] = 1000,
+    photos: Annotated[
+        int, typer.Option("--photos", min=0, max=100_000, help="Payloads read from close-up photos.")
+    ] = 200,
+    seed: SeedOpt = 0,
+    save: Annotated[bool, typer.Option("--save", help="Store the result in the bundle (shown by info).")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Read fresh random payloads back from renders and photos: what the model really reads."""
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.plugins import default_registry
+    from deepmorph_core.validation import validate as run_validation
+    from deepmorph_core.validation import validation_warning
+
+    m = DeepMorphModel.load(model)
+    records = run_validation(m, default_registry(), samples, photos, seed=seed)
+    if save:
+        m.meta.validation = records
+        m.save(model)
+    dumped = [r.model_dump() for r in records]
+    if as_json:
+        print_json({"model": str(model), "validation": dumped, "saved": save})
+    else:
+        _print_validation(dumped)
+    warning = validation_warning(records, str(model))
+    if warning:
+        err.print(f"warning: {safe(warning)}")
 
 
 def encode(
@@ -423,6 +507,7 @@ def register(cli: typer.Typer) -> None:
         ("train", train),
         ("info", info),
         ("tune-decoder", tune_decoder),
+        ("validate", validate),
         ("encode", encode),
     ):
         cli.command(name)(friendly(command))

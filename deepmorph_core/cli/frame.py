@@ -179,3 +179,10 @@ SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (reproducible 
 
 
 ThreadsOpt = Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")]
+ValidationOpt = Annotated[
+    Optional[str],
+    typer.Option(
+        "--validation",
+        help="Fresh payloads read back when done, from renders and close-up photos: R,P (default 1000,200; 0: none).",
+    ),
+]

@@ -18,6 +18,15 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 
+#: How drawings are morphed. 1: per-point moves bound the control points only, and arcs keep
+#: their radii (except arcs of half an ellipse, which follow their chord). 2: every arc follows
+#: its chord (it moves as the similarity taking its chord onto the morphed chord), and each
+#: point's move radius shrinks by how far its primitive's ink can move per unit of the point's
+#: move, so that no ink moves further than the artist's bound. Bundles record the version their
+#: model was trained with; new drawings use the newest.
+GEOMETRY_VERSION = 2
+GEOMETRY_VERSIONS = (1, 2)
+
 
 @dataclass
 class ElementReader:
@@ -27,11 +36,13 @@ class ElementReader:
         source: label of the SVG (a path, or ``<string>``).
         registry: the plugin registry (paths use it to find segment kinds).
         style: the computed style of the element being read (caps, fill rule).
+        geometry: the morph geometry version (:data:`GEOMETRY_VERSION`) the drawing is read for.
     """
 
     source: str
     registry: Registry
     style: Style = Style()
+    geometry: int = GEOMETRY_VERSION
 
     def error(self, element: etree._Element | None, message: str) -> NoReturn:
         """Raise an :class:`SvgError` at ``element``'s line."""

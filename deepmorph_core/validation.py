@@ -1,0 +1,127 @@
+"""Validation: how a trained model reads payloads it has never seen.
+
+Training reports accuracies on its own batches; a user needs to know what the finished model
+reads. After training (and tuning) every model is validated on fresh random payloads:
+
+* **renders** (here): each payload's morph rendered by the real renderer (resvg) at the
+  decoder's width, framed by its ink as photos are, through the training corruption at
+  ``medium``, read by the decoder and the codec;
+* further validations from plugins (the ``deepmorph_validate_model`` hook): the photo chain adds
+  **close-ups**, simulated photos of prints that fill the frame.
+
+The records are stored in the bundle (``meta.validation``) and shown by ``deepmorph info``. A
+payload counts as read only when the codec vouches for it (its CRC matches) *and* it is the one
+sent; one the codec vouches for that is not the one sent is counted as wrong.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from deepmorph_core.bundle import ValidationRecord
+from deepmorph_core.corruption import build_pipeline
+from deepmorph_core.framing import canonicalize, render_moments
+from deepmorph_core.payload import random_payloads
+
+if TYPE_CHECKING:
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.plugins import Registry
+
+RENDER_SAMPLES = 1000  # payloads read from renders after training
+PHOTO_SAMPLES = 200  # payloads read from close-up photos after training (plugins' validations)
+TARGET_RATE = 0.99  # below this share of payloads read, training ends with a warning
+SEVERITY = "medium"
+
+
+def default_samples() -> tuple[int, int]:
+    """``(renders, photos)``: the payloads training validates on when not told otherwise."""
+    return RENDER_SAMPLES, PHOTO_SAMPLES
+
+
+def validate_renders(
+    model: DeepMorphModel, samples: int = RENDER_SAMPLES, seed: int = 0, severity: str = SEVERITY, batch: int = 100
+) -> ValidationRecord:
+    """Read ``samples`` fresh payloads from real renders under the training corruption.
+
+    Args:
+        model: a trained model.
+        samples: how many payloads (each drawn at random from ``seed``).
+        severity: the corruption (``easy``, ``medium``, ``hard``).
+        batch: renders per decoder call.
+    """
+    if samples < 1:
+        raise ValueError(f"samples must be at least 1, got {samples}")
+    start = time.perf_counter()
+    model.eval()
+    codec = model.codec
+    payloads = random_payloads(samples, codec.spec.payload_bits, np.random.default_rng(seed))
+    codes = codec.encode(payloads)
+    augment = build_pipeline(severity, model.width)
+    generator = torch.Generator().manual_seed(seed + 1)
+    target, size = model.canonical_moments(), model.image_size
+    read = wrong = right_bits = 0
+    for lo in range(0, samples, batch):
+        chunk = codes[lo : lo + batch]
+        values = model.morph_values(torch.from_numpy(chunk.astype(np.float32)))
+        real = model.real_renders(values)
+        with torch.no_grad():
+            framed = augment(canonicalize(real, render_moments(real), target, size), generator=generator)
+        probs = model.probabilities(framed).numpy().astype(np.float64)
+        right_bits += int(((probs > 0.5) == (chunk == 1)).sum())
+        for result, payload in zip(codec.decode_batch(probs), payloads[lo : lo + batch]):
+            if result.ok:
+                same = bool(np.array_equal(result.payload, payload))
+                read += same
+                wrong += not same
+    return ValidationRecord(
+        name="renders",
+        description=f"resvg renders at {model.width} px under the training corruption",
+        severity=severity,
+        samples=samples,
+        read=read,
+        wrong=wrong,
+        bit_accuracy=right_bits / (samples * codec.spec.code_bits),
+        seconds=round(time.perf_counter() - start, 2),
+    )
+
+
+def validate(
+    model: DeepMorphModel,
+    registry: Registry,
+    render_samples: int = RENDER_SAMPLES,
+    photo_samples: int = PHOTO_SAMPLES,
+    seed: int = 0,
+) -> list[ValidationRecord]:
+    """Every validation: renders, then what plugins add (``photo_samples`` payloads each)."""
+    records = [validate_renders(model, render_samples, seed)]
+    if photo_samples > 0:
+        records.extend(registry.validate_model(model, photo_samples, seed))
+    return records
+
+
+def validation_warning(records: list[ValidationRecord], label: str) -> str | None:
+    """Why the model should not be trusted yet, when a validation read fewer than
+    :data:`TARGET_RATE` of its payloads (or any wrong one); ``None`` when all is well."""
+    weak = [r for r in records if r.rate < TARGET_RATE or r.wrong]
+    if not weak:
+        return None
+    parts = [f"{r.name} {r.read}/{r.samples} read, {r.wrong} wrong" for r in weak]
+    return (
+        f"{label}: validation read fewer than {TARGET_RATE:.0%} of fresh payloads ({'; '.join(parts)}); "
+        "train with fewer --payload-bits (see `deepmorph capacity`), more --steps, or wider bounds"
+    )
+
+
+__all__ = [
+    "PHOTO_SAMPLES",
+    "RENDER_SAMPLES",
+    "TARGET_RATE",
+    "default_samples",
+    "validate",
+    "validate_renders",
+    "validation_warning",
+]

@@ -1,0 +1,100 @@
+"""Validation after training: fresh payloads read from renders and close-up photos, stored in
+the bundle, shown by ``info``, warned about when weak; ``deepmorph validate`` for any bundle."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from deepmorph_core import hookimpl
+from deepmorph_core.cli import application
+from deepmorph_core.errors import PluginError
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.plugins import load_registry
+from deepmorph_core.validation import TARGET_RATE, validate_renders, validation_warning
+from tests.conftest import BUNDLED_MODEL, make_svg
+
+app = application()
+TINY = make_svg(
+    '<g stroke="black" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2.5">'
+    '<polyline points="4 6 12 4 20 6"/><line x1="4" y1="12" x2="20" y2="12"/>'
+    '<polyline points="4 18 12 20 20 18"/><circle cx="12" cy="12" r="3" dm:move="1.5"/></g>'
+)
+
+
+def test_the_bundled_model_reads_fresh_renders() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    record = validate_renders(model, samples=150, seed=5)
+    assert record.name == "renders" and record.samples == 150
+    assert record.wrong == 0
+    assert record.rate >= 0.96 and record.bit_accuracy > 0.99
+    again = validate_renders(model, samples=150, seed=5)
+    assert (again.read, again.bit_accuracy) == (record.read, record.bit_accuracy)  # seeded
+
+
+def test_training_ends_with_a_stored_validation(tmp_path: Path) -> None:
+    svg = tmp_path / "tiny.svg"
+    svg.write_bytes(TINY)
+    out = tmp_path / "m.dmm"
+    args = ["train", str(svg), "--out", str(out), "--steps", "40", "--payload-bits", "4", "--crc", "16"]
+    args += ["--ecc-t", "0", "--width", "40", "--batch", "8", "--severity", "none", "--threads", "1"]
+    result = CliRunner().invoke(app, [*args, "--validation", "40,3"])
+    assert result.exit_code == 0, result.output
+    assert "validation: renders (medium): " in result.output and "validation: close-ups (medium): " in result.output
+    records = DeepMorphModel.load(out).meta.validation
+    assert [(r.name, r.samples) for r in records] == [("renders", 40), ("close-ups", 3)]
+    weak = any(r.rate < TARGET_RATE or r.wrong for r in records)
+    assert ("warning: " in result.output and "validation read fewer than" in result.output) == weak
+    shown = CliRunner().invoke(app, ["info", str(out)])
+    assert "validated" in shown.output and "renders (medium)" in shown.output
+    as_json = json.loads(CliRunner().invoke(app, ["info", str(out), "--json"]).output)
+    assert [r["name"] for r in as_json["validation"]] == ["renders", "close-ups"]
+
+
+def test_validate_command_prints_and_saves_on_request(tmp_path: Path) -> None:
+    bundle = tmp_path / "ghost.dmm"
+    shutil.copyfile(BUNDLED_MODEL, bundle)
+    assert "none (run `deepmorph validate" in CliRunner().invoke(app, ["info", str(bundle)]).output
+    result = CliRunner().invoke(app, ["validate", str(bundle), "--samples", "30", "--photos", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert [r["name"] for r in data["validation"]] == ["renders", "close-ups"] and data["saved"] is False
+    assert DeepMorphModel.load(bundle).meta.validation == []
+    saved = CliRunner().invoke(app, ["validate", str(bundle), "--samples", "30", "--photos", "0", "--save"])
+    assert saved.exit_code == 0, saved.output
+    assert [r.name for r in DeepMorphModel.load(bundle).meta.validation] == ["renders"]
+
+
+def test_bad_validation_counts_are_a_usage_error(tmp_path: Path) -> None:
+    svg = tmp_path / "tiny.svg"
+    svg.write_bytes(TINY)
+    result = CliRunner().invoke(app, ["train", str(svg), "--out", str(tmp_path / "m.dmm"), "--validation", "lots"])
+    assert result.exit_code == 2 and "--validation" in result.output
+    assert not (tmp_path / "m.dmm").exists()
+
+
+def test_warning_names_what_fell_short() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    record = validate_renders(model, samples=20, seed=1)
+    weak = record.model_copy(update={"read": 10})
+    assert validation_warning([record.model_copy(update={"read": 20, "wrong": 0})], "m.dmm") is None
+    text = validation_warning([weak], "m.dmm")
+    assert text is not None and "renders 10/20 read, 0 wrong" in text and "deepmorph capacity" in text
+
+
+class _BadValidation:
+    @hookimpl
+    def deepmorph_validate_model(self, model, samples, seed):  # noqa: ANN001, ANN201 - a broken plugin
+        return {"read": 1}
+
+
+def test_a_plugin_validation_must_return_a_record() -> None:
+    import deepmorph_primitives.plugin as builtin
+
+    registry = load_registry([builtin, _BadValidation()], entry_points=False)
+    with pytest.raises(PluginError, match="deepmorph_validate_model returned a dict"):
+        registry.validate_model(DeepMorphModel.load(BUNDLED_MODEL), 1, 0)
