@@ -156,3 +156,19 @@ def test_decode_exits_4_when_nothing_is_read_and_still_prints_the_result(tmp_pat
     res = run("decode", BUNDLED_MODEL, blank)
     assert res.exit_code == 4 and "no drawing found" in " ".join(res.stdout.split()) and res.stderr == ""
     assert "Exits with status 4" in " ".join(run("decode", "--help").stdout.split())
+
+
+def test_the_readmes_usage_block_uses_existing_commands_and_flags() -> None:
+    """Every ``deepmorph COMMAND --flag`` in the README's usage block exists (renames included)."""
+    text = (ROOT / "README.md").read_text()
+    block = text[text.index("## Using it") :]
+    block = block[block.index("```bash") : block.index("```", block.index("```bash") + 7)]
+    flags = _flags()
+    lines = [line.split("#")[0] for line in block.splitlines() if line.startswith("deepmorph ")]
+    assert len(lines) > 10
+    for line in lines:
+        words = line.replace("[", " ").replace("]", " ").split()
+        command = words[1]
+        assert command in commands, line
+        for flag in (w for w in words[2:] if w.startswith("--")):
+            assert any(f.command == command for f in flags.get(flag, [])), (command, flag)
