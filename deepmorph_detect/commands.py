@@ -243,7 +243,9 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
 
 def synth(
     model: ModelArg,
-    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each).")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each, index.json, labels.csv).")
+    ],
     n: Annotated[int, typer.Option("--n", min=1, max=1_000_000, help="Number of scenes.")] = 200,
     severity: Annotated[
         PhotoSeverityName, typer.Option("--severity", help="How rough the simulated capture is.")
