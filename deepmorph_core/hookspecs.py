@@ -40,7 +40,9 @@ def deepmorph_register_primitives(register: Register) -> None:
     Called once, the first time primitives or path segments are looked up. Call
     ``register.primitive(cls)`` for each class implementing
     :class:`~deepmorph_core.protocols.Primitive` and ``register.path_segment(cls)`` for each
-    implementing :class:`~deepmorph_core.protocols.PathSegment`. A kind already registered by
+    implementing :class:`~deepmorph_core.protocols.PathSegment`, or pass the class's import path
+    with what listings show (``register.primitive("pkg.mod:Star", kind="star", tags=("star",),
+    morphable="...")``) so that listing kinds does not import it. A kind already registered by
     another plugin is an error naming both plugins.
     """
 

@@ -1,6 +1,7 @@
-"""The photo chain's commands: ``decode``, ``synth``, ``bench-scenes``, ``train-detector`` and
-``demo``, added to the command line through the ``deepmorph_register_commands`` hook
-(:mod:`deepmorph_detect.plugin`). Each parses its arguments and calls the library."""
+"""The photo chain's commands: ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``,
+``train-detector`` and ``demo``, added to the command line through the
+``deepmorph_register_commands`` hook (:mod:`deepmorph_detect.plugin`). Each parses its
+arguments and calls the library."""
 
 from __future__ import annotations
 
@@ -11,13 +12,43 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli.frame import JsonOpt, ModelArg, SeedOpt, err, out, print_json, progress_bar, write_text_atomic
+from deepmorph_core.cli.frame import (
+    EXIT_NOTHING_READ,
+    PANEL_CODES,
+    PANEL_MEASURE,
+    PANEL_MODELS,
+    JsonOpt,
+    ModelArg,
+    PhotoSeverityName,
+    SeedOpt,
+    ThreadsOpt,
+    add_commands,
+    err,
+    out,
+    print_json,
+    progress_bar,
+    step_progress,
+    training_result,
+    use_threads,
+    write_text_atomic,
+)
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import atomic_write, refuse_to_overwrite
+from deepmorph_core.fileio import atomic_write, check_target, refuse_non_folder, refuse_to_overwrite
 
 
 def _progress(name: str):  # noqa: ANN202 - a rich Progress
     return progress_bar(name + " {task.description}")
+
+
+CameraOpt = Annotated[
+    Optional[str],
+    typer.Option("--camera", help="Intrinsics fx,fy,cx,cy in pixels, or an OpenCV calibration file (YAML/XML)."),
+]
+DetectorOpt = Annotated[
+    Optional[str],
+    typer.Option("--detector", help="The detector plugin to propose drawings (default: the one the model names)."),
+]
+HardOpt = Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")]
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -86,22 +117,21 @@ def decode(
         typer.Argument(help="Images (each decoded on its own), folders of frames or videos (frames fused)."),
     ],
     as_json: JsonOpt = False,
-    camera: Annotated[
-        Optional[str],
-        typer.Option("--camera", help="Intrinsics fx,fy,cx,cy in pixels, or an OpenCV calibration file (YAML/XML)."),
-    ] = None,
+    camera: CameraOpt = None,
     overlay: Annotated[
         Optional[Path],
         typer.Option("--overlay", help="Write an annotated image (a folder when there are several inputs)."),
     ] = None,
     every: Annotated[int, typer.Option("--every", min=1, help="Use every N-th frame of a video.")] = 1,
-    hard_only: Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")] = False,
-    detector: Annotated[
-        Optional[str],
-        typer.Option("--detector", help="The detector plugin to propose drawings (default: the one the model names)."),
-    ] = None,
+    hard_only: HardOpt = False,
+    detector: DetectorOpt = None,
+    threads: ThreadsOpt = None,
 ) -> None:
-    """Find every drawing in photos, read its payload, and give its keypoints and camera pose."""
+    """Find every drawing in photos, read its payload, and give its keypoints and camera pose.
+
+    Exits with status 4 when an input (an image, or a folder or video as a whole) gave no
+    verified payload, after printing every result (with --json, an empty "detections" list).
+    """
     import cv2
 
     from deepmorph_core.image_io import read_image_bgr
@@ -109,11 +139,11 @@ def decode(
     from deepmorph_detect.camera import parse_camera
     from deepmorph_detect.fusion import FrameFuser
     from deepmorph_detect.locate import Locator
-    from deepmorph_detect.media import check_video, folder_frames, is_video, video_frames
+    from deepmorph_detect.media import check_video, folder_frames, is_video, video_frame_count, video_frames
     from deepmorph_detect.overlay import draw_overlay
-    from deepmorph_detect.synthesis import disagreement
     from deepmorph_detect.track import SequenceLocator
 
+    use_threads(threads)
     m = DeepMorphModel.load(model)
     locator = Locator(m, detector=detector)
     cam = parse_camera(camera) if camera else None
@@ -141,33 +171,49 @@ def decode(
             raise DeepMorphError(f"--overlay {target}: cannot write this image format")
         atomic_write(target, buf.tobytes())
 
-    for kind, path, payload in jobs:
-        if kind == "image":
-            dets = locator.locate(payload, camera=cam, soft=soft)
-            results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
-            save_overlay(path, payload, dets)
-            continue
-        fuser = FrameFuser(m.codec, locator.check_payload)
-        follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
-        skipped: list[dict[str, str]] = []
-        frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
-        last = None
-        for label, frame in frames:
-            try:
-                dets = follow(frame, camera=cam, soft=soft)
-            except DeepMorphError as exc:  # a frame of another size than the calibration's, say
-                err.print(f"warning: skipped frame {label}: {exc}", markup=False, highlight=False)
-                skipped.append({"frame": label, "error": str(exc)})
+    images = sum(kind == "image" for kind, _, _ in jobs)
+    with _progress("decode") as progress:
+        image_task = progress.add_task("images", total=images) if images > 1 else None
+        for kind, path, payload in jobs:
+            if kind == "image":
+                dets = locator.locate(payload, camera=cam, soft=soft)
+                results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
+                save_overlay(path, payload, dets)
+                if image_task is not None:
+                    progress.advance(image_task)
                 continue
-            fuser.add(label, dets, frame)
-            last = (frame, dets)
-        if last is None:  # a folder none of whose files is an image
-            raise DeepMorphError(f"{path}: no frame could be read ({skipped[0]['error']})")
-        entry = {"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)}
-        if skipped:
-            entry["skipped_frames"] = skipped
-        results.append(entry)
-        save_overlay(path, *last)
+            fuser = FrameFuser(m.codec, locator.check_payload)
+            follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
+            skipped: list[dict[str, str]] = []
+            frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
+            total = len(payload) if kind == "folder" else video_frame_count(path, every)
+            task = progress.add_task(path.name, total=total)
+            last = None
+            for label, frame in frames:
+                progress.advance(task)
+                try:
+                    dets = follow(frame, camera=cam, soft=soft)
+                except DeepMorphError as exc:  # a frame of another size than the calibration's, say
+                    err.print(f"warning: skipped frame {label}: {exc}", markup=False, highlight=False)
+                    skipped.append({"frame": label, "error": str(exc)})
+                    continue
+                fuser.add(label, dets, frame)
+                last = (frame, dets)
+            if last is None:  # a folder none of whose files is an image
+                raise DeepMorphError(f"{path}: no frame could be read ({skipped[0]['error']})")
+            entry = {"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)}
+            if skipped:
+                entry["skipped_frames"] = skipped
+            results.append(entry)
+            save_overlay(path, *last)
+    _print_decoded(results, as_json)
+    if not all(any(d["ok"] for d in r["detections"]) for r in results):
+        raise typer.Exit(EXIT_NOTHING_READ)
+
+
+def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
+    from deepmorph_detect.synthesis import disagreement
+
     if as_json:
         print_json(results)
         return
@@ -197,34 +243,43 @@ def decode(
 
 def synth(
     model: ModelArg,
-    out_dir: Annotated[Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each).")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", help="Folder for the scenes (PNG + JSON truth each, index.json, labels.csv).")
+    ],
     n: Annotated[int, typer.Option("--n", min=1, max=1_000_000, help="Number of scenes.")] = 200,
-    severity: Annotated[str, typer.Option("--severity", help="easy, medium or hard.")] = "medium",
+    severity: Annotated[
+        PhotoSeverityName, typer.Option("--severity", help="How rough the simulated capture is.")
+    ] = "medium",
     seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same scenes).")] = 0,
-    size: Annotated[str, typer.Option("--size", help="Photo size WIDTHxHEIGHT.")] = "640x480",
+    size: Annotated[str, typer.Option("--size", help="Size of each photo, WIDTHxHEIGHT in pixels.")] = "640x480",
     drawings: Annotated[int, typer.Option("--drawings", min=0, max=8, help="Drawings of the model per scene.")] = 1,
     distractors: Annotated[int, typer.Option("--distractors", min=0, max=8, help="Other drawings per scene.")] = 0,
     aruco: Annotated[bool, typer.Option("--aruco/--no-aruco", help="Add an ArUco marker of the same size.")] = True,
     empty_share: Annotated[
         float, typer.Option("--empty-share", min=0, max=1, help="Share of scenes without the model's drawing.")
     ] = 0.0,
+    threads: ThreadsOpt = None,
+    as_json: JsonOpt = False,
 ) -> None:
-    """Make labelled synthetic photos of printed drawings (the capture simulator)."""
+    """Make labelled synthetic photos of printed drawings (the capture simulator), with labels.csv."""
     from deepmorph_core.model import DeepMorphModel
-    from deepmorph_core.severity import PHOTO_SEVERITIES
+    from deepmorph_detect.labels import LABELS_NAME
     from deepmorph_detect.scene_folders import check_scene_folder, write_scenes
 
-    if severity not in PHOTO_SEVERITIES:
-        raise DeepMorphError(f"--severity {severity!r}: expected one of {', '.join(PHOTO_SEVERITIES)}")
     check_scene_folder(out_dir)
-    m = DeepMorphModel.load(model)
     dims = _size(size)
-    progress = _progress("synth")
-    with progress:
+    use_threads(threads)
+    m = DeepMorphModel.load(model)
+    with _progress("synth") as progress:
         task = progress.add_task("", total=n)
         write_scenes(m, out_dir, n, severity, seed, dims, drawings, distractors, aruco, empty_share,
                      on_scene=lambda i: progress.update(task, completed=i))  # fmt: skip
-    out.print(f"wrote {n} scenes ({severity}, {dims[0]}x{dims[1]}) to {out_dir}")
+    if as_json:
+        print_json({"written": [str(out_dir)], "folder": str(out_dir), "scenes": n, "severity": severity,
+                    "size": list(dims), "seed": seed, "labels": str(out_dir / LABELS_NAME),
+                    "index": str(out_dir / "index.json")})  # fmt: skip
+        return
+    out.print(f"wrote {n} scenes ({severity}, {dims[0]}x{dims[1]}) and {LABELS_NAME} to {out_dir}")
 
 
 def bench_scenes_cmd(
@@ -232,28 +287,23 @@ def bench_scenes_cmd(
     scenes: Annotated[Path, typer.Argument(help="A folder written by `deepmorph synth`.")],
     as_json: JsonOpt = False,
     report_path: Annotated[Optional[Path], typer.Option("--out", help="Also write the report as JSON here.")] = None,
-    threads: Annotated[int, typer.Option("--threads", min=1, help="CPU threads (speed is per this many).")] = 1,
+    threads: ThreadsOpt = None,
 ) -> None:
     """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
     if report_path is not None:
         refuse_to_overwrite(report_path, "--out", [("model file", model), ("scene index", scenes / "index.json")])
-    import cv2
-    import torch
-
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.benchmark import bench_scenes
     from deepmorph_detect.report import format_report
     from deepmorph_detect.scene_folders import read_scenes
 
-    torch.set_num_threads(threads)
-    cv2.setNumThreads(threads)
+    n_threads = use_threads(threads)
     m = DeepMorphModel.load(model)
     _, listed = read_scenes(scenes)  # validates the folder before any work
-    progress = _progress("bench")
-    with progress:
+    with _progress("bench") as progress:
         task = progress.add_task("", total=len(listed))
         report = bench_scenes(m, scenes, on_scene=lambda i: progress.update(task, completed=i))
-    report["threads"] = threads
+    report["threads"] = n_threads
     if report_path is not None:
         atomic_write(report_path, json.dumps(report, indent=1).encode())
     if as_json:
@@ -262,27 +312,91 @@ def bench_scenes_cmd(
         out.print(format_report(report))
 
 
+def bench_photos_cmd(
+    model: ModelArg,
+    photos: Annotated[Path, typer.Argument(help="A folder of photos of printed codes (or one made by `synth`).")],
+    labels: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--labels",
+            help="CSV: file, expected payload in hex, optionally corners x0,y0,...,x3,y3 [default: PHOTOS/labels.csv].",
+            show_default=False,
+        ),
+    ] = None,
+    report_dir: Annotated[
+        Optional[Path],
+        typer.Option("--report", help="Write report.html, report.json and PNG plots into this folder."),
+    ] = None,
+    as_json: JsonOpt = False,
+    camera: CameraOpt = None,
+    detector: DetectorOpt = None,
+    hard_only: HardOpt = False,
+    threads: ThreadsOpt = None,
+) -> None:
+    """Score a model on your own labelled photos: read rate, wrong payloads, corner error, time, and a report."""
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.camera import parse_camera
+    from deepmorph_detect.labels import LABELS_NAME
+    from deepmorph_detect.photo_bench import bench_photos, photo_files
+    from deepmorph_detect.photo_report import NO_PLOTS, format_summary, write_report
+
+    labels_path = labels if labels is not None else photos / LABELS_NAME
+    photo_files(photos)  # a folder, checked first
+    if not labels_path.is_file():
+        raise DeepMorphError(f"{labels_path}: no labels file (give one with --labels; see docs/detection.md)")
+    if report_dir is not None:
+        if report_dir.resolve() == photos.resolve():
+            raise DeepMorphError(f"--report {report_dir}: the photos' folder; choose another (its plots are images)")
+        refuse_non_folder(report_dir, "--report")
+        for name in ("report.html", "report.json"):
+            check_target(report_dir / name, f"--report {report_dir / name}")
+    n_threads = use_threads(threads)
+    m = DeepMorphModel.load(model)
+    cam = parse_camera(camera) if camera else None
+    with _progress("photos") as progress:
+        task = progress.add_task("", total=None)
+        report = bench_photos(
+            m, photos, labels_path, camera=cam, detector=detector, soft=not hard_only,
+            on_photo=lambda done, total: progress.update(task, completed=done, total=total),
+            on_skip=lambda name, why: err.print(f"warning: skipped photo {why}"),
+        )  # fmt: skip
+    report["threads"] = n_threads
+    if report_dir is not None:
+        written, note = write_report(report, report_dir)
+        if note == NO_PLOTS:
+            err.print(f"note: {NO_PLOTS}")
+        report["written"] = [str(p) for p in written]
+    if as_json:
+        print_json(report)
+        return
+    out.print(format_summary(report), soft_wrap=True)
+    if report_dir is not None:
+        out.print(f"report: {report_dir / 'report.html'}")
+
+
 def train_detector_cmd(
     model: ModelArg,
     out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps.")] = 2000,
     batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
     seed: SeedOpt = 0,
-    threads: Annotated[int, typer.Option("--threads", min=1, help="torch threads of the training process.")] = 1,
+    threads: ThreadsOpt = None,
     workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
     width: Annotated[
-        int, typer.Option("--width", min=8, max=256, help="Channel width of the network (16: about half the time).")
+        int,
+        typer.Option("--channels", min=8, max=256, help="Channel width of the network (16: about half the time)."),
     ] = 32,
     lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 2e-3,
     fine_tune: Annotated[
         bool,
         typer.Option(
             "--fine-tune",
-            help="Start from the model's trained detector (same --width) instead of from scratch;"
+            help="Start from the model's trained detector (same --channels) instead of from scratch;"
             " use another --seed for new scenes and a lower --lr.",
         ),
     ] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Train the detector of a model on synthetic scenes and store it in the bundle."""
     from deepmorph_detect.detector_training import DetectorConfig, train_detector
@@ -301,18 +415,17 @@ def train_detector_cmd(
             fine_tune=fine_tune,
         )
     )
-    progress = _progress("detector")
-    with progress:
-        task = progress.add_task("", total=steps)
+    use_threads(threads)
 
-        def on_log(m: dict[str, Any]) -> None:
-            progress.update(
-                task,
-                completed=m["step"],
-                description=f"loss {m['loss']:.3f} centre recall {m['recall']:.3f} corner err {m['corner']:.1f}px",
-            )
+    def describe(m: dict[str, Any]) -> str:
+        return f"loss {m['loss']:.3f} centre recall {m['recall']:.3f} corner err {m['corner']:.1f}px"
 
+    with step_progress("detector", describe) as bar:
+        on_log = bar(steps, 0)
         summary = train_detector(out_path if resume else model, out_path, config, resume=resume, on_log=on_log)
+    if as_json:
+        print_json(training_result(summary, bar.last))
+        return
     out.print(
         f"wrote {summary.bundle} ({summary.steps} detector steps in {summary.elapsed_s:.0f} s); log {summary.log}"
     )
@@ -342,7 +455,9 @@ def demo(
     output_folder(out_dir, f"--out {out_dir}")
     if retrain or not BUNDLED_MODEL.is_file():
         out.print(f"training a model for {BUNDLED_DRAWING.name} ({steps} steps) ...")
-        summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps})
+        with step_progress("training", lambda m: f"stage {m['stage']} bit acc {m['bit_acc']:.3f}") as bar:
+            summary = train_model(BUNDLED_DRAWING, out_dir / "ghost.dmm", payload_bits=24, train={"steps": steps},
+                                  on_start=bar)  # fmt: skip
         model_path = summary.bundle
     else:
         model_path = BUNDLED_MODEL
@@ -403,13 +518,14 @@ def _demo_scene(locator: Any, out_dir: Path, seed: int) -> None:
 
 def register(cli: typer.Typer) -> None:
     """Add the photo chain's commands to ``cli``."""
-    from deepmorph_core.cli.frame import friendly
-
-    for name, command in (
-        ("decode", decode),
-        ("synth", synth),
-        ("bench-scenes", bench_scenes_cmd),
-        ("train-detector", train_detector_cmd),
-        ("demo", demo),
-    ):
-        cli.command(name)(friendly(command))
+    add_commands(
+        cli,
+        (
+            ("train-detector", train_detector_cmd, PANEL_MODELS),
+            ("decode", decode, PANEL_CODES),
+            ("synth", synth, PANEL_MEASURE),
+            ("bench-scenes", bench_scenes_cmd, PANEL_MEASURE),
+            ("bench-photos", bench_photos_cmd, PANEL_MEASURE),
+            ("demo", demo, None),
+        ),
+    )

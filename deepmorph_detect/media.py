@@ -65,7 +65,19 @@ def video_frames(path: Path, every: int = 1) -> Iterator[tuple[str, np.ndarray]]
         cap.release()
 
 
-__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "check_video", "folder_frames", "is_video", "video_frames"]
+def video_frame_count(path: Path, every: int = 1) -> int | None:
+    """How many frames :func:`video_frames` will give, from the container's count (for a
+    progress bar: containers may miscount); ``None`` when it does not say."""
+    cap = cv2.VideoCapture(str(path))
+    try:
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+    finally:
+        cap.release()
+    return min(count, MAX_FRAMES) // every + (min(count, MAX_FRAMES) % every > 0) if count > 0 else None
+
+
+__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "check_video", "folder_frames", "is_video", "video_frame_count",
+           "video_frames"]  # fmt: skip
 
 
 def check_video(path: Path) -> tuple[int, int]:

@@ -1,8 +1,10 @@
 """Scene folders: labelled synthetic photos on disk (``deepmorph synth`` writes them,
-``deepmorph bench-scenes`` reads them).
+``deepmorph bench-scenes`` and ``deepmorph bench-photos`` read them).
 
 A folder holds ``scene_00000.png`` and its truth ``scene_00000.json`` (camera, and every
-placement's kind, pose, homography, corners and payload) per scene, and ``index.json``.
+placement's kind, pose, homography, corners and payload) per scene, ``index.json``, and
+``labels.csv`` (:mod:`deepmorph_detect.labels`: the model's codes in each photo, as a user
+labels their own photos).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, output_folder, refuse_non_folder
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_detect.labels import LABELS_NAME, label_rows, labels_text
 from deepmorph_detect.scenes import Placement, SceneMaker
 
 
@@ -25,7 +28,9 @@ def check_scene_folder(out: Path) -> None:
     or a folder that already holds scenes (a second set would replace some of the first and
     leave the rest stale)."""
     refuse_non_folder(out)
-    if out.is_dir() and ((out / "index.json").exists() or next(out.glob("scene_*"), None) is not None):
+    if out.is_dir() and (
+        (out / "index.json").exists() or (out / LABELS_NAME).exists() or next(out.glob("scene_*"), None) is not None
+    ):
         raise DeepMorphError(f"{out}: already holds scenes; write to a new folder, or remove them first")
 
 
@@ -42,7 +47,8 @@ def write_scenes(
     empty_fraction: float = 0.0,
     on_scene: Any = None,
 ) -> Path:
-    """Write ``n`` labelled scenes into ``out`` (``scene_00000.png`` + ``.json``, ``index.json``).
+    """Write ``n`` labelled scenes into ``out`` (``scene_00000.png`` + ``.json``, ``index.json``,
+    ``labels.csv``).
 
     ``empty_fraction`` of the scenes hold no drawing of the model (only distractors and
     markers): the negatives for false-accept counts.
@@ -56,6 +62,7 @@ def write_scenes(
     maker = SceneMaker(model, size, severity, seed=seed)
     rng = np.random.default_rng([seed, 7])
     names = []
+    rows: list[list[str]] = []
     for i in range(n):
         empty = rng.random() < empty_fraction
         scene = maker.make(
@@ -70,10 +77,13 @@ def write_scenes(
         atomic_write(out / f"{name}.png", buf.tobytes())
         atomic_write(out / f"{name}.json", json.dumps(scene.truth_json(), indent=1).encode())
         names.append(name)
+        codes = [(p.payload, p.corners) for p in scene.placements if p.kind == "drawing" and p.payload is not None]
+        rows += label_rows(f"{name}.png", codes)
         if on_scene:
             on_scene(i + 1)
     index = {"format": "deepmorph-scenes/1", "model": model.meta.drawing_name, "severity": severity,
              "seed": seed, "size": list(size), "scenes": names}  # fmt: skip
+    atomic_write(out / LABELS_NAME, labels_text(rows).encode())
     atomic_write(out / "index.json", json.dumps(index, indent=1).encode())
     return out
 

@@ -102,7 +102,7 @@ class ArcSegment:
     kind = "path-arc"
     commands = "Aa"
     svgpath_types = (SvgArc,)
-    morphable = "end point; the arc follows its chord (a similarity)"
+    morphable = "end point; the arc follows its chord"
 
     #: |sqrt(lambda) - 1| below which an arc follows its chord.
     NEAR_HALF = 0.02

@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Optional
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Optional
 
 import typer
 from rich.table import Table
 
 from deepmorph_core.cli.frame import (
+    PANEL_CODES,
+    PANEL_DRAWINGS,
+    PANEL_MODELS,
     DropOpt,
     JsonOpt,
     ModelArg,
@@ -20,16 +23,20 @@ from deepmorph_core.cli.frame import (
     RotateOpt,
     ScaleOpt,
     SeedOpt,
+    SeverityName,
     ShiftOpt,
     SvgArg,
     ThreadsOpt,
     ValidationOpt,
+    add_commands,
     err,
     out,
     parse_pair,
     print_json,
     safe,
     step_progress,
+    training_result,
+    use_threads,
     warn_dropped,
     write_text_atomic,
 )
@@ -69,7 +76,8 @@ def list_primitives(as_json: JsonOpt = False) -> None:
     reg = default_registry()
     rows = []
     for r in [*reg.primitives.values(), *reg.path_segments.values()]:
-        reads = " ".join(f"<{t}>" for t in r.obj.tags) if r.category == "primitive" else f"path {r.obj.commands}"
+        info = r.info
+        reads = " ".join(f"<{t}>" for t in info["tags"]) if r.category == "primitive" else f"path {info['commands']}"
         rows.append(
             {
                 "kind": r.key,
@@ -77,7 +85,7 @@ def list_primitives(as_json: JsonOpt = False) -> None:
                 "reads": reads,
                 "plugin": r.plugin,
                 "distribution": r.distribution,
-                "morphable": r.obj.morphable,
+                "morphable": info["morphable"],
             }
         )
     if as_json:
@@ -145,6 +153,7 @@ def morph(
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
     drop: DropOpt = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Write a morph of a drawing (inside its bounds) as a new SVG."""
     if not random:
@@ -155,24 +164,31 @@ def morph(
         raise DeepMorphError(f"{svg}: the drawing has 0 variables; add dm: bounds or pass --move 0.5")
     values = md.values_from_unit(md.random_unit(1, seed))
     write_text_atomic(out_path, md.to_svg(values[0]))
+    if as_json:
+        print_json({"written": [str(out_path)], "variables": md.n_variables, "seed": seed})
+        return
     out.print(f"wrote {out_path} (random morph of {md.n_variables} variables, seed {seed})")
 
 
 def render(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Output PNG.")],
-    size: Annotated[int, typer.Option("--size", min=8, max=4096, help="Width in pixels.")] = 256,
+    size: Annotated[
+        int, typer.Option("--width-px", min=8, max=4096, help="Width of the PNG in pixels (the height follows).")
+    ] = 256,
     soft: Annotated[bool, typer.Option("--soft", help="Use the soft (differentiable) rasterizer.")] = False,
     overlay_base: Annotated[
-        Optional[Path], typer.Option("--overlay", help="Draw this base drawing in red under the SVG.")
+        Optional[Path],
+        typer.Option("--base", help="A base drawing (the unmorphed one, say) drawn in red under the SVG."),
     ] = None,
     drop: DropOpt = False,
+    as_json: JsonOpt = False,
 ) -> None:
     """Render a drawing with the real renderer (resvg) or the soft rasterizer."""
     from deepmorph_core.image_io import image_format, save_gray, save_rgb
     from deepmorph_core.render import overlay
 
-    refuse_to_overwrite(out_path, "--out", [("input drawing", svg), ("overlay's base drawing", overlay_base)])
+    refuse_to_overwrite(out_path, "--out", [("input drawing", svg), ("base drawing", overlay_base)])
     image_format(out_path)
     ink = _render_ink(svg, size, soft, drop)
     if overlay_base is None:
@@ -182,7 +198,11 @@ def render(
         if base.shape != ink.shape:
             raise DeepMorphError(f"{overlay_base}: its aspect ratio differs from {svg}'s; cannot overlay")
         save_rgb(overlay(base, ink), out_path)
-    out.print(f"wrote {out_path} ({ink.shape[1]}x{ink.shape[0]}, {'soft' if soft else 'resvg'})")
+    renderer = "soft" if soft else "resvg"
+    if as_json:
+        print_json({"written": [str(out_path)], "width": ink.shape[1], "height": ink.shape[0], "renderer": renderer})
+        return
+    out.print(f"wrote {out_path} ({ink.shape[1]}x{ink.shape[0]}, {renderer})")
 
 
 def _render_ink(svg: Path, size: int, soft: bool, drop: bool = False) -> np.ndarray:
@@ -205,9 +225,11 @@ def train(
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 3000,
     batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
-    width: Annotated[int, typer.Option("--width", min=32, max=512, help="Decoder image width in pixels.")] = 96,
+    width: Annotated[
+        int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
+    ] = 96,
     severity: Annotated[
-        str, typer.Option("--severity", help="Capture corruption: none, easy, medium, hard.")
+        SeverityName, typer.Option("--severity", help="Capture corruption to train against.")
     ] = "medium",
     hard_fraction: Annotated[
         float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
@@ -223,7 +245,7 @@ def train(
     ] = 0.0,
     seed: SeedOpt = 0,
     encoder_init: Annotated[
-        str,
+        Literal["spread", "random"],
         typer.Option(
             "--encoder-init", help="Encoder start: spread (each bit drives its own variables) or random (the paper's)."
         ),
@@ -235,7 +257,7 @@ def train(
             help="Learn a homography in front of the decoder that undoes leftover perspective.",
         ),
     ] = True,
-    device: Annotated[str, typer.Option("--device", help="cpu or cuda.")] = "cpu",
+    device: Annotated[Literal["cpu", "cuda"], typer.Option("--device", help="Where torch trains.")] = "cpu",
     threads: ThreadsOpt = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
     checkpoint_every: Annotated[
@@ -247,6 +269,7 @@ def train(
     rotate: RotateOpt = None,
     drop: DropOpt = False,
     validation: ValidationOpt = None,
+    as_json: JsonOpt = False,
 ) -> None:
     """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
     from deepmorph_core.train import train_model
@@ -254,6 +277,7 @@ def train(
     def describe(m: dict[str, Any]) -> str:
         return f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
 
+    use_threads(threads)
     with step_progress("training", describe) as on_start:
         summary = train_model(
             svg,
@@ -288,6 +312,10 @@ def train(
             validation_samples=_validation_samples(validation),
             on_validation=lambda: err.print("validating on fresh payloads ..."),
         )
+    if as_json:
+        result = training_result(summary, on_start.last, stage2_start=summary.stage2_start)
+        print_json({**result, "validation": [r.model_dump() for r in summary.validation]})
+        return
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
@@ -407,11 +435,13 @@ def tune_decoder(
     seed: SeedOpt = 0,
     threads: ThreadsOpt = None,
     validation: ValidationOpt = None,
+    as_json: JsonOpt = False,
 ) -> None:
     """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.train import tune_decoder as tune
 
+    use_threads(threads)
     with step_progress("tuning", lambda m: f"decoder bit acc {m['bit_acc']:.4f}") as on_start:
         run = tune(
             model,
@@ -426,8 +456,12 @@ def tune_decoder(
             on_validation=lambda: err.print("validating on fresh payloads ..."),
             on_warning=lambda text: err.print(f"warning: {text}"),
         )
+    validation_records = DeepMorphModel.load(out_path).info()["validation"]
+    if as_json:
+        print_json({"written": [str(out_path)], "bundle": str(out_path), "run": run, "validation": validation_records})
+        return
     out.print(f"wrote {out_path} ({run['steps']} steps in {run['elapsed_s']:.0f} s, bit acc {run['bit_acc']:.4f})")
-    _print_validation(DeepMorphModel.load(out_path).info()["validation"])
+    _print_validation(validation_records)
 
 
 def validate(
@@ -470,6 +504,7 @@ def encode(
     png: Annotated[Optional[Path], typer.Option("--png", help="Also render a PNG for printing.")] = None,
     width_mm: Annotated[float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of the PNG.")] = 50.0,
     dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of the PNG.")] = 300,
+    as_json: JsonOpt = False,
 ) -> None:
     """Hide a payload in the model's drawing and write the morphed SVG (and a print-ready PNG)."""
     from deepmorph_core.code import print_pixels
@@ -492,22 +527,25 @@ def encode(
         files.append((png, code.png(width_mm, dpi)))
         msg += f" and {png} ({px} px wide = {width_mm:g} mm at {dpi} dpi)"
     atomic_write_all(files)  # both or neither
+    if as_json:
+        print_json({"written": [str(path) for path, _ in files], "payload": code.payload.to_json()})
+        return
     out.print(msg)
 
 
 def register(cli: typer.Typer) -> None:
     """Add core's commands to ``cli``."""
-    from deepmorph_core.cli.frame import friendly
-
-    for name, command in (
-        ("list-primitives", list_primitives),
-        ("inspect", inspect),
-        ("morph", morph),
-        ("render", render),
-        ("train", train),
-        ("info", info),
-        ("tune-decoder", tune_decoder),
-        ("validate", validate),
-        ("encode", encode),
-    ):
-        cli.command(name)(friendly(command))
+    add_commands(
+        cli,
+        (
+            ("list-primitives", list_primitives, PANEL_DRAWINGS),
+            ("inspect", inspect, PANEL_DRAWINGS),
+            ("morph", morph, PANEL_DRAWINGS),
+            ("render", render, PANEL_DRAWINGS),
+            ("train", train, PANEL_MODELS),
+            ("tune-decoder", tune_decoder, PANEL_MODELS),
+            ("info", info, PANEL_MODELS),
+            ("validate", validate, PANEL_MODELS),
+            ("encode", encode, PANEL_CODES),
+        ),
+    )

@@ -11,7 +11,7 @@ import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, Optional, TypeVar
+from typing import Annotated, Any, Literal, Optional, TypeVar
 
 import typer
 from rich.console import Console
@@ -101,7 +101,32 @@ DropOpt = Annotated[
         help="Leave out what DeepMorph cannot model (CSS, filters, text, images ...) instead of refusing the file.",
     ),
 ]
-JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+JsonOpt = Annotated[
+    bool, typer.Option("--json", help="Print the result as one JSON document on stdout, and nothing else there.")
+]
+
+
+def add_commands(cli: typer.Typer, table: tuple[tuple[str, Callable[..., Any], str | None], ...]) -> None:
+    """Add ``(name, function, help panel)`` commands to ``cli``, each turning a DeepMorphError
+    into one ``error:`` line (:func:`friendly`)."""
+    for name, command, panel in table:
+        cli.command(name, rich_help_panel=panel)(friendly(command))
+
+
+def training_result(summary: Any, metrics: dict[str, Any] | None, **extra: Any) -> dict[str, Any]:
+    """The ``--json`` result of a training command: what it wrote (``summary``: ``bundle``,
+    ``log``, ``plot``, ``steps``, ``elapsed_s``), ``extra`` fields, and the last logged metrics."""
+    files = [summary.bundle, summary.log, summary.plot]
+    return {
+        "written": [str(p) for p in files if p is not None],
+        "bundle": str(summary.bundle),
+        "log": str(summary.log),
+        "plot": None if summary.plot is None else str(summary.plot),
+        "steps": summary.steps,
+        **extra,
+        "elapsed_s": round(summary.elapsed_s, 3),
+        "metrics": metrics,
+    }
 
 
 def parse_pair(text: str | None, name: str, single_ok: bool = False) -> tuple[float, float] | None:
@@ -120,7 +145,10 @@ def parse_pair(text: str | None, name: str, single_ok: bool = False) -> tuple[fl
 
 
 def progress_bar(description: str = "{task.description}"):  # noqa: ANN201 - a rich Progress
-    """The progress bar of long commands (on stderr): description, bar, count, elapsed, ETA."""
+    """The progress bar of long commands: description, bar, count, elapsed, ETA.
+
+    Drawn on stderr, and only when stderr is a terminal: stdout holds the result alone (the
+    one JSON document of ``--json``), and logs and pipes get no redrawn lines."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -138,27 +166,59 @@ def progress_bar(description: str = "{task.description}"):  # noqa: ANN201 - a r
         TextColumn("ETA"),
         TimeRemainingColumn(),
         console=err,
+        disable=not err.is_terminal,
     )
 
 
+class StepProgress:
+    """The progress bar of a training run, and its last logged metrics.
+
+    Called as ``on_start(total, done)`` by the training functions: starts the bar and returns
+    the per-log callback (``describe(metrics)`` is the bar's text; the metrics are kept in
+    :attr:`last` for the command's result).
+    """
+
+    def __init__(self, label: str, describe: Callable[[Any], str]):
+        self.label = label
+        self.describe = describe
+        self.last: dict[str, Any] | None = None
+        self.progress = progress_bar()
+
+    def __call__(self, total: int, done: int) -> Callable[[Any], None]:
+        self.progress.start()
+        task = self.progress.add_task(self.label, total=total, completed=done)
+
+        def on_log(m: dict[str, Any]) -> None:
+            self.last = dict(m)
+            self.progress.update(task, completed=m["step"], description=self.describe(m))
+
+        return on_log
+
+
 @contextmanager
-def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[Callable[[int, int], Callable[[Any], None]]]:
-    """A progress bar for a training run: yields ``on_start(total, done)``, which starts the bar
-    and returns the per-log callback (``describe(metrics)`` is its text). Callers start it
-    only once the settings are validated, so an error prints alone; a bar never started is
-    never stopped (that would print a stray newline)."""
-    progress = progress_bar()
-
-    def on_start(total: int, done: int) -> Callable[[Any], None]:
-        progress.start()
-        task = progress.add_task(label, total=total, completed=done)
-        return lambda m: progress.update(task, completed=m["step"], description=describe(m))
-
+def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[StepProgress]:
+    """A :class:`StepProgress` stopped on the way out. Callers start it only once the settings
+    are validated, so an error prints alone; a bar never started is never stopped (that would
+    print a stray newline)."""
+    bar = StepProgress(label, describe)
     try:
-        yield on_start
+        yield bar
     finally:
-        if progress.live.is_started:
-            progress.stop()
+        if bar.progress.live.is_started:
+            bar.progress.stop()
+
+
+def use_threads(threads: int | None) -> int:
+    """Run torch and OpenCV on ``threads`` CPU threads (``None``: torch's default, one per
+    physical core), the same count for both; returns the count in use."""
+    import cv2
+    import torch
+
+    if threads is not None:
+        torch.set_num_threads(threads)
+    n = torch.get_num_threads()
+    cv2.setNumThreads(n)
+    return n
 
 
 def warn_dropped(drawing: Any) -> None:
@@ -178,7 +238,31 @@ ModelArg = Annotated[Path, typer.Argument(help="A DeepMorph model bundle (.dmm).
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")]
 
 
-ThreadsOpt = Annotated[Optional[int], typer.Option("--threads", min=1, help="torch CPU threads.")]
+ThreadsOpt = Annotated[
+    Optional[int],
+    typer.Option(
+        "--threads",
+        min=1,
+        max=256,
+        help="CPU threads for torch and OpenCV [default: one per physical core].",
+        show_default=False,
+    ),
+]
+
+#: ``decode``'s exit status when an input gave no verified payload (zbarimg's "nothing found").
+EXIT_NOTHING_READ = 4
+
+#: The capture severities (:data:`deepmorph_core.severity.SEVERITIES`; a test keeps them equal).
+SeverityName = Literal["none", "easy", "medium", "hard"]
+#: The severities with photo settings (:data:`deepmorph_core.severity.PHOTO_SEVERITIES`).
+PhotoSeverityName = Literal["easy", "medium", "hard"]
+
+#: Panels grouping the commands in ``deepmorph --help``.
+PANEL_DRAWINGS = "Drawings"
+PANEL_MODELS = "Models"
+PANEL_CODES = "Codes and photos"
+PANEL_MEASURE = "Measuring"
+
 ValidationOpt = Annotated[
     Optional[str],
     typer.Option(

@@ -78,13 +78,13 @@ def test_morph_refuses_to_overwrite_input_and_needs_variables(tmp_path: Path) ->
 def test_render_hard_soft_and_overlay(tmp_path: Path, soft: bool) -> None:
     flags = ["--soft"] if soft else []
     out = tmp_path / "a.png"
-    assert run("render", BUNDLED_DRAWING, "--out", out, "--size", "128", *flags).exit_code == 0
+    assert run("render", BUNDLED_DRAWING, "--out", out, "--width-px", "128", *flags).exit_code == 0
     img = np.asarray(Image.open(out))
     assert img.shape == (128, 128) and img.min() < 50 and img.max() == 255
     morphed = tmp_path / "m.svg"
     run("morph", BUNDLED_DRAWING, "--random", "--seed", "1", "--out", morphed)
     cmp = tmp_path / "cmp.png"
-    assert run("render", morphed, "--overlay", BUNDLED_DRAWING, "--out", cmp, "--size", "128", *flags).exit_code == 0
+    assert run("render", morphed, "--base", BUNDLED_DRAWING, "--out", cmp, "--width-px", "128", *flags).exit_code == 0
     rgb = np.asarray(Image.open(cmp).convert("RGB")).astype(int)
     reddish = (rgb[..., 0] > 150) & (rgb[..., 1] < 100)
     assert reddish.sum() > 20  # the base shows in red where the morph moved away

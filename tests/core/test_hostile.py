@@ -134,7 +134,7 @@ def test_what_cannot_be_modelled_is_dropped_on_request_and_never_written(tmp_pat
     written = (tmp_path / "m.svg").read_text()
     for banned in ("DOCTYPE", "style", "pattern", "image", "href", "class", "id=", "text", "dasharray", "font"):
         assert banned not in written, banned
-    code, text = run("render", path, "--out", tmp_path / "r.png", "--drop-unsupported", "--size", "64")
+    code, text = run("render", path, "--out", tmp_path / "r.png", "--drop-unsupported", "--width-px", "64")
     assert code == 0, text
     no_secret_anywhere(tmp_path)
 
@@ -368,7 +368,10 @@ def test_memory_stays_bounded_on_hostile_files(tmp_path: Path) -> None:
         "sys.argv = ['deepmorph'] + sys.argv[1:]\n"
         "main()\n"
     )
-    for args in (["render", extreme, "--out", tmp_path / "x.png", "--size", "4096"], ["decode", BUNDLED_MODEL, hdr]):
+    for args in (
+        ["render", extreme, "--out", tmp_path / "x.png", "--width-px", "4096"],
+        ["decode", BUNDLED_MODEL, hdr],
+    ):
         done = subprocess.run(
             [sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, timeout=120
         )
@@ -380,7 +383,7 @@ def test_memory_stays_bounded_on_hostile_files(tmp_path: Path) -> None:
 def test_renders_are_refused_when_too_large(tmp_path: Path) -> None:
     tall = tmp_path / "tall.svg"
     tall.write_text(svg(LINE).replace('viewBox="0 0 24 24"', 'viewBox="0 0 24 470"'))
-    code, text = run("render", tall, "--out", tmp_path / "t.png", "--size", "4096")
+    code, text = run("render", tall, "--out", tmp_path / "t.png", "--width-px", "4096")
     assert code == 1
     one_error(text, "larger than DeepMorph makes")
     assert np.isfinite(1.0)

@@ -108,3 +108,59 @@ def test_broken_entry_point_is_reported_by_name(monkeypatch) -> None:
     monkeypatch.setattr(importlib.metadata, "entry_points", fake)
     with pytest.raises(PluginError, match="plugin 'broken' .* failed to load"):
         load_registry()
+
+
+def test_kinds_declared_by_import_path_are_listed_without_importing_them(builtin_registry) -> None:
+    """The built-in kinds are declared by import path: listing them (what ``list-primitives``
+    shows) imports no class; using one imports it, checked against its declaration."""
+    for reg in [*builtin_registry.primitives.values(), *builtin_registry.path_segments.values()]:
+        assert not reg.loaded and reg.info["morphable"]
+    assert builtin_registry.primitives["circle"].info["tags"] == ("circle",)
+    assert builtin_registry.primitives["circle"].obj is Circle
+    assert builtin_registry.primitives["circle"].loaded and not builtin_registry.primitives["rect"].loaded
+
+
+def test_every_declaration_matches_its_class(builtin_registry, bezier_registry) -> None:
+    """What each installed plugin declares is what its class says (resolving checks it)."""
+    for registry in (builtin_registry, bezier_registry):
+        for reg in registry.all():
+            cls = reg.obj
+            assert all(getattr(cls, name) == value for name, value in reg.info.items()), reg
+
+
+def _declaring(name: str, **declared):
+    @hookimpl
+    def deepmorph_register_primitives(register):
+        register.primitive(declared.pop("path"), **declared)
+
+    return plugin_module(name, deepmorph_register_primitives=deepmorph_register_primitives)
+
+
+def test_a_declaration_that_drifts_from_its_class_is_an_error_naming_the_plugin() -> None:
+    drifted = _declaring(
+        "drifted", path="deepmorph_primitives.circle:Circle", kind="circle", tags=("circle", "disc"), morphable="x"
+    )
+    registry = load_registry([drifted], entry_points=False)
+    assert registry.primitives["circle"].info["tags"] == ("circle", "disc")  # listed as declared ...
+    with pytest.raises(PluginError, match=r"'drifted': primitive 'circle': declared with tags=\('circle', 'disc'\)"):
+        _ = registry.primitives["circle"].obj  # ... refused once used
+
+
+@pytest.mark.parametrize(
+    ("declared", "message"),
+    [
+        ({"path": "no_such_module_xyz:Star", "kind": "star", "tags": ("star",), "morphable": "x"},
+         r"'star': cannot import no_such_module_xyz:Star"),
+        ({"path": "deepmorph_primitives.circle:Nope", "kind": "star", "tags": ("star",), "morphable": "x"},
+         "cannot import deepmorph_primitives.circle:Nope"),
+        ({"path": "deepmorph_primitives.circle", "kind": "star", "tags": ("star",), "morphable": "x"},
+         'expected "package.module:Class"'),
+        ({"path": "deepmorph_primitives.circle:Circle", "kind": "circle"}, "needs tags=, morphable="),
+        ({"path": Circle, "kind": "circle"}, "are read from the class"),
+    ],
+)  # fmt: skip
+def test_bad_declarations_are_clear_errors(declared: dict, message: str) -> None:
+    registry = load_registry([_declaring("odd", **declared)], entry_points=False)
+    with pytest.raises(PluginError, match=message):
+        for reg in registry.primitives.values():
+            _ = reg.obj

@@ -194,7 +194,7 @@ def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(t
 def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg: Path, tmp_path: Path) -> None:
     """26 variables cannot carry a 24-bit payload's 32+ code bits (README: how many variables a
     payload needs): the user is told before the run, not after minutes of training."""
-    base = ["train", str(tiny_svg), "--steps", "1", "--width", "32", "--batch", "2", "--threads", "1"]
+    base = ["train", str(tiny_svg), "--steps", "1", "--image-width", "32", "--batch", "2", "--threads", "1"]
     base += ["--validation", "0"]  # a 1-step model fails its validation, which says so too
     res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
     text = " ".join(res.stderr.split())
@@ -206,7 +206,7 @@ def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg:
 def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_path: Path) -> None:
     """New trainings put the spatial transformer in front of the decoder; the flag leaves it out,
     and ``info`` says which decoder a bundle has."""
-    base = ["train", str(tiny_svg), "--steps", "2", "--width", "32", "--batch", "2", "--threads", "1"]
+    base = ["train", str(tiny_svg), "--steps", "2", "--image-width", "32", "--batch", "2", "--threads", "1"]
     for flag, expected in (([], True), (["--no-spatial-transformer"], False)):
         out = tmp_path / f"m{expected}.dmm"
         res = runner.invoke(app, [*base, *flag, "--payload-bits", "4", "--out", str(out)])
@@ -303,7 +303,7 @@ def test_cli_info_encode_decode(trained: Path, tmp_path: Path) -> None:
     blank = tmp_path / "blank.png"
     save_gray(np.ones((50, 50)), blank)
     dec = runner.invoke(app, ["decode", str(trained), str(png), str(blank), "--json"])
-    assert dec.exit_code == 0, dec.output
+    assert dec.exit_code == 4, dec.output  # the blank image gave no payload (docs/cli.md)
     results = json.loads(dec.stdout)
     assert [r["image"] for r in results] == [str(png), str(blank)]
     (det,) = results[0]["detections"]
@@ -527,3 +527,26 @@ def test_one_code_word_gives_the_batched_morph_values() -> None:
         model.morph_values_one(np.zeros(n_b + 1))
     with pytest.raises(ValueError, match="variables"):
         model.drawing.space.values_from_unit_one(np.zeros(3))
+
+
+def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp_path: Path) -> None:
+    """``--json``: the result as one JSON object, and nothing else on stdout (docs/cli.md)."""
+    out = tmp_path / "j.dmm"
+    args = ["train", str(tiny_svg), "--steps", "2", "--image-width", "32", "--batch", "2", "--threads", "1",
+            "--payload-bits", "4", "--out", str(out), "--json"]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "elapsed_s", "metrics", "validation"}
+    assert set(data) == keys and [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
+    assert data["bundle"] == str(out) and data["steps"] == 2 and str(out) in data["written"]
+    assert {"step", "loss", "bit_acc"} <= set(data["metrics"]) and data["metrics"]["step"] == 2
+    tuned = tmp_path / "t.dmm"
+    res = CliRunner().invoke(
+        app, ["tune-decoder", str(trained), "--out", str(tuned), "--steps", "2", "--threads", "1", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["written"] == [str(tuned)] and data["bundle"] == str(tuned)
+    assert [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
+    assert data["run"]["steps"] == 2 and data["run"]["finished"] is True and "bit_acc" in data["run"]

@@ -41,7 +41,7 @@ def test_training_ends_with_a_stored_validation(tmp_path: Path) -> None:
     svg.write_bytes(TINY)
     out = tmp_path / "m.dmm"
     args = ["train", str(svg), "--out", str(out), "--steps", "40", "--payload-bits", "4", "--crc", "16"]
-    args += ["--ecc-t", "0", "--width", "40", "--batch", "8", "--severity", "none", "--threads", "1"]
+    args += ["--ecc-t", "0", "--image-width", "40", "--batch", "8", "--severity", "none", "--threads", "1"]
     result = CliRunner().invoke(app, [*args, "--validation", "40,3"])
     assert result.exit_code == 0, result.output
     assert "validation: renders (medium): " in result.output and "validation: close-ups (medium): " in result.output

@@ -188,7 +188,7 @@ def test_a_wrong_payload_that_passes_the_crc_is_withdrawn(
         lambda self, probs, soft=True: replace(real_decode(probs, soft=soft), payload=wrong, ok=True),
     )
     res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "photo.png")])
-    assert res.exit_code == 0 and "decoded morph does not fit the photo" in " ".join(res.output.split()), res.output
+    assert res.exit_code == 4 and "decoded morph does not fit the photo" in " ".join(res.output.split()), res.output
 
 
 def test_several_drawings_in_one_photo(model: DeepMorphModel, locator: Locator) -> None:
@@ -344,9 +344,14 @@ def test_a_corrupt_video_prints_our_error_and_nothing_of_ffmpegs(tmp_path: Path)
 
 def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
     res = runner.invoke(
-        app, ["synth", str(BUNDLED_MODEL), "--n", "3", "--severity", "easy", "--out", str(tmp_path / "s")]
+        app, ["synth", str(BUNDLED_MODEL), "--n", "3", "--severity", "easy", "--out", str(tmp_path / "s"), "--json"]
     )
     assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout) == {
+        "written": [str(tmp_path / "s")], "folder": str(tmp_path / "s"), "scenes": 3, "severity": "easy",
+        "size": [640, 480], "seed": 0, "labels": str(tmp_path / "s" / "labels.csv"),
+        "index": str(tmp_path / "s" / "index.json"),
+    }  # fmt: skip
     index = json.loads((tmp_path / "s" / "index.json").read_text())
     assert len(index["scenes"]) == 3 and (tmp_path / "s" / "scene_00002.png").is_file()
     res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path / "s"), "--json"])
@@ -357,6 +362,12 @@ def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
     assert {"deepmorph", "aruco"} <= set(report["pose"]) and report["speed_ms"]["qr_detect_and_decode_median"] > 0
     res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path)])
     assert res.exit_code == 1 and "not a scene folder" in res.output
+    # the same folder through bench-photos, by the labels.csv synth wrote beside the scenes
+    res = runner.invoke(app, ["bench-photos", str(BUNDLED_MODEL), str(tmp_path / "s"), "--json"])
+    assert res.exit_code == 0, res.output
+    photos = json.loads(res.stdout)
+    assert photos["photos"] == 3 and photos["codes"] == 3 and photos["read"] >= 2 and photos["wrong_payloads"] == 0
+    assert photos["corner_error_px"]["n"] == photos["read"] and photos["corner_error_px"]["max"] < 3
     # a second set is not written over the first (it would replace some scenes, leave others
     # stale), nor into a file; the first set is left whole
     before = {p.name: p.read_bytes() for p in (tmp_path / "s").iterdir()}

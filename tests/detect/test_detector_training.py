@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -137,7 +138,7 @@ def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_
     base = tmp_path / "base.dmm"
     train_detector(BUNDLED_MODEL, base, _config(2))
     tuned = tmp_path / "tuned.dmm"
-    args = ["train-detector", str(base), "--out", str(tuned), "--steps", "1", "--batch", "2", "--width", "8"]
+    args = ["train-detector", str(base), "--out", str(tuned), "--steps", "1", "--batch", "2", "--channels", "8"]
     res = runner.invoke(app, [*args, "--workers", "0", "--fine-tune", "--lr", "1e-6", "--seed", "5"])
     assert res.exit_code == 0, res.output
     before, after = DeepMorphModel.load(base), DeepMorphModel.load(tuned)
@@ -149,7 +150,7 @@ def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_
     assert earlier["record"]["step"] == 2 and earlier["config"]["seed"] == 4
     res = runner.invoke(app, ["info", str(tuned)])
     assert "fine-tuned after 2 steps" in " ".join(res.output.split()), res.output
-    wider = ["train-detector", str(base), "--out", str(tmp_path / "wider.dmm"), "--steps", "1", "--width", "16"]
+    wider = ["train-detector", str(base), "--out", str(tmp_path / "wider.dmm"), "--steps", "1", "--channels", "16"]
     res = runner.invoke(app, [*wider, "--workers", "0", "--fine-tune"])
     assert res.exit_code == 1 and "width 8, not 16" in " ".join(res.output.split()), res.output
 
@@ -168,12 +169,15 @@ def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
 
 
 def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: Path) -> None:
-    """``--width`` picks the detector's channel width; the bundle records it, and the locator
+    """``--channels`` picks the detector's channel width; the bundle records it, and the locator
     builds the network at that width from the bundle alone."""
     out = tmp_path / "slim.dmm"
-    args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--width", "8"]
-    res = runner.invoke(app, [*args, "--workers", "0"])
+    args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--channels", "8"]
+    res = runner.invoke(app, [*args, "--workers", "0", "--json"])
     assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)  # one JSON object, nothing else on stdout (docs/cli.md)
+    assert set(data) == {"written", "bundle", "log", "plot", "steps", "elapsed_s", "metrics"}
+    assert data["bundle"] == str(out) and data["steps"] == 1 and {"loss", "recall", "corner"} <= set(data["metrics"])
     model = DeepMorphModel.load(out)
     assert model.meta.detector.config["width"] == 8
     assert model.detector_state["detector.stem.0.0.weight"].shape[0] == 4  # width // 2 channels
@@ -182,5 +186,5 @@ def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: 
     detector = CentreNetDetector.from_model(model)
     image = SceneMaker(model, (320, 240), "easy", seed=1).make(drawings=1).image
     assert isinstance(detector.detect(image), list)
-    res = runner.invoke(app, [*args[:-2], "--width", "4"])
-    assert res.exit_code != 0 and "--width" in res.output
+    res = runner.invoke(app, [*args[:-2], "--channels", "4"])
+    assert res.exit_code != 0 and "--channels" in res.output

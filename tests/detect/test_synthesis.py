@@ -156,7 +156,7 @@ def test_a_near_miss_that_passes_the_crc_and_the_morph_check_is_contradicted(
     cv2.imwrite(str(tmp_path / "photo.png"), scene.image)
     monkeypatch.setattr(PayloadCodec, "decode", collide)
     res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(tmp_path / "photo.png")])
-    assert res.exit_code == 0 and "code bits flipped" in " ".join(res.output.split()), res.output
+    assert res.exit_code == 4 and "code bits flipped" in " ".join(res.output.split()), res.output
 
 
 def test_a_collision_read_without_corrections_but_unsure_is_checked_bit_by_bit(

@@ -21,7 +21,7 @@ TINY = make_svg(
     '<g stroke="black" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2">'
     '<polyline points="4 6 12 4 20 6"/><line x1="4" y1="12" x2="20" y2="12"/><circle cx="12" cy="18" r="3"/></g>'
 )
-TRAIN = ["--payload-bits", "4", "--crc", "8", "--ecc-t", "0", "--width", "32", "--batch", "4",
+TRAIN = ["--payload-bits", "4", "--crc", "8", "--ecc-t", "0", "--image-width", "32", "--batch", "4",
          "--severity", "none", "--real-render-share", "0", "--threads", "1", "--validation", "8,0"]  # fmt: skip
 CHECKPOINT_EVERY = 10
 
