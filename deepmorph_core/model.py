@@ -118,7 +118,7 @@ class DeepMorphModel:
             raise DeepMorphError(
                 f"{drawing_name}: {shapes} shapes and {md.n_variables} variables; a drawing to train on may have at "
                 f"most {MAX_TRAIN_PRIMITIVES} shapes and {MAX_TRAIN_VARIABLES} variables (mark the elements that "
-                "need not morph dm:fixed=\"true\", or simplify the drawing)"
+                'need not morph dm:fixed="true", or simplify the drawing)'
             )
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()

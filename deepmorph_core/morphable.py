@@ -133,6 +133,30 @@ class MorphableDrawing:
         svg = self.to_svg(values) if values is not None else self.to_svg(self.neutral_values()[0])
         return render_svg_ink(svg, width)
 
+    def effects(self, raster: SoftRasterizer | None = None, chunk: int = 64) -> Tensor:
+        """What each variable does to the picture, as a Gram matrix ``(N_v, N_v)``.
+
+        Each variable sweeps its whole range with every other variable neutral (soft raster,
+        ``raster`` or one at 96 px); entry ``(i, k)`` is the dot product of the pixel changes of
+        ``i`` and ``k``. The diagonal is how visible a variable is; the correlations show
+        variables that look alike (:func:`~deepmorph_core.networks.twin_groups`).
+        """
+        raster = raster or self.rasterizer(96)
+        space = self.space
+        neutral = space.neutral_unit(1)[0]
+        changes = []
+        with torch.no_grad():
+            for start in range(0, space.n_variables, chunk):
+                idx = torch.arange(start, min(start + chunk, space.n_variables))
+                unit = neutral.repeat(2 * len(idx), 1)
+                rows = torch.arange(len(idx))
+                unit[2 * rows, idx] = 0.0
+                unit[2 * rows + 1, idx] = 1.0
+                images = raster(space.values_from_unit(unit))
+                changes.append((images[1::2] - images[0::2]).flatten(1).double())
+        change = torch.cat(changes)
+        return change @ change.T
+
     def visibility(self, width: int = 96) -> np.ndarray:
         """``(N_v,)`` how much each variable changes the picture, relative to the median
         variable: the pixel change, squared and summed, between the two ends of its range (all
@@ -202,21 +226,3 @@ class MorphableDrawing:
             ],
             "skipped": [{"line": line, "reason": why} for line, why in self.drawing.skipped],
         }
-
-
-def capacity_warning(code_bits: int, visibility: np.ndarray, label: str) -> str | None:
-    """Why payloads are unlikely to be read, when the code has more bits than the drawing has
-    visible variables (``visibility`` from :meth:`MorphableDrawing.visibility`; those at
-    :data:`INVISIBLE` or less do not count). Each code bit needs a variable of its own to be
-    read reliably; with fewer, bits share variables as levels the decoder does not separate,
-    or land on variables no renderer shows."""
-    visible = int((np.asarray(visibility) > INVISIBLE).sum())
-    if code_bits <= visible:
-        return None
-    hidden = len(visibility) - visible
-    also = f" ({hidden} of its {len(visibility)} variables change nothing a renderer shows)" if hidden else ""
-    return (
-        f"{label}: the code has {code_bits} bits but the drawing only {visible} visible variables{also};"
-        " each code bit needs a variable of its own to be read reliably, so expect most payloads to fail."
-        " Use fewer payload bits (or --ecc-t 0), or let more of the drawing morph (dm: bounds, --move)."
-    )

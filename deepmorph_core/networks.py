@@ -68,7 +68,7 @@ def spread_weights(
 
     Args:
         effects: ``(N_v, N_v)`` Gram matrix of the variables' full-range picture changes
-            (``deepmorph_core.train.variable_effects``).
+            (:meth:`~deepmorph_core.morphable.MorphableDrawing.effects`).
         code_bits: ``N_b``.
         generator: randomness for bit order and signs.
         strength: pre-activation of a variable driven by all of its bits agreeing.
@@ -77,7 +77,7 @@ def spread_weights(
     Returns:
         ``(N_v, N_b)``, the layout of ``Encoder.linear.weight``.
     """
-    groups = _twin_groups(effects, same)
+    groups = twin_groups(effects, same)
     visibility = [float(signs @ effects[members][:, members] @ signs) for members, signs in groups]
     strongest_first = sorted(range(len(groups)), key=lambda g: -visibility[g])
     bit_order = torch.randperm(code_bits, generator=generator).tolist()
@@ -105,8 +105,10 @@ def spread_weights(
     return weights
 
 
-def _twin_groups(effects: Tensor, same: float) -> list[tuple[list[int], Tensor]]:
-    """Groups of variables with (nearly) the same effect, each with signs relative to its first."""
+def twin_groups(effects: Tensor, same: float = 0.95) -> list[tuple[list[int], Tensor]]:
+    """Groups of variables with (nearly) the same effect (correlation ``>= same`` in absolute
+    value), each with signs relative to its first: a decoder tells the members of a group apart
+    by nothing, so a group carries what one variable does."""
     energy = effects.diagonal().clamp_min(1e-12)
     corr = effects / torch.sqrt(energy[:, None] * energy[None, :])
     groups: list[tuple[list[int], list[float]]] = []

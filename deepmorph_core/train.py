@@ -35,14 +35,15 @@ from torch import Tensor, nn
 
 from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.bundle import TrainingRecord, ValidationRecord
-from deepmorph_core.codec import choose_codec
+from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
+from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import canonicalize, render_moments
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.morphable import MorphableDrawing, bound_defaults, capacity_warning
+from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import DecoderConfig, spread_weights
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
@@ -121,28 +122,10 @@ CODEC_PANELS = (
 )
 
 
-def variable_effects(model: DeepMorphModel, chunk: int = 64) -> Tensor:
-    """What each variable does to the picture, as a Gram matrix ``(N_v, N_v)``.
-
-    Each variable sweeps its whole range with every other variable neutral (soft raster at the
-    model's width); entry ``(i, k)`` is the dot product of the pixel changes of ``i`` and ``k``.
-    The diagonal is how visible a variable is; the correlations show variables that look alike.
-    """
-    space = model.drawing.space
-    raster = model.rasterizer()
-    neutral = space.neutral_unit(1)[0]
-    changes = []
-    with torch.no_grad():
-        for start in range(0, space.n_variables, chunk):
-            idx = torch.arange(start, min(start + chunk, space.n_variables))
-            unit = neutral.repeat(2 * len(idx), 1)
-            rows = torch.arange(len(idx))
-            unit[2 * rows, idx] = 0.0
-            unit[2 * rows + 1, idx] = 1.0
-            images = raster(space.values_from_unit(unit))
-            changes.append((images[1::2] - images[0::2]).flatten(1).double())
-    change = torch.cat(changes)
-    return change @ change.T
+def variable_effects(model: DeepMorphModel) -> Tensor:
+    """:meth:`MorphableDrawing.effects <deepmorph_core.morphable.MorphableDrawing.effects>` of
+    the model's drawing with its own soft rasterizer."""
+    return model.drawing.effects(model.rasterizer())
 
 
 class CodecRun:
@@ -350,7 +333,7 @@ def train_model(
     svg: str | Path,
     out: str | Path,
     *,
-    payload_bits: int = 24,
+    payload_bits: int | Literal["auto"] = 24,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
     bounds: dict[str, Any] | None = None,
@@ -368,14 +351,16 @@ def train_model(
     Args:
         svg: the drawing.
         out: bundle path; it is also the checkpoint that ``resume`` continues.
-        payload_bits, crc_bits, ecc_t: the payload and its code (:func:`deepmorph_core.codec.choose_codec`).
+        payload_bits, crc_bits, ecc_t: the payload and its code (:func:`deepmorph_core.codec.choose_codec`);
+            ``payload_bits="auto"``: the largest size :func:`deepmorph_core.capacity.predict`
+            predicts to read from 99 % of captures (with ``crc_bits`` and ``ecc_t`` where given).
         bounds: default bounds (``move``, ``shift``, ``scale``, ``rotate``) for unannotated elements.
         train: :class:`TrainConfig` fields (``steps``, ``batch``, ``seed`` ...).
         resume: continue the checkpoint at ``out``.
         overwrite: replace an existing bundle at ``out`` instead of refusing.
         on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback (progress bars).
         on_warning: ``on_warning(text)`` for a warning before training starts (default:
-            :func:`warnings.warn`), such as :func:`~deepmorph_core.morphable.capacity_warning`'s.
+            :func:`warnings.warn`), such as :func:`~deepmorph_core.capacity.size_warning`'s.
         drop_unsupported: train on the drawing with what DeepMorph cannot model left out (a
             warning names each part); the bundle holds that drawing.
         validation_samples: fresh payloads read from renders and from photos once training
@@ -419,12 +404,14 @@ def train_model(
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
             augment = build_pipeline(config.severity, config.width)
             settings = RasterSettings(width=config.width)
+            given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
+            spec = _payload_code(payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn)
             torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
             model = DeepMorphModel.create(
                 svg_text,
                 Path(label).name,
                 defaults.model_dump(exclude_none=True),
-                choose_codec(payload_bits, crc_bits, ecc_t),
+                spec,
                 config.width,
                 {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
                 augment.config.model_dump(),
@@ -434,9 +421,6 @@ def train_model(
             )
     except ValidationError as exc:
         raise _settings_error("training settings", exc) from None
-    warning = None if resume else capacity_warning(model.codec.spec.code_bits, model.drawing.visibility(), label)
-    if warning:
-        warn(warning)
     run = CodecRun(model, config, out)
     loop = TrainingLoop(
         out.with_suffix(".log.jsonl"),
@@ -450,6 +434,35 @@ def train_model(
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records
     )
+
+
+def _payload_code(
+    payload_bits: int | Literal["auto"],
+    crc_bits: int | None,
+    ecc_t: int | None,
+    svg_text: str,
+    bounds: dict[str, Any],
+    width: int,
+    label: str,
+    warn: Callable[[str], None],
+) -> CodecSpec:
+    """The code of a new model: the requested payload's (with a warning when the drawing is
+    predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry."""
+    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds)
+    report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
+    if payload_bits == "auto":
+        if report.codec is None:
+            raise DeepMorphError(
+                f"{label}: no payload is predicted to read from 99 % of captures ({report.readable_groups} readable "
+                f"variables carry about {report.code_bits} code bits); let more of the drawing morph (dm: bounds, "
+                "--move); `deepmorph capacity` says what limits it"
+            )
+        return report.codec
+    spec = choose_codec(payload_bits, crc_bits, ecc_t)
+    warning = size_warning(spec, report, label)
+    if warning:
+        warn(warning)
+    return spec
 
 
 def _validate_and_store(

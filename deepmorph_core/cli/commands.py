@@ -143,6 +143,52 @@ def inspect(
         )
 
 
+def capacity(
+    svg: SvgArg,
+    move: MoveOpt = None,
+    shift: ShiftOpt = None,
+    scale: ScaleOpt = None,
+    rotate: RotateOpt = None,
+    crc: Annotated[
+        Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: the codec's choice).")
+    ] = None,
+    drop: DropOpt = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Predict the payload a drawing carries before training: its readable variables, the
+    largest payload that reads from 99 % of captures, and what limits it."""
+    from deepmorph_core.capacity import predict
+
+    if crc not in (None, 8, 16):
+        raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
+    report = predict(_load(svg, move, shift, scale, rotate, drop), crc_bits=crc)
+    if as_json:
+        print_json({"svg": str(svg), **report.to_json()})
+        return
+    spec = report.codec
+    hidden = report.n_variables - report.visible
+    rows = [
+        ("variables", f"{report.n_variables} ({report.visible} visible, {hidden} change nothing a renderer shows)"),
+        ("readable", f"{report.readable_groups} (visible variables, look-alikes counted once)"),
+        ("code bits", f"{report.code_bits} read reliably (predicted)"),
+        (
+            "payload",
+            "none predicted to read from 99 % of captures"
+            if spec is None
+            else f"{report.payload_bits} bits at 99 % (CRC {spec.crc_bits}, BCH t={spec.bch_t}: "
+            f"{spec.code_bits} code bits); train with --payload-bits auto",
+        ),
+    ]
+    table = Table(title=safe(svg), show_header=False)
+    table.add_column("what")
+    table.add_column("value", overflow="fold")
+    for k, v in rows:
+        table.add_row(k, v)
+    out.print(table)
+    for line in report.limits():
+        out.print(f"limit: {safe(line)}")
+
+
 def morph(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Where to write the morphed SVG.")],
@@ -218,7 +264,13 @@ def _render_ink(svg: Path, size: int, soft: bool, drop: bool = False) -> np.ndar
 def train(
     svg: SvgArg,
     out_path: Annotated[Path, typer.Option("--out", help="Model bundle to write (.dmm); also the checkpoint.")],
-    payload_bits: Annotated[int, typer.Option("--payload-bits", min=1, max=256, help="Payload length in bits.")] = 24,
+    payload_bits: Annotated[
+        str,
+        typer.Option(
+            "--payload-bits",
+            help="Payload length in bits (1-256), or auto: the largest `deepmorph capacity` predicts to read.",
+        ),
+    ] = "24",
     crc: Annotated[
         Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
     ] = None,
@@ -282,7 +334,7 @@ def train(
         summary = train_model(
             svg,
             out_path,
-            payload_bits=payload_bits,
+            payload_bits=_payload_bits(payload_bits),
             crc_bits=crc,
             ecc_t=ecc_t,
             resume=resume,
@@ -321,6 +373,19 @@ def train(
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
     _print_validation([r.model_dump() for r in summary.validation])
+
+
+def _payload_bits(text: str) -> int | Literal["auto"]:
+    """``--payload-bits``: a size from 1 to 256, or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        bits = int(text)
+    except ValueError:
+        bits = 0
+    if not 1 <= bits <= 256:
+        raise typer.BadParameter(f"expected a number of bits from 1 to 256, or auto; got {text!r}")
+    return bits
 
 
 def _validation_samples(text: str | None) -> tuple[int, int] | None:
@@ -540,6 +605,7 @@ def register(cli: typer.Typer) -> None:
         (
             ("list-primitives", list_primitives, PANEL_DRAWINGS),
             ("inspect", inspect, PANEL_DRAWINGS),
+            ("capacity", capacity, PANEL_DRAWINGS),
             ("morph", morph, PANEL_DRAWINGS),
             ("render", render, PANEL_DRAWINGS),
             ("train", train, PANEL_MODELS),

@@ -12,12 +12,13 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.capacity import predict
 from deepmorph_core.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.image_io import save_gray
 from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.morphable import INVISIBLE, MorphableDrawing, capacity_warning
+from deepmorph_core.morphable import INVISIBLE, MorphableDrawing
 from deepmorph_core.networks import Encoder, spread_weights
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg
@@ -192,14 +193,15 @@ def test_api_encode_takes_the_clis_payload_text_and_refuses_what_it_would_cast(t
 
 
 def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg: Path, tmp_path: Path) -> None:
-    """26 variables cannot carry a 24-bit payload's 32+ code bits (README: how many variables a
-    payload needs): the user is told before the run, not after minutes of training."""
+    """26 variables cannot carry a 24-bit payload's 44 code bits (``deepmorph capacity``): the user
+    is told before the run, not after minutes of training, and offered the size that fits."""
     base = ["train", str(tiny_svg), "--steps", "1", "--image-width", "32", "--batch", "2", "--threads", "1"]
     base += ["--validation", "0"]  # a 1-step model fails its validation, which says so too
     res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
     text = " ".join(res.stderr.split())
-    assert res.exit_code == 0 and "warning:" in text and "but the drawing only 26 visible variables" in text, text
-    res = runner.invoke(app, [*base, "--payload-bits", "8", "--out", str(tmp_path / "small.dmm")])
+    assert res.exit_code == 0 and "warning:" in text, text
+    assert "26 readable variables are predicted to carry 17" in text and "is 4 bits (--payload-bits auto)" in text
+    res = runner.invoke(app, [*base, "--payload-bits", "4", "--out", str(tmp_path / "small.dmm")])
     assert res.exit_code == 0 and "warning" not in res.stderr
 
 
@@ -249,13 +251,15 @@ def test_variables_a_renderer_does_not_show_do_not_count() -> None:
     them (0.00-0.03 of the median change); it read 40 % of 24-bit payloads (README). cpu: 40,
     all visible (the weakest, pins pushed into the outline, at 0.4)."""
     feather = Path(__file__).parent.parent / "data" / "feather"
-    package = MorphableDrawing.load(feather / "package.svg", move=0.48).visibility()
-    cpu = MorphableDrawing.load(feather / "cpu.svg", move=0.48).visibility()
+    package_drawing = MorphableDrawing.load(feather / "package.svg", move=0.48)
+    cpu_drawing = MorphableDrawing.load(feather / "cpu.svg", move=0.48)
+    package, cpu = package_drawing.visibility(), cpu_drawing.visibility()
     assert len(package) == len(cpu) == 40 and (package <= INVISIBLE).sum() == 6 and (cpu <= INVISIBLE).sum() == 0
     assert np.median(cpu) == pytest.approx(1.0) and cpu.min() > 0.3
-    warning = capacity_warning(38, package, "package.svg")  # 24 bits, CRC-8, t = 1
-    assert warning is not None and "only 34 visible variables (6 of its 40 variables change nothing" in warning
-    assert capacity_warning(38, cpu, "cpu.svg") is None and capacity_warning(34, package, "package.svg") is None
+    package_report, cpu_report = predict(package_drawing), predict(cpu_drawing)
+    assert package_report.visible == 34 and cpu_report.visible == 40
+    assert package_report.code_bits < cpu_report.code_bits
+    assert "6 of 40 variables change nothing a renderer shows" in " ".join(package_report.limits())
 
 
 def test_blank_image_has_no_detection(trained: Path) -> None:

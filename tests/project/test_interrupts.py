@@ -66,7 +66,20 @@ def test_sigterm_and_ctrl_c_leave_a_checkpoint_that_resumes(svg: Path, tmp_path:
     step = DeepMorphModel.load(out).meta.record.step
     assert step >= 14 and not DeepMorphModel.load(out).meta.record.finished
     done = subprocess.run(
-        [sys.executable, "-m", "deepmorph", "train", str(svg), "--out", str(out), "--resume", "--steps", str(step + 6), "--validation", "8,0"],
+        [
+            sys.executable,
+            "-m",
+            "deepmorph",
+            "train",
+            str(svg),
+            "--out",
+            str(out),
+            "--resume",
+            "--steps",
+            str(step + 6),
+            "--validation",
+            "8,0",
+        ],
         capture_output=True,
         text=True,
         timeout=120,
@@ -92,7 +105,20 @@ def test_kill_9_at_any_moment_loses_at_most_one_checkpoint_interval(svg: Path, t
             assert logged - record.step <= CHECKPOINT_EVERY + 2, (logged, record.step)
     strays = [p.name for p in tmp_path.iterdir() if p.name.startswith(".dm-")]
     done = subprocess.run(
-        [sys.executable, "-m", "deepmorph", "train", str(svg), "--out", str(out), "--resume", "--steps", "120", "--validation", "8,0"],
+        [
+            sys.executable,
+            "-m",
+            "deepmorph",
+            "train",
+            str(svg),
+            "--out",
+            str(out),
+            "--resume",
+            "--steps",
+            "120",
+            "--validation",
+            "8,0",
+        ],
         capture_output=True,
         text=True,
         timeout=120,

@@ -1,0 +1,229 @@
+"""How many payload bits a drawing carries, predicted before any training.
+
+The decoder reads code bits from the variables a renderer shows. What limits a drawing:
+
+* **invisible variables** change nothing a renderer draws (a point moving along its own straight
+  line, or under other ink): :meth:`MorphableDrawing.visibility
+  <deepmorph_core.morphable.MorphableDrawing.visibility>` at or below
+  :data:`~deepmorph_core.morphable.INVISIBLE` of the median variable;
+* **look-alikes**: variables whose effects on the picture are the same
+  (:func:`~deepmorph_core.networks.twin_groups`, the two ends of a half circle) carry what one
+  variable does.
+
+What is left are the drawing's *readable groups*. A trained decoder reads about
+:data:`CODE_BITS_PER_GROUP` code bits per readable group reliably enough for whole payloads to
+come back from 99 % of captures (measured on the bundled ghost: 38 code bits from 57 groups read
+99 % of payloads, 52 did not; ``docs/training.md`` has the panel it was checked on). The largest
+payload is then the largest one whose code (CRC and a BCH code correcting one or two bit errors,
+:func:`~deepmorph_core.codec.choose_codec`) fits in that many code bits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from deepmorph_core.codec import CodecSpec, choose_codec
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.morphable import INVISIBLE, MorphableDrawing
+from deepmorph_core.networks import twin_groups
+from deepmorph_core.payload import MAX_PAYLOAD_BITS
+
+#: Code bits a decoder reads reliably per readable group (see the module docstring).
+CODE_BITS_PER_GROUP = 0.67
+#: BCH codes the predicted size may use: correcting one or two bit errors.
+ECC_CHOICES = (2, 1)
+#: A variable this visible or less is weak: it reads, but a wider bound would help most.
+WEAK = 0.3
+
+
+@dataclass(frozen=True)
+class ElementCapacity:
+    """What one element contributes.
+
+    Attributes:
+        index: its place among the drawing's primitives (0 first).
+        line: its line in the SVG.
+        kind: its primitive kind.
+        variables: its morph variables.
+        visible: how many of them a renderer shows.
+        weak: how many of those show only a little (a wider ``dm:move`` helps most here).
+    """
+
+    index: int
+    line: int | None
+    kind: str
+    variables: int
+    visible: int
+    weak: int
+
+    @property
+    def where(self) -> str:
+        """``shape 3 (<path>, line 12)``: how messages name it."""
+        return f"shape {self.index} (<{self.kind}>, line {self.line})"
+
+
+@dataclass(frozen=True)
+class CapacityReport:
+    """The predicted capacity of a drawing.
+
+    Attributes:
+        n_variables: ``N_v``.
+        visible: variables a renderer shows.
+        readable_groups: visible variables with look-alikes counted once.
+        code_bits: code bits a decoder is predicted to read reliably.
+        payload_bits: the largest payload predicted to read from 99 % of captures (0: none).
+        codec: its code (``None`` when no payload fits).
+        elements: per element, what it contributes (in document order).
+        static: lines of elements that do not morph at all (fixed, or no bounds).
+    """
+
+    n_variables: int
+    visible: int
+    readable_groups: int
+    code_bits: int
+    payload_bits: int
+    codec: CodecSpec | None
+    elements: list[ElementCapacity] = field(default_factory=list)
+    static: list[int | None] = field(default_factory=list)
+
+    def fits(self, spec: CodecSpec) -> bool:
+        """Whether a code is within the prediction."""
+        return spec.code_bits <= self.code_bits
+
+    def limits(self) -> list[str]:
+        """What limits the capacity, and where loosening bounds would help, in lines."""
+        lines = []
+        hidden = self.n_variables - self.visible
+        if hidden:
+            lines.append(
+                f"{hidden} of {self.n_variables} variables change nothing a renderer shows (points moving along "
+                "their own straight lines, or under other ink)"
+            )
+        twins = self.visible - self.readable_groups
+        if twins > 0:
+            lines.append(f"{twins} visible variables repeat another's effect (they count once)")
+        if self.static:
+            where = ", ".join(str(line) for line in self.static[:8]) + (" ..." if len(self.static) > 8 else "")
+            lines.append(f"{len(self.static)} elements do not morph (dm:fixed or no bounds): lines {where}")
+        hiding = sorted((e for e in self.elements if e.visible < e.variables), key=lambda e: e.visible - e.variables)
+        for e in hiding[:5]:
+            lines.append(
+                f"{e.where}: {e.variables - e.visible} of its {e.variables} variables change nothing a renderer shows"
+            )
+        weakest = sorted((e for e in self.elements if e.weak), key=lambda e: -e.weak)[:5]
+        for e in weakest:
+            lines.append(
+                f"{e.where}: {e.weak} of its {e.visible} visible variables show only a little; "
+                "a wider dm:move there adds capacity"
+            )
+        return lines
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["codec"] = None if self.codec is None else {**self.codec.model_dump(), "code_bits": self.codec.code_bits}
+        data["limits"] = self.limits()
+        return data
+
+
+def code_bits_for(readable_groups: int) -> int:
+    """Code bits a decoder reads reliably from ``readable_groups`` groups."""
+    return int(math.floor(CODE_BITS_PER_GROUP * readable_groups + 1e-9))
+
+
+def largest_payload(
+    code_bits: int, crc_bits: int | None = None, ecc: tuple[int, ...] = ECC_CHOICES
+) -> CodecSpec | None:
+    """The code of the largest payload whose code fits in ``code_bits`` (a BCH code correcting
+    ``ecc`` errors, by default one or two; the default CRC unless ``crc_bits``); ``None`` when
+    none fits."""
+    best: CodecSpec | None = None
+    for payload in range(1, MAX_PAYLOAD_BITS + 1):
+        for t in ecc:
+            try:
+                spec = choose_codec(payload, crc_bits, t)
+            except DeepMorphError:
+                continue
+            if spec.code_bits <= code_bits and (best is None or payload > best.payload_bits):
+                best = spec
+    return best
+
+
+def predict(
+    drawing: MorphableDrawing, width: int = 96, crc_bits: int | None = None, ecc: tuple[int, ...] = ECC_CHOICES
+) -> CapacityReport:
+    """Predict what ``drawing`` carries, from renders of each variable at both ends of its
+    range (real renderer for visibility, soft rasterizer for look-alikes) at ``width`` pixels,
+    with codes of ``crc_bits`` (default: the codec's choice) and BCH codes correcting ``ecc``
+    bit errors."""
+    n = drawing.n_variables
+    if n == 0:
+        return CapacityReport(0, 0, 0, 0, 0, None, [], [p.line for p in drawing.drawing.primitives])
+    visibility = drawing.visibility(width)
+    shown = visibility > INVISIBLE
+    groups = twin_groups(drawing.effects(drawing.rasterizer(width)))
+    readable = sum(1 for members, _ in groups if shown[members].any())
+    code_bits = code_bits_for(readable)
+    spec = largest_payload(code_bits, crc_bits, ecc)
+    per_prim: dict[int, list[int]] = {}
+    for k, var in enumerate(drawing.variables):
+        if var.owner == "primitive":
+            per_prim.setdefault(var.index, []).append(k)
+    elements, static = [], []
+    for prim in drawing.drawing.primitives:
+        ks = per_prim.get(prim.index, [])
+        if not ks:
+            static.append(prim.line)
+            continue
+        vis = visibility[np.array(ks)]
+        elements.append(
+            ElementCapacity(
+                prim.index,
+                prim.line,
+                prim.primitive.kind,
+                len(ks),
+                int((vis > INVISIBLE).sum()),
+                int(((vis > INVISIBLE) & (vis < WEAK)).sum()),
+            )
+        )
+    return CapacityReport(
+        n,
+        int(shown.sum()),
+        readable,
+        code_bits,
+        0 if spec is None else spec.payload_bits,
+        spec,
+        elements,
+        static,
+    )
+
+
+def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | None:
+    """Why payloads of ``spec`` are unlikely to read, when its code is above the prediction,
+    with the largest size that fits; ``None`` when it is within."""
+    if report.fits(spec):
+        return None
+    if report.codec is None:
+        advice = "no payload is predicted to read reliably; let more of the drawing morph (dm: bounds, --move)"
+    else:
+        bits = report.payload_bits
+        advice = f"the largest predicted to read is {bits} bit{'' if bits == 1 else 's'} (--payload-bits auto)"
+    return (
+        f"{label}: a {spec.payload_bits}-bit payload needs {spec.code_bits} code bits but the drawing's "
+        f"{report.readable_groups} readable variables are predicted to carry {report.code_bits}; expect fewer "
+        f"than 99 % of payloads to read; {advice}"
+    )
+
+
+__all__ = [
+    "CODE_BITS_PER_GROUP",
+    "CapacityReport",
+    "ElementCapacity",
+    "code_bits_for",
+    "largest_payload",
+    "predict",
+    "size_warning",
+]

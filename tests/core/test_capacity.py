@@ -1,0 +1,123 @@
+"""Capacity before training: what a drawing carries, what limits it, and ``--payload-bits auto``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from deepmorph_core.capacity import CODE_BITS_PER_GROUP, largest_payload, predict, size_warning
+from deepmorph_core.cli import application
+from deepmorph_core.codec import choose_codec
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.train import train_model
+from tests.conftest import FEATHER, make_svg
+
+app = application()
+
+#: Strokes with generous bounds; the middle point of the straight polyline moving along it
+#: changes nothing a renderer shows.
+DRAWING = make_svg(
+    '<g stroke="black" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2.5">'
+    '<polyline points="4 6 12 4 20 6"/><polyline points="4 12 12 12 20 12"/>'
+    '<polyline points="4 18 12 20 20 18"/><circle cx="12" cy="12" r="3" dm:move="1.5"/>'
+    '<polyline points="2 9 2 15" dm:move="1.5"/><polyline points="22 9 22 15" dm:move="1.5"/></g>',
+    style='stroke-linejoin="round"',
+)
+
+
+@pytest.fixture(scope="module")
+def drawing_svg(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cap") / "drawing.svg"
+    path.write_bytes(DRAWING)
+    return path
+
+
+def test_prediction_counts_readable_variables_and_names_what_limits_them() -> None:
+    md = MorphableDrawing.load(DRAWING)
+    report = predict(md)
+    assert report.n_variables == 28 and report.visible == 27  # the straight middle point's x
+    assert report.readable_groups <= report.visible
+    assert report.code_bits == int(CODE_BITS_PER_GROUP * report.readable_groups)
+    assert report.codec is not None and report.codec.code_bits <= report.code_bits
+    assert report.payload_bits == report.codec.payload_bits > 0
+    bigger = largest_payload(report.code_bits + 12)
+    assert bigger is not None and bigger.payload_bits > report.payload_bits  # more bits, more payload
+    limits = " ".join(report.limits())
+    assert "1 of 28 variables change nothing a renderer shows" in limits and "shape 1 (<polyline>" in limits
+
+
+def test_every_payload_size_that_fits_is_the_largest() -> None:
+    for code_bits in range(10, 70, 3):
+        spec = largest_payload(code_bits)
+        if spec is None:
+            assert all(choose_codec(p, None, 1).code_bits > code_bits for p in (1, 2))
+            continue
+        assert spec.code_bits <= code_bits
+        for t in (1, 2):
+            try:
+                assert choose_codec(spec.payload_bits + 1, None, t).code_bits > code_bits
+            except DeepMorphError:
+                pass
+
+
+def test_a_feather_icon_with_few_readable_variables_is_told_so() -> None:
+    md = MorphableDrawing.load(FEATHER / "camera.svg", move=0.48)
+    report = predict(md)
+    assert report.visible < report.n_variables and report.payload_bits == 0 and report.codec is None
+    warning = size_warning(choose_codec(24), report, "camera.svg")
+    assert warning is not None and "no payload is predicted to read reliably" in warning
+
+
+def test_capacity_command_table_and_json(drawing_svg: Path) -> None:
+    shown = CliRunner().invoke(app, ["capacity", str(drawing_svg)])
+    assert shown.exit_code == 0, shown.output
+    text = " ".join(shown.output.split())
+    assert "28 (27 visible, 1 change nothing a renderer shows)" in text and "--payload-bits auto" in text
+    data = json.loads(CliRunner().invoke(app, ["capacity", str(drawing_svg), "--json"]).output)
+    assert data["n_variables"] == 28 and data["payload_bits"] == data["codec"]["payload_bits"]
+    assert data["limits"] and data["elements"][1]["kind"] == "polyline"
+
+
+def test_auto_trains_the_predicted_size_and_a_short_training_reads_it(drawing_svg: Path, tmp_path: Path) -> None:
+    """The prediction is a real number: a short training at that size reads fresh payloads."""
+    predicted = predict(MorphableDrawing.load(DRAWING)).codec
+    out = tmp_path / "auto.dmm"
+    summary = train_model(
+        drawing_svg,
+        out,
+        payload_bits="auto",
+        train={"steps": 500, "width": 40, "batch": 16, "threads": 1, "log_every": 50},
+        validation_samples=(300, 0),
+    )
+    model = DeepMorphModel.load(out)
+    assert model.codec.spec == predicted
+    (renders,) = summary.validation
+    assert renders.wrong == 0 and renders.rate >= 0.97, renders
+
+
+def test_a_size_above_the_prediction_is_warned_about_before_training(drawing_svg: Path, tmp_path: Path) -> None:
+    args = ["train", str(drawing_svg), "--steps", "1", "--image-width", "32", "--batch", "2", "--threads", "1"]
+    args += ["--validation", "0"]
+    big = CliRunner().invoke(app, [*args, "--payload-bits", "40", "--out", str(tmp_path / "big.dmm")])
+    text = " ".join(big.output.split())
+    assert big.exit_code == 0 and "warning:" in text and "a 40-bit payload needs" in text
+    assert "the largest predicted to read is" in text
+    small = CliRunner().invoke(app, [*args, "--payload-bits", "4", "--out", str(tmp_path / "small.dmm")])
+    assert small.exit_code == 0 and "warning" not in small.output
+
+
+def test_auto_refuses_a_drawing_that_carries_nothing(tmp_path: Path) -> None:
+    camera = tmp_path / "camera.svg"
+    camera.write_bytes((FEATHER / "camera.svg").read_bytes())
+    result = CliRunner().invoke(
+        app, ["train", str(camera), "--move", "0.48", "--payload-bits", "auto", "--out", str(tmp_path / "c.dmm")]
+    )
+    assert result.exit_code == 1 and "no payload is predicted to read" in result.output
+    assert not (tmp_path / "c.dmm").exists()
+    bad = CliRunner().invoke(app, ["train", str(camera), "--payload-bits", "lots", "--out", str(tmp_path / "c.dmm")])
+    assert bad.exit_code == 2
