@@ -7,8 +7,8 @@ training) and ``deepmorph_detect`` (the photo chain)::
 
     model = deepmorph.load("model.dmm")
     code = model.encode(0xA1B2C3)          # an int, hex text, bytes or bits -> deepmorph.Code
-    open("code.svg", "w").write(code.svg)
-    for found in model.decode("photo.jpg"):   # a path, a PIL image or an RGB array
+    code.save("code.pdf", width_mm=50)     # or .svg / .png; code.pdf(), code.png(), code.svg
+    for found in model.decode("photo.jpg"):   # a path, a PIL image or an RGB array (bgr=True)
         print(found.payload.hex, found.ok, found.pose)
 
 Names are imported on first use, so ``import deepmorph`` (and ``python -m deepmorph --help``)
@@ -25,9 +25,16 @@ from deepmorph_core import __version__
 if TYPE_CHECKING:
     from deepmorph.model import Model, load, train
     from deepmorph_core.code import Code
-    from deepmorph_core.errors import DeepMorphError, PluginError, SvgError, UnsupportedFeatureError
+    from deepmorph_core.errors import (
+        DeepMorphError,
+        DeepMorphWarning,
+        PluginError,
+        SvgError,
+        UnsupportedFeatureError,
+    )
+    from deepmorph_core.image_io import ImageLike
     from deepmorph_core.morphable import MorphableDrawing
-    from deepmorph_core.payload import Payload
+    from deepmorph_core.payload import Payload, PayloadLike
     from deepmorph_detect.camera import Camera
     from deepmorph_detect.results import Located, Pose
 
@@ -37,11 +44,14 @@ _WHERE = {
     "train": "deepmorph.model",
     "Code": "deepmorph_core.code",
     "DeepMorphError": "deepmorph_core.errors",
+    "DeepMorphWarning": "deepmorph_core.errors",
     "PluginError": "deepmorph_core.errors",
     "SvgError": "deepmorph_core.errors",
     "UnsupportedFeatureError": "deepmorph_core.errors",
+    "ImageLike": "deepmorph_core.image_io",
     "MorphableDrawing": "deepmorph_core.morphable",
     "Payload": "deepmorph_core.payload",
+    "PayloadLike": "deepmorph_core.payload",
     "Camera": "deepmorph_detect.camera",
     "Located": "deepmorph_detect.results",
     "Pose": "deepmorph_detect.results",
@@ -64,10 +74,13 @@ __all__ = [
     "Camera",
     "Code",
     "DeepMorphError",
+    "DeepMorphWarning",
+    "ImageLike",
     "Located",
     "Model",
     "MorphableDrawing",
     "Payload",
+    "PayloadLike",
     "PluginError",
     "Pose",
     "SvgError",

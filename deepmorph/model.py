@@ -7,17 +7,20 @@ Every method hands over to the library (``deepmorph_core`` for the model and its
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from deepmorph_core.code import Code
+    from deepmorph_core.image_io import ImageLike
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.payload import PayloadLike
     from deepmorph_detect.camera import Camera
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.results import Located
+
+Severity = Literal["none", "easy", "medium", "hard"]
 
 
 class Model:
@@ -44,15 +47,26 @@ class Model:
         return self.bundle.meta.drawing_name
 
     def info(self) -> dict[str, Any]:
-        """What ``deepmorph info --json`` prints: codec, image size, training record, ..."""
+        """What ``deepmorph info --json`` prints (JSON values): codec, image size, training record ..."""
         return self.bundle.info()
 
     def encode(self, payload: PayloadLike) -> Code:
-        """``payload`` (an int, hex or binary text, bytes, or a sequence of bits) hidden in the
-        drawing: a :class:`~deepmorph_core.code.Code` with its SVG and renders for print.
+        """``payload`` hidden in the drawing.
+
+        Args:
+            payload: exactly :attr:`payload_bits` bits, as an ``int`` (``0 <= payload <
+                2**payload_bits``), hex text with ``0x`` and ``ceil(payload_bits / 4)`` digits,
+                a string of ``payload_bits`` binary digits, ``ceil(payload_bits / 8)`` big-endian
+                ``bytes``, or a sequence or array of ``payload_bits`` zeros and ones.
+
+        Returns:
+            A :class:`~deepmorph_core.code.Code`: ``.svg`` (the morphed SVG), ``.svg_at(width_mm)``,
+            ``.pdf(width_mm)``, ``.png(width_mm, dpi)``, ``.save(path, width_mm)``.
 
         Raises:
-            DeepMorphError: a payload of the wrong size or type, saying what was expected.
+            DeepMorphError: a payload of another type (a float, ``None``, a bool ...) or one
+                that does not fit (too large, negative, the wrong number of digits, bytes or
+                bits), saying what was expected.
         """
         return self.bundle.code(payload)
 
@@ -65,18 +79,26 @@ class Model:
             self._locator = Locator(self.bundle, detector=self._detector)
         return self._locator
 
-    def decode(self, image: Any, *, bgr: bool = False, camera: Camera | None = None) -> list[Located]:
+    def decode(self, image: ImageLike, *, bgr: bool = False, camera: Camera | None = None) -> list[Located]:
         """Every drawing of this model in a photo, with its payload, corners and camera pose.
 
         Args:
-            image: a path, a PIL image, or an ``(H, W)`` / ``(H, W, 3|4)`` array (uint8, or
-                float in ``[0, 1]``). Colour arrays are RGB unless ``bgr`` is set (OpenCV's order).
+            image: a path to an image file, a PIL image, or an ``(H, W)`` / ``(H, W, 3|4)``
+                array (uint8, uint16, or float in ``[0, 1]``). Colour arrays are RGB(A), the
+                order of PIL, imageio and matplotlib; pass ``bgr=True`` for OpenCV's BGR(A).
+                The chain reads gray (OpenCV's weights), so a black print read with its red and
+                blue swapped reads the same; only coloured ink would differ.
+            bgr: the array's channels are in OpenCV's order.
             camera: calibrated intrinsics (:class:`~deepmorph_detect.camera.Camera`); without
                 them the pose assumes a typical phone camera and says so.
 
         Returns:
             One :class:`~deepmorph_detect.results.Located` per drawing found (``[]`` for none):
             ``.payload`` (``.hex``, ``.int``, ``.bits``), ``.ok``, ``.pose``, ``.corners``.
+
+        Raises:
+            DeepMorphError: a path that is not a readable image, another type, or an array of
+                another shape or pixel type.
         """
         from deepmorph_core.image_io import image_input
 
@@ -101,33 +123,71 @@ def train(
     drawing: str | Path,
     out: str | Path,
     *,
-    payload_bits: int = 24,
+    payload_bits: int | Literal["auto"] = 24,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
-    move: float | None = None,
     steps: int = 3000,
-    threads: int | None = None,
+    batch: int = 32,
+    image_width: int = 96,
+    severity: Severity = "medium",
+    real_render_share: float = 0.25,
+    small_prints: float = 0.0,
     seed: int = 0,
+    encoder_init: Literal["spread", "random"] = "spread",
+    spatial_transformer: bool = True,
+    device: Literal["cpu", "cuda"] = "cpu",
+    threads: int | None = None,
     resume: bool = False,
-    on_log: Callable[[dict[str, Any]], None] | None = None,
-    **settings: Any,
+    checkpoint_every: int = 250,
+    move: float | None = None,
+    shift: float | tuple[float, float] | None = None,
+    scale: tuple[float, float] | None = None,
+    rotate: tuple[float, float] | None = None,
+    drop_unsupported: bool = False,
+    validation: tuple[int, int] | None = None,
+    on_log: Callable[[dict[str, float]], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
 ) -> Model:
-    """Train a model for ``drawing`` and write it to ``out``, as ``deepmorph train`` does.
+    """Train a model for ``drawing`` and write it to ``out``: ``deepmorph train``, one keyword per
+    option (``--crc`` is ``crc_bits``), with the same defaults.
 
     Args:
         drawing: the SVG.
         out: the bundle to write (also the checkpoint ``resume`` continues).
-        payload_bits, crc_bits, ecc_t: the payload and its code.
-        move: default ``dm:move`` for elements the SVG gives no bounds.
-        steps, threads, seed: the run.
-        on_log: called with each log line (a dict with ``step``, ``loss``, ``bit_acc`` ...).
-        **settings: further :class:`~deepmorph_core.train.TrainConfig` fields (``width``,
-            ``batch``, ``severity`` ...).
+        payload_bits, crc_bits, ecc_t: the payload and its code (CRC 8 or 16 bits; BCH
+            correcting ``ecc_t`` bit errors; defaults chosen from ``payload_bits``);
+            ``payload_bits="auto"``: the largest size ``deepmorph capacity`` predicts to read.
+        steps, batch, image_width: training steps (both stages), morphs per step, the width in
+            pixels of the image the decoder reads.
+        severity: the capture corruption reached at the end of the curriculum.
+        real_render_share: share of each batch drawn by resvg.
+        small_prints: share of each batch captured as a small print.
+        seed, encoder_init, spatial_transformer, device, threads: the run and its networks.
+        resume: continue the checkpoint at ``out``.
+        checkpoint_every: steps between checkpoints.
+        move, shift, scale, rotate: default bounds for elements the SVG gives none
+            (``dm:move``, ``dm:shift`` as one radius or ``(rx, ry)``, ``dm:scale`` and
+            ``dm:rotate`` as ``(lo, hi)``).
+        drop_unsupported: leave out what DeepMorph cannot model instead of refusing the file.
+        validation: fresh payloads read after training from renders and from close-up photos
+            (default 1000 and 200; ``(0, 0)`` skips it); the result is stored in the bundle and
+            a model below 99 % warns.
+        on_log: called with each log line (``step``, ``stage``, ``loss``, ``bit_acc`` ...).
+        on_warning: called with each warning before training starts (default:
+            :func:`warnings.warn`).
 
     Returns:
         The trained model.
+
+    Raises:
+        DeepMorphError: the drawing, a setting or the output refused, in one line.
     """
+    import warnings
+
     from deepmorph_core.train import train_model
+
+    def warn(text: str) -> None:
+        warnings.warn(text, stacklevel=4)  # shown at the line that called deepmorph.train
 
     summary = train_model(
         drawing,
@@ -135,12 +195,28 @@ def train(
         payload_bits=payload_bits,
         crc_bits=crc_bits,
         ecc_t=ecc_t,
-        bounds={"move": move},
-        train={"steps": steps, "threads": threads, "seed": seed, **settings},
+        bounds={"move": move, "shift": shift, "scale": scale, "rotate": rotate},
+        train={
+            "steps": steps,
+            "batch": batch,
+            "width": image_width,
+            "severity": severity,
+            "hard_fraction": real_render_share,
+            "small_prints": small_prints,
+            "seed": seed,
+            "encoder_init": encoder_init,
+            "spatial_transformer": spatial_transformer,
+            "device": device,
+            "threads": threads,
+            "checkpoint_every": checkpoint_every,
+        },
         resume=resume,
         on_start=(lambda total, done: on_log) if on_log else None,
+        on_warning=on_warning or warn,
+        drop_unsupported=drop_unsupported,
+        validation_samples=validation,
     )
     return load(summary.bundle)
 
 
-__all__ = ["Model", "load", "train"]
+__all__ = ["Model", "Severity", "load", "train"]

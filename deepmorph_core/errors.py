@@ -12,6 +12,11 @@ class DeepMorphError(Exception):
     """Base class of every error DeepMorph reports to a user."""
 
 
+class DeepMorphWarning(UserWarning):
+    """Something a user should know that does not stop the work (an optional output left out);
+    the command line prints it as one ``warning: ...`` line."""
+
+
 class SvgError(DeepMorphError):
     """A drawing that cannot be read or used, with the file and line it comes from.
 

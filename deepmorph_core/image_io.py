@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Union
 
 import cv2
 import numpy as np
@@ -35,6 +35,9 @@ EXIF_ORIENTATION = 0x0112  # the EXIF tag of how a viewer turns the stored pixel
 
 
 MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
+
+#: What a user hands in as a photo (:func:`image_input`): a path, a PIL image or an array.
+ImageLike = Union[str, Path, Image.Image, np.ndarray]
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -97,7 +100,7 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(img[..., :3])
 
 
-def image_input(source: Any, bgr: bool = False) -> np.ndarray:
+def image_input(source: ImageLike, bgr: bool = False) -> np.ndarray:
     """What a user hands in as a photo, as the photo chain takes it: a path (read with
     :func:`read_image_bgr`), a PIL image, or an array.
 
@@ -112,11 +115,14 @@ def image_input(source: Any, bgr: bool = False) -> np.ndarray:
         DeepMorphError: a path that is not a readable image, or another type.
     """
     if isinstance(source, (str, Path)):
+        if Path(source).is_dir():
+            raise DeepMorphError(f"{source}: is a folder, not an image file")
         return read_image_bgr(source)
     if isinstance(source, Image.Image):
         source = np.asarray(source.convert("RGBA" if "A" in source.getbands() else "RGB"))
     if not isinstance(source, np.ndarray):
-        raise DeepMorphError(f"an image is a path, a PIL image or an array, not a {type(source).__name__}")
+        what = "None" if source is None else f"a {type(source).__name__}"
+        raise DeepMorphError(f"an image is a path, a PIL image or an array, not {what}")
     if source.ndim == 3 and source.shape[2] in (3, 4) and not bgr:
         source = source[..., [2, 1, 0, 3][: source.shape[2]]]
     return np.ascontiguousarray(source)

@@ -13,7 +13,8 @@ their state is written (a :class:`Run`); this loop does the rest the same way fo
 * resuming continues from the record's step: log lines written after that checkpoint (and a
   line cut by a crash) are dropped, so the log and the plot hold each step once;
 * at the end the run writes its final state and a PNG plot of the log goes beside the log
-  (matplotlib is optional: without it there is no plot).
+  (matplotlib is optional, the ``plot`` extra: without it one
+  :class:`~deepmorph_core.errors.DeepMorphWarning` says how to get the plot).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import json
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -29,8 +31,11 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from deepmorph_core.bundle import TrainingRecord
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import append_line, atomic_write
+
+#: What a run without matplotlib says instead of drawing its plot.
+NO_PLOT = "no training plot: matplotlib is not installed (pip install 'deepmorph[plot]' draws one)"
 
 
 class Interrupted(DeepMorphError):
@@ -190,12 +195,14 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 def plot_history(history: list[dict[str, Any]], panels: tuple[Panel, ...], path: Path) -> Path | None:
     """The log's metrics against steps, one panel each, with the switch to stage 2 marked (PNG);
-    ``None`` when there is nothing to plot or matplotlib is not installed."""
+    ``None`` when there is nothing to plot, or when matplotlib is not installed (then a
+    :class:`~deepmorph_core.errors.DeepMorphWarning` says so: :data:`NO_PLOT`)."""
     if not history or not panels:
         return None
     try:
         import matplotlib
     except ImportError:
+        warnings.warn(NO_PLOT, DeepMorphWarning, stacklevel=2)
         return None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -77,7 +77,8 @@ class Payload:
         * ``int``: the value, ``0 <= value < 2**payload_bits``;
         * ``str``: hex with the ``0x`` prefix and ``ceil(payload_bits / 4)`` digits, or exactly
           ``payload_bits`` binary digits;
-        * ``bytes``: a big-endian value, at most ``ceil(payload_bits / 8)`` bytes, that fits;
+        * ``bytes``: a big-endian value of exactly ``ceil(payload_bits / 8)`` bytes that fits
+          (what :attr:`bytes` gives back);
         * a sequence or array of ``payload_bits`` zeros and ones.
 
         Raises:
@@ -96,14 +97,16 @@ class Payload:
         if isinstance(value, str):
             return cls(parse_payload_text(value, payload_bits))
         if isinstance(value, (bytes, bytearray)):
-            if len(value) > math.ceil(payload_bits / 8):
-                raise DeepMorphError(
-                    f"payload of {len(value)} bytes is longer than {payload_bits} bits; {_expected(payload_bits)}"
-                )
+            if len(value) != math.ceil(payload_bits / 8):
+                raise DeepMorphError(f"payload of {len(value)} bytes; {_expected(payload_bits)}")
             return cls(_int_bits(int.from_bytes(bytes(value), "big"), payload_bits, f"bytes {bytes(value)!r}"))
         if isinstance(value, (np.ndarray, list, tuple)):
-            return cls(as_bits(value, payload_bits, "payload bits"))
-        raise DeepMorphError(f"a payload cannot be a {type(value).__name__}; {_expected(payload_bits)}")
+            try:
+                return cls(as_bits(value, payload_bits, "payload bits"))
+            except DeepMorphError as exc:
+                raise DeepMorphError(f"{exc}; {_expected(payload_bits)}") from None
+        what = "None" if value is None else f"a {type(value).__name__}"
+        raise DeepMorphError(f"a payload cannot be {what}; {_expected(payload_bits)}")
 
     def __len__(self) -> int:
         return int(self.bits.shape[0])
@@ -147,7 +150,7 @@ def _expected(payload_bits: int) -> str:
     example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
     return (
         f"expected a {payload_bits}-bit payload: an int below 2**{payload_bits}, hex with {digits} digits like "
-        f"{example}, {payload_bits} binary digits, bytes, or {payload_bits} bits"
+        f"{example}, {payload_bits} binary digits, {math.ceil(payload_bits / 8)} bytes, or {payload_bits} bits"
     )
 
 

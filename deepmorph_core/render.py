@@ -3,6 +3,11 @@
 resvg (through the ``resvg-py`` wheel) is the reference renderer: it is a self-contained Rust
 library with no system dependencies (cairosvg needs a system Cairo), it follows the SVG spec
 closely, never fetches anything, and renders the same bytes to the same pixels everywhere.
+
+A render maps the drawing's viewBox onto the pixels asked for, as the soft rasterizer does: the
+root's ``width`` and ``height`` (``50mm`` on a code made for print, fractions from editors) are
+set to the viewBox's size first, because resvg rounds a document's own size to whole pixels
+before scaling (a drawing 50 mm wide rendered 200 px wide came out up to 0.5 % off).
 """
 
 from __future__ import annotations
@@ -11,14 +16,18 @@ import io
 
 import numpy as np
 import resvg_py
+from lxml import etree
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.svg.secure import parse_svg_bytes
+from deepmorph_core.svg.values import parse_numbers
 
 #: The largest side of any raster DeepMorph makes, and the most pixels: what a print at 2400 dpi
 #: and 17 cm takes; larger prints are what the SVG (or a PDF) is for.
 MAX_RASTER_SIDE = 16_384
 MAX_RASTER_PIXELS = 100_000_000
+CSS_DPI = 96  # absolute lengths in a document without a viewBox (the wheel's default, 0, zeroes them)
 
 
 def raster_size(viewbox: tuple[float, float, float, float], width: int) -> tuple[int, int]:
@@ -37,15 +46,52 @@ def raster_size(viewbox: tuple[float, float, float, float], width: int) -> tuple
     return height, width
 
 
+def sized_svg(svg_text: str, width: str, height: str) -> str:
+    """``svg_text`` with its root's ``width`` and ``height`` set (lengths, with or without a
+    unit); its viewBox and content unchanged.
+
+    Raises:
+        SvgError: not an SVG document (:func:`~deepmorph_core.svg.secure.parse_svg_bytes`).
+    """
+    root = parse_svg_bytes(svg_text.encode("utf-8"), "<svg>")
+    root.set("width", width)
+    root.set("height", height)
+    return etree.tostring(root, encoding="unicode")
+
+
+def at_viewbox_size(svg_text: str) -> str:
+    """``svg_text`` with its root's ``width`` and ``height`` those of its viewBox (one pixel per
+    user unit), or as it is without a viewBox (then the size is in user units already).
+
+    Raises:
+        SvgError: not an SVG document.
+    """
+    root = parse_svg_bytes(svg_text.encode("utf-8"), "<svg>")
+    try:
+        _, _, vw, vh = parse_numbers(root.get("viewBox") or "")
+    except ValueError:
+        return svg_text
+    if vw <= 0 or vh <= 0 or (root.get("width"), root.get("height")) == (f"{vw:g}", f"{vh:g}"):
+        return svg_text
+    root.set("width", f"{vw:g}")
+    root.set("height", f"{vh:g}")
+    return etree.tostring(root, encoding="unicode")
+
+
 def render_svg(svg_text: str, width: int) -> np.ndarray:
-    """Render SVG text with resvg on white paper.
+    """Render SVG text with resvg on white paper, its viewBox ``width`` pixels across.
 
     Returns:
         ``(H, W)`` float32 image intensity in ``[0, 1]`` (1 = white).
+
+    Raises:
+        DeepMorphError: a document resvg (or the secure parser before it) refuses.
     """
     try:
-        png = resvg_py.svg_to_bytes(svg_string=svg_text, width=width, background="#ffffff")
-    except Exception as exc:  # resvg raises ValueError/RuntimeError on bad documents
+        png = resvg_py.svg_to_bytes(
+            svg_string=at_viewbox_size(svg_text), width=width, background="#ffffff", dpi=CSS_DPI
+        )
+    except Exception as exc:  # the parser's SvgError; resvg's ValueError/RuntimeError
         raise DeepMorphError(f"the SVG renderer refused the drawing: {exc}") from None
     img = Image.open(io.BytesIO(bytes(png))).convert("L")
     return np.asarray(img, dtype=np.float32) / 255.0

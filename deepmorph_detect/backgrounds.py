@@ -1,42 +1,41 @@
 """Backgrounds for synthetic scenes: real photos and procedural clutter.
 
-The photos are scikit-image's bundled sample images (public domain / CC0, shipped inside the
-wheel, so no download): a desk, a cat, a rocket, coins, gravel, brick... Procedural clutter adds
-what photos of real places hold and a detector must not fire on: hard edges, text, line art,
-stripes and blobs of every tone.
+The photos ship with the package (``data/backgrounds/``: 13 small JPEGs, 640 KB, from
+scikit-image's sample data, each public domain or CC0; their sources are in the folder's
+``LICENSE``): a desk, a cat, a rocket, a camera, bricks, gravel, grass, text ... Procedural
+clutter adds what photos of real places hold and a detector must not fire on: hard edges,
+text, line art, stripes and blobs of every tone.
 """
 
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import cv2
 import numpy as np
 
-_PHOTO_NAMES = (
-    "astronaut", "brick", "camera", "cat", "clock", "coffee", "coins", "grass", "gravel",
-    "horse", "hubble_deep_field", "immunohistochemistry", "moon", "page", "rocket", "text",
-    "colorwheel", "cell",
-)  # fmt: skip
+from deepmorph_core.errors import DeepMorphError
+
+PHOTOS = Path(__file__).parent / "data" / "backgrounds"
 
 
 @functools.lru_cache(maxsize=1)
 def sample_photos() -> tuple[np.ndarray, ...]:
-    """scikit-image's offline sample photos as float32 BGR ``(H, W, 3)`` in ``[0, 1]``."""
-    import skimage.data
+    """The shipped background photos as float32 BGR ``(H, W, 3)`` in ``[0, 1]``, by name.
 
+    Raises:
+        DeepMorphError: the photos are missing or unreadable (a broken installation): scenes
+            without them would be a different benchmark.
+    """
     photos = []
-    for name in _PHOTO_NAMES:
-        try:
-            img = np.asarray(getattr(skimage.data, name)())
-        except Exception:  # a sample missing from this scikit-image version: skip it
-            continue
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, axis=2)
-        img = img[..., :3]
-        if img.dtype != np.uint8:
-            img = (img.astype(np.float64) / max(float(img.max()), 1e-9) * 255).astype(np.uint8)
-        photos.append(img[..., ::-1].astype(np.float32) / 255.0)
+    for path in sorted(PHOTOS.glob("*.jpg")):
+        img = cv2.imdecode(np.fromfile(path, dtype=np.uint8), cv2.IMREAD_COLOR)
+        if img is None:
+            raise DeepMorphError(f"{path}: the background photo cannot be read; reinstall deepmorph")
+        photos.append(img.astype(np.float32) / 255.0)
+    if not photos:
+        raise DeepMorphError(f"{PHOTOS}: the background photos are missing; reinstall deepmorph")
     return tuple(photos)
 
 
@@ -44,8 +43,6 @@ def photo_background(rng: np.random.Generator, size: tuple[int, int]) -> np.ndar
     """A random crop of a random sample photo, resized, flipped and tinted: ``(H, W, 3)``."""
     W, H = size
     photos = sample_photos()
-    if not photos:
-        return clutter_background(rng, size)
     img = photos[int(rng.integers(len(photos)))]
     h, w = img.shape[:2]
     frac = rng.uniform(0.4, 1.0)
@@ -120,4 +117,4 @@ def random_background(rng: np.random.Generator, size: tuple[int, int]) -> np.nda
     return clutter_background(rng, size)
 
 
-__all__ = ["add_clutter", "clutter_background", "photo_background", "random_background", "sample_photos"]
+__all__ = ["PHOTOS", "add_clutter", "clutter_background", "photo_background", "random_background", "sample_photos"]

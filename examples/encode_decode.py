@@ -1,4 +1,5 @@
-"""Runnable example of the Python API: train a small model, hide a payload, read it back.
+"""Runnable example of the Python API: train a small model, hide a payload, print it at 30 mm
+as SVG, PNG and PDF, and read it back from the PNG, from the PDF and from a simulated photo.
 
     .venv/bin/python examples/encode_decode.py            # about a minute on one core
 
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import deepmorph
-from deepmorph_core.render import render_svg
+from deepmorph_core.pdf import render_pdf
 from deepmorph_detect.scenes import close_up_photo
 
 DRAWING = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" viewBox="0 0 24 24"
@@ -32,19 +33,23 @@ def main() -> None:
     # 1. Train: 8 payload bits, CRC-8, BCH correcting one bit error.
     model = deepmorph.train(
         svg, work / "model.dmm", payload_bits=8, crc_bits=8, ecc_t=1,
-        steps=600, threads=1, width=48, batch=16, severity="easy",
+        steps=600, threads=1, image_width=48, batch=16, severity="easy",
     )  # fmt: skip
     print(f"trained in {model.info()['record']['elapsed_s']:.0f} s -> {work / 'model.dmm'}")
 
-    # 2. Encode: a payload (an int here; hex text, bytes or bits work too) becomes a code.
+    # 2. Encode: a payload (an int here; hex text, bytes or bits work too) becomes a code,
+    #    saved at its printed size as the extension says (the PNG at 300 dpi).
     code = model.encode(0xA5)
-    (work / "code.svg").write_text(code.svg)
+    files = [code.save(work / name, width_mm=30) for name in ("code.svg", "code.png", "code.pdf")]
+    print(f"wrote {', '.join(f.name for f in files)} ({code.payload.hex}, 30 x {code.height_mm(30):g} mm)")
 
-    # 3. Decode: from a real render, and from a simulated phone photo of a print.
-    render = render_svg(code.svg, 300)
-    photo = close_up_photo(render, "easy", np.random.default_rng(0))
-    for name, image in (("render", render), ("photo", photo)):
-        for found in model.decode(image):
+    # 3. Decode: the PNG by its path, a render of the PDF (an RGB array, as PIL gives), and a
+    #    simulated phone photo of the print (OpenCV's BGR order, said with bgr=True).
+    pdf_render = render_pdf((work / "code.pdf").read_bytes(), 300)
+    rgb = np.repeat((pdf_render * 255).astype(np.uint8)[..., None], 3, axis=2)
+    photo = close_up_photo(pdf_render, "easy", np.random.default_rng(0))
+    for name, image, bgr in (("png", work / "code.png", False), ("pdf", rgb, False), ("photo", photo, True)):
+        for found in model.decode(image, bgr=bgr):
             r = found.result
             print(
                 f"{name}: {found.payload.hex} ok={found.ok} corrected={r.corrected_bits} confidence={r.confidence:.2f}"

@@ -565,37 +565,42 @@ def encode(
     payload: Annotated[
         str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")
     ],
-    out_path: Annotated[Path, typer.Option("--out", help="Morphed SVG to write.")],
+    out_path: Annotated[
+        Path, typer.Option("--out", help="The code to write: .svg, .pdf (vector) or .png, by its extension.")
+    ],
     png: Annotated[Optional[Path], typer.Option("--png", help="Also render a PNG for printing.")] = None,
-    width_mm: Annotated[float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of the PNG.")] = 50.0,
-    dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of the PNG.")] = 300,
+    pdf: Annotated[Optional[Path], typer.Option("--pdf", help="Also write a vector PDF at the print's size.")] = None,
+    width_mm: Annotated[
+        float, typer.Option("--width-mm", min=1, max=2000, help="Printed width of every file written, in mm.")
+    ] = 50.0,
+    dpi: Annotated[int, typer.Option("--dpi", min=50, max=2400, help="Printer resolution of a PNG.")] = 300,
     as_json: JsonOpt = False,
 ) -> None:
-    """Hide a payload in the model's drawing and write the morphed SVG (and a print-ready PNG)."""
-    from deepmorph_core.code import print_pixels
+    """Hide a payload in the model's drawing and write it at its printed size: an SVG (width and
+    height in mm), a vector PDF page or a print-ready PNG, all or none."""
+    from deepmorph_core.code import FILE_FORMATS, print_pixels
     from deepmorph_core.fileio import atomic_write_all
     from deepmorph_core.model import DeepMorphModel
 
-    refuse_to_overwrite(out_path, "--out", [("model file", model)])
-    if out_path.suffix.lower() != ".svg":
-        raise DeepMorphError(f"--out {out_path}: the code is written as SVG; name it .svg")
-    if png is not None:
-        refuse_to_overwrite(png, "--png", [("model file", model), ("SVG given with --out", out_path)])
-        if png.suffix.lower() != ".png":
-            raise DeepMorphError(f"--png {png}: the print image is a PNG; name it .png")
+    targets = [("--out", out_path, FILE_FORMATS.get(out_path.suffix.lower(), ""))]
+    targets += [(option, path, fmt) for option, path, fmt in (("--png", png, "PNG"), ("--pdf", pdf, "PDF")) if path]
+    for i, (option, path, fmt) in enumerate(targets):
+        earlier = [(f"file given with {o}", p) for o, p, _ in targets[:i]]
+        refuse_to_overwrite(path, option, [("model file", model), *earlier])
+        if not fmt:
+            raise DeepMorphError(f"--out {path}: a code is written as .svg, .pdf or .png; name it so")
+        if FILE_FORMATS.get(path.suffix.lower()) != fmt:
+            raise DeepMorphError(f"{option} {path}: this file is a {fmt}; name it .{fmt.lower()}")
+    if any(fmt == "PNG" for *_, fmt in targets):
         px = print_pixels(width_mm, dpi)  # refused here, before any work, when too large
-    m = DeepMorphModel.load(model)
-    code = m.code(payload)
-    files = [(out_path, code.svg.encode("utf-8"))]
-    msg = f"wrote {out_path} carrying {code.payload.hex}"
-    if png is not None:
-        files.append((png, code.png(width_mm, dpi)))
-        msg += f" and {png} ({px} px wide = {width_mm:g} mm at {dpi} dpi)"
-    atomic_write_all(files)  # both or neither
+    code = DeepMorphModel.load(model).code(payload)
+    atomic_write_all([(path, code.file(fmt, width_mm, dpi)) for _, path, fmt in targets])  # every one or none
+    written = [f"{path} ({px} px wide at {dpi} dpi)" if fmt == "PNG" else str(path) for _, path, fmt in targets]
+    listed = ", ".join(written[:-1]) + (" and " if len(written) > 1 else "") + written[-1]
     if as_json:
-        print_json({"written": [str(path) for path, _ in files], "payload": code.payload.to_json()})
+        print_json({"written": [str(path) for _, path, _ in targets], "payload": code.payload.to_json()})
         return
-    out.print(msg)
+    out.print(f"wrote {listed} carrying {code.payload.hex}, {width_mm:g} x {code.height_mm(width_mm):.4g} mm")
 
 
 def register(cli: typer.Typer) -> None:

@@ -148,13 +148,11 @@ def test_no_output_replaces_an_input(tmp_path: Path) -> None:
     cases = [
         ([*enc, "--out", model], "--out", "refusing to overwrite the model file"),
         ([*enc, "--out", tmp_path / "code.svg", "--png", model], "--png", "refusing to overwrite the model file"),
-        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.svg"], "--png", "SVG given with --out"),
-        (
-            [*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.xyz"],
-            "c.xyz",
-            "the print image is a PNG; name it .png",
-        ),
-        ([*enc, "--out", tmp_path / "c.pdf"], "c.pdf", "the code is written as SVG; name it .svg"),
+        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.svg"], "--png", "file given with --out"),
+        ([*enc, "--out", tmp_path / "c.pdf", "--pdf", tmp_path / "c.pdf"], "--pdf", "file given with --out"),
+        ([*enc, "--out", tmp_path / "c.svg", "--png", tmp_path / "c.xyz"], "c.xyz", "this file is a PNG; name it .png"),
+        ([*enc, "--out", tmp_path / "c.svg", "--pdf", tmp_path / "c.svg.txt"], "--pdf", "this file is a PDF"),
+        ([*enc, "--out", tmp_path / "c.xyz"], "c.xyz", "a code is written as .svg, .pdf or .png"),
         (["render", drawing, "--out", drawing], "--out", "refusing to overwrite the input drawing"),
         (["decode", model, photo, "--overlay", tmp_path / "ann.xyz"], "--overlay", "cannot write this image format"),
         (["morph", drawing, "--random", "--out", drawing], "--out", "refusing to overwrite the input drawing"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -10,13 +11,19 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_encode_decode_example_runs() -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's packages, whatever is installed
     result = subprocess.run(
-        [sys.executable, str(ROOT / "examples" / "encode_decode.py")], capture_output=True, text=True, timeout=600
+        [sys.executable, str(ROOT / "examples" / "encode_decode.py")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
     )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0].startswith("trained in ")
-    decoded = [line for line in lines if line.startswith(("render:", "photo:"))]
-    assert len(decoded) == 2
+    assert lines[1] == "wrote code.svg, code.png, code.pdf (0xA5, 30 x 30 mm)"
+    decoded = [line for line in lines if line.startswith(("png:", "pdf:", "photo:"))]
+    assert len(decoded) == 3
     assert any("0xA5 ok=True" in line for line in decoded)
     assert not any("ok=True" in line and "0xA5" not in line for line in decoded)  # never a wrong payload
