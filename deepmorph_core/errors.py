@@ -44,3 +44,9 @@ class BoundsError(SvgError):
 
 class PluginError(DeepMorphError):
     """A plugin that registers something invalid, or a hook implementation that matches no hook."""
+
+
+class DeepMorphWarning(UserWarning):
+    """Something a user should know that does not stop the work (a stored ONNX graph that cannot
+    be used, say: PyTorch runs the network instead). The command line prints it as one
+    ``warning: ...`` line."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import re
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,7 +18,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import atomic_write
 
 _UNPRINTABLE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069]")
@@ -66,15 +67,26 @@ def print_error(exc: BaseException) -> None:
 
 
 def friendly(fn: F) -> F:
-    """Turn a DeepMorphError raised by a command into one ``error:`` line and exit status 1."""
+    """Turn a DeepMorphError raised by a command into one ``error:`` line and exit status 1,
+    and each DeepMorphWarning it gives into one ``warning:`` line."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except DeepMorphError as exc:
-            print_error(exc)
-            raise typer.Exit(1) from None
+        with warnings.catch_warnings():
+            shown = warnings.showwarning
+
+            def show(message: Warning | str, category: type[Warning], *rest: Any, **more: Any) -> None:
+                if issubclass(category, DeepMorphWarning):
+                    err.print(Text.assemble(("warning: ", "yellow"), safe(message)), soft_wrap=True)
+                else:
+                    shown(message, category, *rest, **more)
+
+            warnings.showwarning = show
+            try:
+                return fn(*args, **kwargs)
+            except DeepMorphError as exc:
+                print_error(exc)
+                raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
 
