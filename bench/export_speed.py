@@ -8,9 +8,11 @@ ONNX Runtime from the bundle's graphs (what ``decode`` does) and with both netwo
 runs on the same frame, and OpenCV's QR ``detectAndDecode`` once per frame on a same-size frame
 holding a QR code, so that every median is taken over the same minutes.
 
-Where the time goes, per frame: the detector, the decoder (calls and milliseconds), and the
-frames that needed the second looks or the last look by synthesis (the slow paths a weaker
-first reading takes), with their share of the time.
+Where the time goes, per frame: the detector, the decoder (calls and milliseconds), the payload
+check and how many frames it checked bit by bit (a reading that needed corrections or is less
+confident than 0.97: ``deepmorph_detect/check.py``), and the frames that needed the second
+looks or the last look by synthesis: the slow paths a weaker first reading takes. The medians
+of the frames without them say what each costs.
 
     .venv/bin/python bench/export_speed.py --fresh /work/onnx-fresh/codesandbox.dmm --n 60
 """
@@ -27,6 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
 MODES = ("onnx", "torch")
+# what is recorded per frame
+FIELDS = ("ms", "read", "detector_ms", "decoder_calls", "decoder_ms", "second", "synthesis", "synthesis_ms",
+          "bitwise", "check_ms")  # fmt: skip
 
 
 class Clock:
@@ -47,6 +52,18 @@ class Clock:
         out = (self.calls, self.seconds)
         self.calls, self.seconds = 0, 0.0
         return out
+
+
+class CheckClock(Clock):
+    """A :class:`Clock` on the payload check that also counts the checks that went bit by bit
+    (``calls`` then counts those; ``seconds`` is every check's time)."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        checked = self.fn(*args, **kwargs)
+        self.seconds += time.perf_counter() - t0
+        self.calls += checked.bits is not None
+        return checked
 
 
 def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
@@ -74,6 +91,8 @@ def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
     }
     reader.decoder, reader.second_looks = clocks["decoder"], clocks["second"]
     reader.read_by_synthesis = clocks["synthesis"]
+    clocks["check"] = CheckClock(locator.checker.check)
+    locator.checker.check = clocks["check"]
     if locator.detector is not None:
         clocks["detector"] = Clock(locator.detector.net)
         locator.detector.net = clocks["detector"]
@@ -114,13 +133,7 @@ def main() -> None:
         locator.locate(scenes[k][0].image, scenes[k][0].camera)
         for clock in clocks.values():
             clock.take()
-    rows: dict[tuple[str, str], dict[str, list[float]]] = {
-        key: {
-            f: []
-            for f in ("ms", "read", "detector_ms", "decoder_calls", "decoder_ms", "second", "synthesis", "synthesis_ms")
-        }
-        for key in chains
-    }
+    rows: dict[tuple[str, str], dict[str, list[float]]] = {key: {f: [] for f in FIELDS} for key in chains}
     aruco_ms: dict[str, list[float]] = {k: [] for k in models}
     for i in range(args.n):
         order = list(chains) if i % 2 == 0 else list(chains)[::-1]
@@ -143,6 +156,9 @@ def main() -> None:
             n_syn, syn_s = clocks["synthesis"].take()
             r["synthesis"].append(n_syn > 0)
             r["synthesis_ms"].append(1000 * syn_s)
+            n_bitwise, check_s = clocks["check"].take()
+            r["bitwise"].append(n_bitwise > 0)
+            r["check_ms"].append(1000 * check_s)
         for k in models:
             gray = cv2.cvtColor(scenes[k][i].image, cv2.COLOR_BGR2GRAY)
             t0 = time.perf_counter()
@@ -176,16 +192,22 @@ def main() -> None:
             "synthesis_ms_mean": round(float(np.mean(r["synthesis_ms"])), 2),
             "ms_median_without_slow_paths": round(float(np.median(ms[~slow])), 2) if (~slow).any() else None,
             "share_of_time_in_slow_frames": round(float(ms[slow].sum() / ms.sum()), 3),
+            "frames_checked_bit_by_bit": int(sum(r["bitwise"])),
+            "check_ms_mean": round(float(np.mean(r["check_ms"])), 2),
+            "ms_median_without_bitwise_check": round(float(np.median(ms[~np.asarray(r["bitwise"])])), 2)
+            if not all(r["bitwise"])
+            else None,
         }
         report["chains"][f"{k}/{mode}"] = entry
         lines.append([k, mode, f"{entry['read']}/{args.n}", entry["ms_median"], entry["ms_mean"], entry["x_qr_median"],
                       entry["aruco_ms_median"], entry["detector_ms_mean"], entry["decoder_calls_mean"],
-                      entry["decoder_ms_mean"], f"{entry['frames_second_looks']}/{args.n}",
+                      entry["decoder_ms_mean"], f"{entry['frames_checked_bit_by_bit']}/{args.n}",
+                      entry["check_ms_mean"], f"{entry['frames_second_looks']}/{args.n}",
                       f"{entry['frames_synthesis']}/{args.n}", entry["ms_median_without_slow_paths"],
-                      entry["share_of_time_in_slow_frames"]])  # fmt: skip
+                      entry["ms_median_without_bitwise_check"]])  # fmt: skip
     print(table(["bundle", "networks", "read", "ms median", "ms mean", "x QR", "ArUco ms", "detector ms",
-                 "decoder calls", "decoder ms", "second looks", "synthesis", "ms median, fast frames",
-                 "time in slow frames"], lines))  # fmt: skip
+                 "decoder calls", "decoder ms", "checked bit by bit", "check ms", "second looks", "last look",
+                 "ms median w/o 2nd/last looks", "ms median w/o bit check"], lines))  # fmt: skip
     print(f"QR detectAndDecode median {qr_ms:.2f} ms; {args.threads} thread(s), {args.severity}, {args.n} scenes")
     print(f"wrote {write_json(args.out, report)}")
 

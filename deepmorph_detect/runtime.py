@@ -89,8 +89,8 @@ def onnx_or_torch(
     if model is not None:
         model.graphs[name] = stored
         _warn(
-            f"{label} holds no ONNX graph of its {name}: exported one in {time.perf_counter() - t0:.1f} s "
-            "(`deepmorph export MODEL --bundle MODEL` stores it)"
+            f"{label} holds no ONNX graph of its {name}: exported one in {time.perf_counter() - t0:.1f} s"
+            + (f" (`deepmorph export {label} --bundle {label}` stores it)" if model.source else "")
         )
     return fast
 
