@@ -6,9 +6,10 @@ variables, in order, the icon not yet picked whose count is nearest (ties: alpha
 the bundled ghost with its own bounds. The Feather set has few icons above 54 variables, so the
 upper targets take the nearest there are.
 
-For each drawing: ``deepmorph capacity``'s prediction ``P``; a model trained with the default
-settings (``deepmorph train``) at ``P``, then at ``P + 4`` while that passes or at ``P - 4`` while
-it fails (at most three sizes, ``--sizes``); each model read back with fresh payloads:
+For each drawing: ``deepmorph capacity``'s prediction ``P``; a model trained at ``P`` with the
+predicted code and otherwise the default settings (``deepmorph train --payload-bits auto``),
+then at ``P + 4`` while that passes or at ``P - 4`` while it fails (at most three sizes,
+``--sizes``); each model read back with fresh payloads:
 
 * **renders**: 1000 resvg renders under the training corruption at ``medium``
   (:func:`deepmorph_core.validation.validate_renders`);
@@ -176,9 +177,12 @@ def evaluate(model: Any, args: argparse.Namespace, unrelated: list[tuple[str, An
     return out
 
 
-def train_size(name: str, svg: Path, move: float | None, bits: int, args: argparse.Namespace) -> Any:
-    """A model of ``svg`` at ``bits`` payload bits with the default settings (kept in
-    ``--models-dir``; reused with ``--reuse`` when finished)."""
+def train_size(
+    name: str, svg: Path, move: float | None, bits: int, code: tuple[int | None, int | None], args: argparse.Namespace
+) -> Any:
+    """A model of ``svg`` at ``bits`` payload bits with the predicted code ``(crc_bits, bch_t)``
+    and otherwise the default settings (kept in ``--models-dir``; reused with ``--reuse`` when
+    finished)."""
     from deepmorph_core.errors import DeepMorphError
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.train import train_model
@@ -196,6 +200,8 @@ def train_size(name: str, svg: Path, move: float | None, bits: int, args: argpar
         svg,
         path,
         payload_bits=bits,
+        crc_bits=code[0],
+        ecc_t=code[1],
         bounds={"move": move},
         train={"seed": args.seed, "threads": args.threads},
         overwrite=True,
@@ -212,10 +218,11 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
     report = predict(MorphableDrawing.load(svg, move=move))
     predict_s = time.perf_counter() - t0
     start = max(report.payload_bits, STEP_BITS)
+    code = (report.codec.crc_bits, report.codec.bch_t) if report.codec else (None, None)  # as train --payload-bits auto
     sizes: list[dict[str, Any]] = []
     bits, direction = start, 0
     while 1 <= bits and len(sizes) < args.sizes:
-        model, path, trained = train_size(name, svg, move, bits, args)
+        model, path, trained = train_size(name, svg, move, bits, code, args)
         rec = model.meta.record
         ev = evaluate(model.eval(), args, unrelated, args.seed + 7919 * bits)
         sizes.append(

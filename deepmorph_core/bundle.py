@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -36,6 +36,10 @@ MAX_BUNDLE_BYTES = 512 * 1024 * 1024
 MAX_HEADER_BYTES = 16 * 1024 * 1024  # the safetensors header: tensor table and our metadata
 MAX_NAME_CHARS = 256
 MAX_DRAWING_CHARS = 8 * 1024 * 1024
+MAX_GRAPHS = 8  # stored ONNX graphs: one per network (the decoder, the detector)
+_SHA256 = r"^[0-9a-f]{64}$"
+_NAME = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
+_SHAPE = Annotated[list[Annotated[int, Field(ge=1, le=1 << 20)]], Field(min_length=1, max_length=8)]
 
 
 class TrainingRecord(BaseModel):
@@ -104,6 +108,33 @@ class DetectorMeta(BaseModel):
     earlier: list[dict[str, Any]] = Field(default_factory=list)
 
 
+class GraphMeta(BaseModel):
+    """An ONNX graph stored in a bundle: tensor ``graph.<name>`` holds its bytes; it was exported
+    from the network whose weights the bundle files under ``<name>.``.
+
+    Attributes:
+        size, sha256: the graph's length in bytes and its SHA-256 (a damaged graph is not run).
+        weights_sha256: :func:`~deepmorph_core.graphs.weights_fingerprint` of the weights it was
+            exported from (a graph of other weights is not run).
+        inputs, outputs: names and shapes, in order (every tensor float32).
+        opset: the ONNX operator set.
+        exporter: what exported it (``torch.onnx.export`` and the torch version).
+        max_abs_diff: the largest difference between its outputs and PyTorch's on the check
+            inputs, measured before it was stored.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    size: int = Field(ge=1, le=MAX_BUNDLE_BYTES)
+    sha256: str = Field(pattern=_SHA256)
+    weights_sha256: str = Field(pattern=_SHA256)
+    inputs: dict[_NAME, _SHAPE] = Field(min_length=1, max_length=4)
+    outputs: dict[_NAME, _SHAPE] = Field(min_length=1, max_length=4)
+    opset: int = Field(ge=1, le=1000)
+    exporter: str = Field(max_length=200)
+    max_abs_diff: float = Field(ge=0)
+
+
 class BundleMeta(BaseModel):
     """The JSON part of a bundle (everything but tensors)."""
 
@@ -129,6 +160,7 @@ class BundleMeta(BaseModel):
     tuning: list[dict[str, Any]] = Field(default_factory=list)  # decoder tunings after training, oldest first
     # the last validation of the codec as it now is (after training, tuning or `deepmorph validate`)
     validation: list[ValidationRecord] = Field(default_factory=list, max_length=16)
+    graphs: dict[_NAME, GraphMeta] = Field(default_factory=dict, max_length=MAX_GRAPHS)
 
 
 def _bad(path: Path | str, why: str) -> DeepMorphError:

@@ -409,6 +409,41 @@ class PayloadCodec:
             raise DeepMorphError(f"probabilities must have shape (B, {self.spec.code_bits}), got {tuple(arr.shape)}")
         return [self.decode(row, soft=soft) for row in arr]
 
+    def describe(self) -> dict[str, Any]:
+        """What a program needs to decode code bits without DeepMorph, JSON-ready: the layout
+        (this module's docstring), the CRC's and the BCH code's parameters, and the whitening
+        mask as a string of ``0`` and ``1``, most significant bit first (``docs/export.md``)."""
+        spec = self.spec
+        crc_config = _CRC_CONFIGS[spec.crc_bits].value if spec.crc_bits else None
+        return {
+            "payload_bits": spec.payload_bits,
+            "crc_bits": spec.crc_bits,
+            "ecc_bits": spec.ecc_bits,
+            "code_bits": spec.code_bits,
+            "layout": "code = (payload | CRC of the payload | BCH parity) XOR whitening, most significant bit first",
+            "crc": None
+            if crc_config is None
+            else {
+                "width": crc_config.width,
+                "polynomial": crc_config.polynomial,
+                "init": crc_config.init_value,
+                "final_xor": crc_config.final_xor_value,
+                "reflect_input": crc_config.reverse_input,
+                "reflect_output": crc_config.reverse_output,
+                "input": "the payload's value as big-endian bytes, zero bits added in front to whole bytes",
+            },
+            "bch": None
+            if self._bch is None
+            else {
+                "t": spec.bch_t,
+                "m": spec.field_order,
+                "primitive_polynomial": int(self._bch.prim_poly),
+                "data": "payload and CRC bits with zero bits added at the end to whole bytes (not sent)",
+                "parity": "the first ecc_bits bits of the Linux kernel BCH encoder's parity bytes (bchlib)",
+            },
+            "whitening": "".join(str(int(b)) for b in self._mask),
+        }
+
     # -- decoding internals
 
     def _probabilities(self, probs: Any) -> np.ndarray:

@@ -13,8 +13,8 @@ class DeepMorphError(Exception):
 
 
 class DeepMorphWarning(UserWarning):
-    """Something a user should know that does not stop the work (an optional output left out);
-    the command line prints it as one ``warning: ...`` line."""
+    """Something a user should know that does not stop the work (an optional output left out, a
+    stored ONNX graph that cannot be used); the command line prints it as one ``warning:`` line."""
 
 
 class SvgError(DeepMorphError):

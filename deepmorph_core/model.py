@@ -4,10 +4,13 @@
 which the drawing fills the frame, and saves and loads itself as a bundle
 (:mod:`deepmorph_core.bundle`). Training lives in :mod:`deepmorph_core.train`; finding and
 reading drawings in photos is the photo chain's (:mod:`deepmorph_detect`), which builds on this.
+The networks' ONNX graphs travel with the model (:attr:`DeepMorphModel.graphs`): the decoder's
+is exported when training ends (:meth:`DeepMorphModel.store_decoder_graph`).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,10 +22,11 @@ from torch import Tensor
 from deepmorph_core.bundle import BundleMeta, TrainingRecord, check_weights, load_bundle, save_bundle, versions
 from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
-from deepmorph_core.errors import DeepMorphError, SvgError
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning, SvgError
 from deepmorph_core.framing import align_to_frame, render_moments
+from deepmorph_core.graphs import GraphError, StoredGraph, make_graph, read_graphs, weights_fingerprint
 from deepmorph_core.morphable import MorphableDrawing
-from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters
+from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
 from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.photo import to_gray
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
@@ -75,6 +79,9 @@ class DeepMorphModel:
         encoder, decoder: the networks.
         width: image width (pixels) the decoder reads; height follows the drawing's aspect.
         meta: the bundle metadata (configuration, versions, training record).
+        graphs: ONNX graphs of the networks by name (``decoder``, ``detector``), each checked
+            against PyTorch when it was made; saved with the bundle while their weights stay.
+        source: the file the model was loaded from (named in messages), if any.
     """
 
     drawing: MorphableDrawing
@@ -85,6 +92,8 @@ class DeepMorphModel:
     meta: BundleMeta
     extra_tensors: dict[str, Tensor] = field(default_factory=dict)
     detector_state: dict[str, Tensor] = field(default_factory=dict)
+    graphs: dict[str, StoredGraph] = field(default_factory=dict)
+    source: str | None = None
 
     # -- construction and files -----------------------------------------------------------
 
@@ -178,23 +187,68 @@ class DeepMorphModel:
         )
         nets = {k: v for k, v in tensors.items() if k.startswith(("encoder.", "decoder."))}
         model.detector_state = {k: v for k, v in tensors.items() if k.startswith("detector.")}
-        model.extra_tensors = {k: v for k, v in tensors.items() if k not in nets and k not in model.detector_state}
+        model.extra_tensors = {
+            k: v
+            for k, v in tensors.items()
+            if k not in nets and k not in model.detector_state and not k.startswith("graph.")
+        }
         if meta.detector is not None and not model.detector_state:
             raise DeepMorphError(f"{path}: not a usable DeepMorph model file (detector weights are missing)")
         for name, network in (("encoder", model.encoder), ("decoder", model.decoder)):
             given = {k[len(name) + 1 :]: v for k, v in nets.items() if k.startswith(name + ".")}
             check_weights(path, name, network.state_dict(), given)
             network.load_state_dict(given)
+        model.graphs = read_graphs(path, meta.graphs, tensors)
+        model.source = str(path)
         model.eval()
         return model
 
-    def save(self, path: str | Path, extra: dict[str, Tensor] | None = None) -> None:
-        """Write the bundle atomically (``extra``: optimiser/RNG state in checkpoints)."""
+    def tensors(self) -> dict[str, Tensor]:
+        """The networks' weights as the bundle files them (``encoder.``, ``decoder.``, ``detector.``)."""
         tensors = {f"encoder.{k}": v for k, v in self.encoder.state_dict().items()}
         tensors.update({f"decoder.{k}": v for k, v in self.decoder.state_dict().items()})
         tensors.update(self.detector_state)
+        return tensors
+
+    def save(self, path: str | Path, extra: dict[str, Tensor] | None = None) -> None:
+        """Write the bundle atomically (``extra``: optimiser/RNG state in checkpoints), with the
+        graphs of :attr:`graphs` whose network has not changed since they were exported (a
+        graph of weights trained further is dropped)."""
+        tensors = self.tensors()
+        self.graphs = {
+            name: graph
+            for name, graph in self.graphs.items()
+            if graph.meta.weights_sha256 == weights_fingerprint(tensors, name)
+        }
+        self.meta.graphs = {name: graph.meta for name, graph in self.graphs.items()}
+        for name, graph in self.graphs.items():
+            tensors[f"graph.{name}"] = torch.from_numpy(np.frombuffer(graph.data, dtype=np.uint8).copy())
         tensors.update(extra or {})
         save_bundle(path, self.meta, tensors)
+
+    def decoder_graph(self) -> StoredGraph:
+        """The decoder (batch norms folded) exported to ONNX for one ``(1, 1, H, W)`` image
+        (input ``image``, 1 = white paper; output ``logits``) and checked against PyTorch.
+
+        Raises:
+            GraphError: export failed or the graph does not give PyTorch's outputs.
+        """
+        generator = torch.Generator().manual_seed(0)
+        examples = [torch.rand(1, 1, *self.image_size, generator=generator) for _ in range(3)]
+        fingerprint = weights_fingerprint(self.tensors(), "decoder")
+        return make_graph(fused_for_inference(self.decoder), examples, "image", ["logits"], fingerprint)
+
+    def store_decoder_graph(self) -> bool:
+        """Export the decoder's graph into :attr:`graphs` (saved with the bundle); when that
+        fails, warn (:class:`~deepmorph_core.errors.DeepMorphWarning`) and go on: PyTorch runs
+        the decoder. Returns whether a graph was stored."""
+        try:
+            self.graphs["decoder"] = self.decoder_graph()
+        except GraphError as exc:
+            self.graphs.pop("decoder", None)
+            warnings.warn(DeepMorphWarning(f"the decoder's ONNX graph was not stored: {exc}"), stacklevel=2)
+            return False
+        return True
 
     def eval(self) -> DeepMorphModel:
         self.encoder.eval()
@@ -298,6 +352,7 @@ class DeepMorphModel:
             "detector": None if m.detector is None else m.detector.model_dump(),
             "tuning": m.tuning,
             "validation": [r.model_dump() for r in m.validation],
+            "graphs": {name: graph.meta.model_dump() for name, graph in self.graphs.items()},
         }
 
 

@@ -7,12 +7,14 @@ augmentations in between live in their own modules (:mod:`deepmorph_core.train` 
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Annotated
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor, nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 from deepmorph_core.spatial import SpatialTransformer
 
@@ -213,3 +215,19 @@ class Decoder(nn.Module):
             images = self.align(images)
         # centre intensities so that white paper is +0.5 and black ink -0.5
         return self.head(self.features(images - 0.5))
+
+
+def fused_for_inference(net: nn.Module) -> nn.Module:
+    """A copy of ``net`` in eval mode on the CPU with every batch norm folded into the
+    convolution before it: the same outputs (to float rounding) with one pass less over each
+    feature map. What the photo chain runs, and what is exported to ONNX."""
+    fused = copy.deepcopy(net).cpu().eval()
+    for module in fused.modules():
+        if not isinstance(module, nn.Sequential):
+            continue
+        for i in range(len(module) - 1):
+            conv, norm = module[i], module[i + 1]
+            if isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d):
+                module[i] = fuse_conv_bn_eval(conv, norm)
+                module[i + 1] = nn.Identity()
+    return fused

@@ -205,8 +205,11 @@ class CodecRun:
         self._prev_window = float(extra["prev_window"][0]) if "prev_window" in extra else None
 
     def checkpoint(self) -> None:
-        """Write the bundle with optimiser and generator state (atomic)."""
+        """Write the bundle with optimiser and generator state (atomic); at the end, with the
+        decoder's ONNX graph."""
         self.model.meta.record = self.record
+        if self.record.finished:
+            self.model.store_decoder_graph()
         self.model.save(self.out, extra=None if self.record.finished else self._extra_state())
 
     # -- one step -------------------------------------------------------------------------
@@ -527,6 +530,8 @@ class TuningRun(CodecRun):
         self.model.meta.record = self.trained_record
         self.model.meta.tuning = [*self._earlier, self.entry]
         self.model.decoder.eval()
+        if rec.finished:
+            self.model.store_decoder_graph()
         self.model.save(self.out)
         self.model.meta.record = rec
 

@@ -1,5 +1,7 @@
 """The built-in detector: peaks of :class:`~deepmorph_detect.network.DetectorNet`'s centre heatmap,
-each with the quadrilateral its corner offsets give (registered as ``centrenet``)."""
+each with the quadrilateral its corner offsets give (registered as ``centrenet``). Its ONNX
+graph (:func:`detector_graph`) is stored in the bundle when its training ends and run by ONNX
+Runtime (:mod:`deepmorph_detect.runtime`)."""
 
 from __future__ import annotations
 
@@ -8,16 +10,26 @@ from typing import ClassVar
 import cv2
 import numpy as np
 import torch
+from torch import Tensor, nn
 
 from deepmorph_core.bundle import check_weights
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.graphs import StoredGraph, make_graph, weights_fingerprint
 from deepmorph_core.kernels import SQUARE_3X3, area_resize
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_core.protocols import Candidate
-from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, fused_for_inference, standardise, stored_weights
+from deepmorph_detect.network import (
+    INPUT_SIZE,
+    STRIDE,
+    DetectorGraph,
+    DetectorNet,
+    fused_for_inference,
+    standardise,
+    stored_weights,
+)
 from deepmorph_detect.propose import quad_bbox
-from deepmorph_detect.runtime import detector_graph, onnx_or_torch
+from deepmorph_detect.runtime import onnx_or_torch
 
 # x, y of the centres of a 3x3 block of heatmap cells, from its top-left cell
 MIN_WIDTH, MAX_WIDTH = 8, 256  # the detector's channel widths (DetectorConfig's bounds)
@@ -35,34 +47,42 @@ class CentreNetDetector:
 
     name: ClassVar[str] = "centrenet"
 
-    def __init__(self, net: DetectorNet, threshold: float = 0.3, max_detections: int = 12) -> None:
+    def __init__(
+        self,
+        net: DetectorNet,
+        threshold: float = 0.3,
+        max_detections: int = 12,
+        model: DeepMorphModel | None = None,
+    ) -> None:
         # where ONNX Runtime cannot run it: channels-last, with batch norms folded into their
         # convolutions, runs this small convolution stack about a quarter faster on CPU
         eager = fused_for_inference(net).to(memory_format=torch.channels_last)
+        generator = torch.Generator().manual_seed(0)
         W, H = INPUT_SIZE
-        example = torch.randn(1, 1, H, W, generator=torch.Generator().manual_seed(0))
-        # ONNX Runtime where it gives the same outputs (deepmorph_detect.runtime): 0.75x the time
-        self.net = onnx_or_torch(eager, lambda: detector_graph(eager, H, W), example)
+        examples = [torch.rand(1, 1, H, W, generator=generator) for _ in range(2)]
+        # ONNX Runtime from the graph the bundle stores (or exported now): 0.75x the time
+        self.net = onnx_or_torch(model, "detector", TorchDetector(eager), examples, lambda: detector_graph(net))
         self.threshold = threshold
         self.max_detections = max_detections
 
     @classmethod
     def from_model(cls, model: DeepMorphModel) -> CentreNetDetector | None:
         """The detector stored in a bundle, or ``None`` when it has none (or one of another kind)."""
-        meta = model.meta.detector
-        if meta is None or meta.name != cls.name:
+        net = stored_net(model)
+        return None if net is None else cls(net, model=model)
+
+    @classmethod
+    def graph(cls, model: DeepMorphModel) -> StoredGraph | None:
+        """The ONNX graph of the detector a bundle stores (:func:`detector_graph`), the stored one
+        when it has one; ``None`` when it has no detector of this kind.
+
+        Raises:
+            GraphError: no graph could be made.
+        """
+        net = stored_net(model)
+        if net is None:
             return None
-        width = meta.config.get("width", 32)
-        if not isinstance(width, int) or not MIN_WIDTH <= width <= MAX_WIDTH:
-            raise DeepMorphError(
-                f"{model.meta.drawing_name}: the model's detector has width {width!r} "
-                f"(a detector is {MIN_WIDTH} to {MAX_WIDTH} channels wide)"
-            )
-        net = DetectorNet(width)
-        weights = stored_weights(model.detector_state)
-        check_weights(model.meta.drawing_name, "detector", net.state_dict(), weights)
-        net.load_state_dict(weights)
-        return cls(net)
+        return model.graphs.get("detector") or detector_graph(net)
 
     def detect(self, image: np.ndarray) -> list[Candidate]:
         """Quadrilaterals (corners TL, TR, BR, BL in pixels) and scores, best first."""
@@ -74,8 +94,7 @@ class CentreNetDetector:
         small = area_resize(gray, (rw, rh))
         small = cv2.copyMakeBorder(small, 0, H - rh, 0, W - rw, cv2.BORDER_REPLICATE)
         with torch.inference_mode():
-            x = torch.from_numpy(standardise(small))[None, None].contiguous(memory_format=torch.channels_last)
-            heat, corners = self.net(x)
+            heat, corners = self.net(torch.from_numpy(np.ascontiguousarray(small, dtype=np.float32))[None, None])
             p_np, c_np = torch.sigmoid(heat)[0, 0].numpy(), corners[0].numpy()
         # local maxima over 3x3 cells (the border counts as lower than any cell)
         peaks = (p_np == cv2.dilate(p_np, SQUARE_3X3)) & (p_np > self.threshold)
@@ -106,3 +125,59 @@ def _same_order(quads: np.ndarray, ref: np.ndarray) -> np.ndarray:
     rolled = quads[:, _ROLLS]  # (n, 4 rolls, 4 corners, 2)
     best = np.abs(rolled - ref).sum((2, 3)).argmin(1)
     return rolled[np.arange(len(quads)), best]
+
+
+class TorchDetector:
+    """The PyTorch detector (batch norms folded) called as its ONNX graph is, on gray: what runs
+    where no graph can be had. The standardisation is numpy's (:func:`~deepmorph_detect.network.standardise`),
+    four times faster here than torch's reductions."""
+
+    def __init__(self, net: nn.Module) -> None:
+        self.net = net
+
+    def __call__(self, gray: Tensor) -> tuple[Tensor, Tensor]:
+        x = torch.from_numpy(standardise(gray[0, 0].numpy()))[None, None]
+        with torch.inference_mode():
+            return self.net(x.contiguous(memory_format=torch.channels_last))
+
+
+def stored_net(model: DeepMorphModel) -> DetectorNet | None:
+    """The built-in detector network a bundle stores, weights loaded and checked; ``None`` when
+    the bundle has no detector or one of another kind.
+
+    Raises:
+        DeepMorphError: the stored detector does not fit the network.
+    """
+    meta = model.meta.detector
+    if meta is None or meta.name != CentreNetDetector.name:
+        return None
+    width = meta.config.get("width", 32)
+    if not isinstance(width, int) or not MIN_WIDTH <= width <= MAX_WIDTH:
+        raise DeepMorphError(
+            f"{model.meta.drawing_name}: the model's detector has width {width!r} "
+            f"(a detector is {MIN_WIDTH} to {MAX_WIDTH} channels wide)"
+        )
+    net = DetectorNet(width)
+    weights = stored_weights(model.detector_state)
+    check_weights(model.meta.drawing_name, "detector", net.state_dict(), weights)
+    net.load_state_dict(weights)
+    return net.eval()
+
+
+def detector_graph(net: nn.Module) -> StoredGraph:
+    """The detector exported to ONNX as :class:`~deepmorph_detect.network.DetectorGraph` (batch
+    norms folded) for one photo at :data:`~deepmorph_detect.network.INPUT_SIZE` (input
+    ``image``; outputs ``heat`` and ``corners``), checked against PyTorch.
+
+    Raises:
+        GraphError: export failed or the graph does not give PyTorch's outputs.
+    """
+    W, H = INPUT_SIZE
+    generator = torch.Generator().manual_seed(0)
+    examples = [torch.rand(1, 1, H, W, generator=generator) for _ in range(3)]
+    weights = {f"detector.{k}": v for k, v in net.state_dict().items()}
+    module = DetectorGraph(fused_for_inference(net))
+    return make_graph(module, examples, "image", ["heat", "corners"], weights_fingerprint(weights, "detector"))
+
+
+__all__ = ["CentreNetDetector", "TorchDetector", "detector_graph", "stored_net"]

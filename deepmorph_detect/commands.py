@@ -1,5 +1,5 @@
 """The photo chain's commands: ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``,
-``train-detector`` and ``demo``, added to the command line through the
+``train-detector``, ``export`` and ``demo``, added to the command line through the
 ``deepmorph_register_commands`` hook (:mod:`deepmorph_detect.plugin`). Each parses its
 arguments and calls the library."""
 
@@ -431,6 +431,40 @@ def train_detector_cmd(
     )
 
 
+def _size_text(n: int) -> str:
+    return f"{n / 1e6:.1f} MB" if n >= 100_000 else f"{n / 1e3:.1f} kB"
+
+
+def export_cmd(
+    model: ModelArg,
+    out_dir: Annotated[
+        Optional[Path],
+        typer.Option("--out", help="Folder for decoder.onnx, detector.onnx and manifest.json (docs/export.md)."),
+    ] = None,
+    bundle: Annotated[
+        Optional[Path],
+        typer.Option("--bundle", help="Also write the model with its ONNX graphs stored (may be the model itself)."),
+    ] = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Write the model's networks as ONNX graphs with a manifest, for apps that decode without Python."""
+    if out_dir is None and bundle is None:
+        raise typer.BadParameter("give --out (a folder for the files), --bundle, or both", param_hint="'--out'")
+    from deepmorph_detect.export import export_model
+
+    summary = export_model(model, out_dir, bundle)
+    if as_json:
+        print_json(summary.to_json())
+        return
+    for note in summary.notes:
+        out.print(note)
+    if summary.files:
+        listed = ", ".join(f"{name} ({_size_text(f['bytes'])})" for name, f in summary.files.items())
+        out.print(f"wrote {listed} to {out_dir}")
+    if summary.bundle:
+        out.print(f"wrote {summary.bundle} with its ONNX graphs ({', '.join(summary.graphs)})")
+
+
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Folder for the demo's files.")] = Path("deepmorph-demo"),
     seed: Annotated[int, typer.Option("--seed", help="Seed of the payload and the photo simulation.")] = 3,
@@ -522,6 +556,7 @@ def register(cli: typer.Typer) -> None:
         cli,
         (
             ("train-detector", train_detector_cmd, PANEL_MODELS),
+            ("export", export_cmd, PANEL_MODELS),
             ("decode", decode, PANEL_CODES),
             ("synth", synth, PANEL_MEASURE),
             ("bench-scenes", bench_scenes_cmd, PANEL_MEASURE),

@@ -13,6 +13,7 @@ checkpoints are the bundle itself plus optimiser state, written atomically.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,11 +25,12 @@ from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import same_file
+from deepmorph_core.graphs import GraphError
 from deepmorph_core.loop import Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.centrenet import CentreNetDetector
+from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, SceneMaker
 
@@ -208,7 +210,8 @@ class DetectorRun:
         self._batches: Iterator[tuple[Tensor, Tensor, Tensor, Tensor]] | None = None
 
     def checkpoint(self) -> None:
-        """Write the bundle with the detector (and optimiser state until finished)."""
+        """Write the bundle with the detector (and optimiser state until finished; at the end,
+        with the detector's ONNX graph)."""
         self.model.detector_state = {f"detector.{k}": v for k, v in self.net.state_dict().items()}
         self.model.meta.detector = DetectorMeta(
             name=CentreNetDetector.name, config=self.cfg.model_dump(), record=self.record, earlier=self.earlier
@@ -222,6 +225,10 @@ class DetectorRun:
                     extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
         else:
             self.net.eval()
+            try:
+                self.model.graphs["detector"] = detector_graph(self.net)
+            except GraphError as exc:
+                warnings.warn(DeepMorphWarning(f"the detector's ONNX graph was not stored: {exc}"), stacklevel=2)
         self.model.extra_tensors = {}
         self.model.save(self.out, extra=extra)
 

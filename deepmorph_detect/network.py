@@ -14,7 +14,6 @@ quadrilateral is then refined to sub-pixel accuracy on the full-resolution photo
 
 from __future__ import annotations
 
-import copy
 import math
 
 import cv2
@@ -22,7 +21,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
-from torch.nn.utils.fusion import fuse_conv_bn_eval
+
+from deepmorph_core.networks import fused_for_inference
 
 INPUT_SIZE = (256, 192)  # (width, height) the photo is resized to (keeping its aspect by padding)
 STRIDE = 8
@@ -65,21 +65,6 @@ class DetectorNet(nn.Module):
         return self.heat(f), self.corners(f)
 
 
-def fused_for_inference(net: nn.Module) -> nn.Module:
-    """A copy of ``net`` in eval mode with every batch norm folded into the convolution
-    before it: the same outputs (to float rounding) with one pass less over each feature map."""
-    fused = copy.deepcopy(net).eval()
-    for module in fused.modules():
-        if not isinstance(module, nn.Sequential):
-            continue
-        for i in range(len(module) - 1):
-            conv, norm = module[i], module[i + 1]
-            if isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d):
-                module[i] = fuse_conv_bn_eval(conv, norm)
-                module[i + 1] = nn.Identity()
-    return fused
-
-
 def stored_weights(detector_state: dict[str, Tensor]) -> dict[str, Tensor]:
     """A bundle's ``detector.*`` tensors (``DeepMorphModel.detector_state``) as the network's
     own state dict: the prefix the bundle files them under dropped."""
@@ -103,6 +88,20 @@ def standardise(gray: np.ndarray) -> np.ndarray:
     return ((gray - np.float32(mean[0, 0])) / np.float32(spread)).astype(np.float32, copy=False)
 
 
+class DetectorGraph(nn.Module):
+    """What the detector's ONNX graph computes: ``(1, 1, H, W)`` gray in ``[0, 1]`` (the photo
+    area-resized and edge-padded to :data:`INPUT_SIZE`) -> heatmap logits and corner offsets,
+    with the standardisation (:func:`normalise_input`) inside, so that a program running the
+    graph has one step less to get right."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, gray: Tensor) -> tuple[Tensor, Tensor]:
+        return self.net(normalise_input(gray))
+
+
 def focal_loss(logits: Tensor, target: Tensor, alpha: float = 2.0, beta: float = 4.0) -> Tensor:
     """CenterNet's penalty-reduced focal loss over Gaussian-splatted centre heatmaps."""
     p = torch.sigmoid(logits).clamp(1e-4, 1 - 1e-4)
@@ -117,6 +116,7 @@ def focal_loss(logits: Tensor, target: Tensor, alpha: float = 2.0, beta: float =
 __all__ = [
     "INPUT_SIZE",
     "STRIDE",
+    "DetectorGraph",
     "DetectorNet",
     "focal_loss",
     "fused_for_inference",

@@ -26,7 +26,7 @@ def deepmorph_register_detectors(register: Register) -> None:
 
 @hookimpl
 def deepmorph_register_commands(cli: typer.Typer) -> None:
-    """Add ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``, ``train-detector`` and ``demo``."""
+    """Add ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``, ``train-detector``, ``export`` and ``demo``."""
     from deepmorph_detect import commands
 
     commands.register(cli)

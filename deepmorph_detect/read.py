@@ -2,7 +2,7 @@
 
 The aligned drawing is rectified (perspective removed) :data:`RECTIFY_WIDTH_FACTOR` decoder
 widths wide, framed by its ink as training frames its renders, and read by the model's decoder
-(run by ONNX Runtime where it gives PyTorch's outputs). :meth:`Reader.looks` yields readings of
+(run by ONNX Runtime from the graph the bundle stores). :meth:`Reader.looks` yields readings of
 one drawing in the order they are tried; the caller stops at the first payload that passes
 every check (:mod:`deepmorph_detect.check`):
 
@@ -25,11 +25,11 @@ import torch
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.framing import align_to_frame
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.networks import fused_for_inference
 from deepmorph_core.photo import flatten_illumination
 from deepmorph_detect.check import MORPH_WIDTH, MorphTemplates
-from deepmorph_detect.network import fused_for_inference
 from deepmorph_detect.refine import ImagePyramid, Template, refine_at, warp_to_template
-from deepmorph_detect.runtime import decoder_graph, onnx_or_torch
+from deepmorph_detect.runtime import onnx_or_torch
 from deepmorph_detect.synthesis import MorphSynthesis
 
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
@@ -68,11 +68,13 @@ class Reader:
         self.synthesis = synthesis
         self.ink_thickness = ink_thickness
         self.view_width = model.width * RECTIFY_WIDTH_FACTOR
-        # the decoder with its batch norms folded in, run by ONNX Runtime where it gives the same
-        # outputs: together about half the time per reading
-        decoder = fused_for_inference(model.decoder)
-        example = torch.rand(1, 1, *model.image_size, generator=torch.Generator().manual_seed(0))
-        self.decoder = onnx_or_torch(decoder, lambda: decoder_graph(decoder), example)
+        # the decoder's graph run by ONNX Runtime (PyTorch, batch norms folded, where there is
+        # none): about half the time per reading
+        generator = torch.Generator().manual_seed(0)
+        examples = [torch.rand(1, 1, *model.image_size, generator=generator) for _ in range(2)]
+        self.decoder = onnx_or_torch(
+            model, "decoder", fused_for_inference(model.decoder), examples, model.decoder_graph
+        )
 
     def rectify(self, pyramid: ImagePyramid, H: np.ndarray) -> np.ndarray:
         """The drawing's viewBox seen head-on, :attr:`view_width` pixels wide."""

@@ -1,205 +1,98 @@
-"""The detector and the decoder run by ONNX Runtime: the photo chain's two networks, per frame.
+"""The photo chain's two networks, the detector and the decoder, run by ONNX Runtime.
 
-Both networks are small convolution stacks on one image at a time, where PyTorch's eager mode
+Both are small convolution stacks run on one image at a time, where PyTorch's eager mode
 spends much of its time between the layers (dispatch, and oneDNN converting each feature map to
-its blocked layout and back). ONNX Runtime's CPU engine fuses each convolution with its ReLU,
-plans its memory once and keeps one layout throughout: on one core the decoder takes about 0.6x
-torch's time, and the detector somewhat more.
+its blocked layout and back). ONNX Runtime fuses each convolution with its ReLU, plans its
+memory once and keeps one layout: on one core the decoder takes about half of PyTorch's time,
+with or without a spatial transformer.
 
-The graphs are built here, layer by layer, from the trained weights (:func:`detector_graph`,
-:func:`decoder_graph`) with ``onnx.helper``: no exporter is involved, since PyTorch's
-TorchScript-based ONNX exporter is deprecated and the newer one traces for seconds. Only the
-layer types these two networks use are known; a network with anything else (a decoder with a
-spatial transformer, say) raises :class:`Unsupported` and the caller keeps PyTorch.
-:func:`onnx_or_torch` checks the graph's outputs against the PyTorch network's on two inputs
-before it is used, and keeps PyTorch where they differ or ONNX Runtime cannot run the graph.
+The graphs come from the bundle, where training stored them (:mod:`deepmorph_core.graphs`). A
+bundle without one (written before graphs were stored, or by an interrupted run) has it
+exported once per process, kept with the loaded model, and a warning says how to store it.
+:func:`onnx_or_torch` checks every graph against the PyTorch network on a few inputs before
+using it, and keeps PyTorch, with a warning, where no graph can be had or a graph disagrees.
 """
 
 from __future__ import annotations
 
+import time
+import warnings
 from collections.abc import Callable, Sequence
 
-import numpy as np
-import onnx
-import onnxruntime as ort
-import torch
-from onnx import TensorProto, helper, numpy_helper
-from torch import Tensor, nn
+from torch import Tensor
 
-from deepmorph_core.networks import Decoder
-from deepmorph_detect.network import STRIDE, DetectorNet
+from deepmorph_core.errors import DeepMorphWarning
+from deepmorph_core.graphs import TOLERANCE, GraphError, OnnxNetwork, StoredGraph
+from deepmorph_core.model import DeepMorphModel
 
-OPSET = 17
-
-# what ONNX Runtime raises when it cannot load or run a graph (each derives from Exception alone)
-_RUNTIME_ERRORS: tuple[type[Exception], ...] = tuple(
-    getattr(ort.capi.onnxruntime_pybind11_state, name)
-    for name in ("Fail", "InvalidArgument", "InvalidGraph", "InvalidProtobuf", "NotImplemented", "RuntimeException")
-    if hasattr(ort.capi.onnxruntime_pybind11_state, name)
-)
+Network = Callable[[Tensor], "Tensor | tuple[Tensor, ...]"]
 
 
-class Unsupported(ValueError):
-    """The network holds a layer the graph builder does not know."""
+def _warn(text: str) -> None:
+    warnings.warn(DeepMorphWarning(text), stacklevel=3)
 
 
-class _Graph:
-    """Nodes and weights of one graph under construction, with fresh names."""
-
-    def __init__(self) -> None:
-        self.nodes: list[onnx.NodeProto] = []
-        self.weights: list[onnx.TensorProto] = []
-        self._count = 0
-
-    def name(self, stem: str) -> str:
-        self._count += 1
-        return f"{stem}_{self._count}"
-
-    def weight(self, array: np.ndarray, stem: str) -> str:
-        name = self.name(stem)
-        self.weights.append(numpy_helper.from_array(np.ascontiguousarray(array, dtype=np.float32), name))
-        return name
-
-    def node(self, op: str, inputs: Sequence[str], **attributes: object) -> str:
-        out = self.name(op.lower())
-        self.nodes.append(helper.make_node(op, list(inputs), [out], **attributes))
-        return out
-
-    def module(self, module: nn.Module, x: str) -> str:
-        """``module`` (a fused eval-mode layer or a Sequential of them) applied to ``x``."""
-        if isinstance(module, nn.Sequential):
-            for layer in module:
-                x = self.module(layer, x)
-            return x
-        if isinstance(module, nn.Identity):
-            return x
-        if isinstance(module, nn.ReLU):
-            return self.node("Relu", [x])
-        if isinstance(module, nn.Flatten) and module.start_dim == 1 and module.end_dim == -1:
-            return self.node("Flatten", [x], axis=1)
-        if isinstance(module, nn.Conv2d) and module.groups == 1 and module.padding_mode == "zeros":
-            if isinstance(module.padding, str):
-                raise Unsupported(f"convolution with padding {module.padding!r}")
-            inputs = [x, self.weight(module.weight.detach().numpy(), "w")]
-            if module.bias is not None:
-                inputs.append(self.weight(module.bias.detach().numpy(), "b"))
-            ph, pw = module.padding
-            return self.node(
-                "Conv",
-                inputs,
-                kernel_shape=list(module.kernel_size),
-                strides=list(module.stride),
-                pads=[ph, pw, ph, pw],
-                dilations=list(module.dilation),
-            )
-        if isinstance(module, nn.Linear):
-            inputs = [x, self.weight(module.weight.detach().numpy(), "w")]
-            if module.bias is not None:
-                inputs.append(self.weight(module.bias.detach().numpy(), "b"))
-            return self.node("Gemm", inputs, transB=1)
-        raise Unsupported(f"no ONNX graph for {type(module).__name__}")
-
-    def model(self, inputs: list[onnx.ValueInfoProto], outputs: dict[str, list[int]]) -> bytes:
-        """The graph as a serialised ONNX model; ``outputs`` maps output names to shapes."""
-        graph = helper.make_graph(
-            self.nodes,
-            "deepmorph",
-            inputs,
-            [helper.make_tensor_value_info(o, TensorProto.FLOAT, shape) for o, shape in outputs.items()],
-            self.weights,
-        )
-        model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
-        model.ir_version = 8  # what ONNX Runtime releases of the last years all read
-        onnx.checker.check_model(model)
-        return model.SerializeToString()
-
-
-def detector_graph(net: DetectorNet, height: int, width: int) -> bytes:
-    """The detector (batch norms folded: ``fused_for_inference``) as an ONNX model for
-    ``(1, 1, height, width)`` inputs: outputs the heatmap logits and the corner offsets."""
-    with torch.inference_mode():  # the feature maps' sizes for this input size
-        probe8 = net.down8(net.stem(torch.zeros(1, 1, height, width)))
-        probe16 = net.down16(probe8)
-    g = _Graph()
-    f8 = g.module(net.down8, g.module(net.stem, "image"))
-    f16 = g.module(net.down16, f8)
-    # bilinear upsampling to f8's size, as F.interpolate(align_corners=False)
-    size = g.name("size")
-    g.weights.append(numpy_helper.from_array(np.array([1, probe16.shape[1], *probe8.shape[2:]], np.int64), size))
-    up = g.node(
-        "Resize",
-        [f16, "", "", size],
-        mode="linear",
-        coordinate_transformation_mode="pytorch_half_pixel",
-    )
-    f = g.module(net.fuse, g.node("Concat", [up, f8], axis=1))
-    heat, corners = g.module(net.heat, f), g.module(net.corners, f)
-    image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 1, height, width])
-    cells = [height // STRIDE, width // STRIDE]
-    return g.model([image], {heat: [1, 1, *cells], corners: [1, 8, *cells]})
-
-
-def decoder_graph(decoder: Decoder) -> bytes:
-    """The decoder (batch norms folded) as an ONNX model for ``(1, 1, H, W)`` images: logits.
-
-    Raises:
-        Unsupported: the decoder has a spatial transformer (PyTorch runs it).
-    """
-    if decoder.align is not None:
-        raise Unsupported("a decoder with a spatial transformer")
-    g = _Graph()
-    centred = g.node("Sub", ["image", g.weight(np.array(0.5), "half")])  # white +0.5, ink -0.5
-    logits = g.module(decoder.head, g.module(decoder.features, centred))
-    h, w = decoder.image_size
-    image = helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 1, h, w])
-    return g.model([image], {logits: [1, decoder.head[-1].out_features]})
-
-
-class OnnxNetwork:
-    """An ONNX model run on as many CPU threads as ``torch.get_num_threads()`` says when it is
-    made (one in the photo benchmarks), called like the PyTorch network it replaces: a
-    ``(1, 1, H, W)`` float32 tensor in, a tensor (or a tuple of them) out."""
-
-    def __init__(self, graph: bytes, n_outputs: int) -> None:
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = max(1, torch.get_num_threads())
-        options.inter_op_num_threads = 1
-        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        options.log_severity_level = 3  # errors only
-        self._session = ort.InferenceSession(graph, options, providers=["CPUExecutionProvider"])
-        self._n_outputs = n_outputs
-
-    def __call__(self, x: Tensor) -> Tensor | tuple[Tensor, ...]:
-        feed = {"image": np.ascontiguousarray(x.detach().numpy(), dtype=np.float32)}
-        outs = tuple(torch.from_numpy(o) for o in self._session.run(None, feed))
-        return outs if self._n_outputs > 1 else outs[0]
-
-
-def agrees(a: Tensor | tuple[Tensor, ...], b: Tensor | tuple[Tensor, ...], tolerance: float) -> bool:
-    """Whether two networks' outputs (tensors or tuples of them) match within ``tolerance``."""
-    pairs = zip(a, b) if isinstance(a, tuple) else [(a, b)]
-    return all(x.shape == y.shape and float((x - y).abs().max()) <= tolerance for x, y in pairs)
+def _checked(stored: StoredGraph, net: Network, examples: Sequence[Tensor]) -> tuple[OnnxNetwork | None, str]:
+    """``stored`` run by ONNX Runtime when it passes the checks and gives ``net``'s outputs;
+    otherwise ``None`` and why."""
+    try:
+        fast = OnnxNetwork(stored.data, stored.meta.inputs, stored.meta.outputs)
+        diff = fast.difference(net, examples)
+    except GraphError as exc:
+        return None, str(exc)
+    if diff <= TOLERANCE:
+        return fast, ""
+    return None, f"its outputs differ from PyTorch's by {diff:.3g}"
 
 
 def onnx_or_torch(
-    net: nn.Module, build: Callable[[], bytes], example: Tensor, tolerance: float = 1e-3
-) -> Callable[[Tensor], Tensor | tuple[Tensor, ...]]:
-    """``net`` (eval mode, batch norms folded) run by ONNX Runtime from the graph ``build``
-    makes, when it builds, loads and gives ``net``'s outputs on ``example`` and on ``example``
-    upside down (within ``tolerance``); ``net`` itself otherwise. Either is called the same
-    way, on a ``(1, 1, H, W)`` tensor of ``example``'s size."""
-    inputs = (example, example.flip(-2))
-    try:
-        with torch.inference_mode():
-            want = [net(x) for x in inputs]
-        n_outputs = len(want[0]) if isinstance(want[0], tuple) else 1
-        fast = OnnxNetwork(build(), n_outputs)
-        if all(agrees(w, fast(x), tolerance) for w, x in zip(want, inputs)):
+    model: DeepMorphModel | None,
+    name: str,
+    net: Network,
+    examples: Sequence[Tensor],
+    export: Callable[[], StoredGraph],
+) -> Network:
+    """The network ``name`` of ``model`` run by ONNX Runtime, or ``net`` (PyTorch) itself.
+
+    The graph is the one ``model.graphs`` holds, else the one ``export`` makes (then kept in
+    ``model.graphs``, so that other locators of the same model share it and a save stores it).
+    It is used when it passes the checks (:class:`~deepmorph_core.graphs.OnnxNetwork`) and gives
+    ``net``'s outputs on ``examples`` within :data:`~deepmorph_core.graphs.TOLERANCE`;
+    otherwise a warning says why and ``net`` runs. Either is called the same way, on a tensor
+    of the examples' shape.
+
+    Args:
+        model: the loaded model (``None``: the graph is exported and not kept).
+        name: the network's name in the bundle (``decoder``, ``detector``).
+        net: the PyTorch network (eval mode, batch norms folded), or a callable around it.
+        examples: inputs the graph is checked on.
+        export: makes the graph from ``net``'s weights.
+    """
+    label = (model.source if model is not None else None) or "the model"
+    stored = model.graphs.get(name) if model is not None else None
+    if stored is not None:
+        fast, problem = _checked(stored, net, examples)
+        if fast is not None:
             return fast
-    except (Unsupported, onnx.checker.ValidationError, *_RUNTIME_ERRORS):
-        pass
-    return net
+        model.graphs.pop(name, None)  # type: ignore[union-attr]
+        _warn(f"{label}: its stored ONNX graph {name!r} is not used: {problem}")
+    t0 = time.perf_counter()
+    try:
+        stored = export()
+    except GraphError as exc:
+        _warn(f"{label}: PyTorch runs its {name}: no ONNX graph could be made ({exc})")
+        return net
+    fast, problem = _checked(stored, net, examples)
+    if fast is None:
+        _warn(f"{label}: PyTorch runs its {name}: the exported ONNX graph is not usable ({problem})")
+        return net
+    if model is not None:
+        model.graphs[name] = stored
+        _warn(
+            f"{label} holds no ONNX graph of its {name}: exported one in {time.perf_counter() - t0:.1f} s"
+            + (f" (`deepmorph export {label} --bundle {label}` stores it)" if model.source else "")
+        )
+    return fast
 
 
-__all__ = ["OPSET", "OnnxNetwork", "Unsupported", "agrees", "decoder_graph", "detector_graph", "onnx_or_torch"]
+__all__ = ["onnx_or_torch"]

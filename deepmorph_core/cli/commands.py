@@ -483,6 +483,14 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         )
     for line in _validation_lines(data["validation"]) or ["none (run `deepmorph validate MODEL --save`)"]:
         rows.append(("validated", line))
+    graphs = data["graphs"]
+    rows.append(
+        (
+            "ONNX graphs",
+            ", ".join(f"{name} ({g['size'] / 1e6:.1f} MB, opset {g['opset']})" for name, g in graphs.items())
+            or "none (exported when decoding; `deepmorph export` stores them)",
+        )
+    )
     for k, v in rows:
         table.add_row(k, safe(v))
     out.print(table)

@@ -75,11 +75,11 @@ def friendly(fn: F) -> F:
         with warnings.catch_warnings():
             shown = warnings.showwarning
 
-            def show(message: Warning | str, category: type[Warning], *rest: Any, **kw: Any) -> None:
+            def show(message: Warning | str, category: type[Warning], *rest: Any, **more: Any) -> None:
                 if issubclass(category, DeepMorphWarning):
-                    err.print(f"warning: {message}")
+                    err.print(Text.assemble(("warning: ", "yellow"), safe(message)), soft_wrap=True)
                 else:
-                    shown(message, category, *rest, **kw)
+                    shown(message, category, *rest, **more)
 
             warnings.showwarning = show
             try:

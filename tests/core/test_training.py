@@ -115,6 +115,7 @@ def test_bundle_round_trip(trained: Path, tmp_path: Path) -> None:
     copy = tmp_path / "copy.dmm"
     m.save(copy)
     again = DeepMorphModel.load(copy)
+    assert again.graphs["decoder"].data == m.graphs["decoder"].data  # exported when training ended
     payload = random_payloads(1, 4, np.random.default_rng(0))[0]
     assert m.encode(payload) == again.encode(payload)
     info = again.info()
@@ -481,6 +482,8 @@ def test_tune_decoder_keeps_the_encoder_and_records_the_run(trained: Path, tmp_p
         assert torch.equal(value, after.encoder.state_dict()[name]), name
     changed = [n for n, v in before.decoder.state_dict().items() if not torch.equal(v, after.decoder.state_dict()[n])]
     assert changed
+    # the decoder's graph was exported again for the tuned weights
+    assert after.graphs["decoder"].meta.weights_sha256 != before.graphs["decoder"].meta.weights_sha256
     assert after.meta.record == before.meta.record
     (run,) = after.meta.tuning
     assert run["steps"] == 30 and run["finished"] and run["small_prints"] == 0.5
@@ -514,8 +517,10 @@ def test_an_interrupted_tuning_writes_what_it_has(
     out = tmp_path / "part.dmm"
     with pytest.raises(Interrupted, match="step 7/50"):
         tune_decoder(trained, out, steps=50, threads=1)
-    (run,) = DeepMorphModel.load(out).meta.tuning
+    part = DeepMorphModel.load(out)
+    (run,) = part.meta.tuning
     assert run["steps"] == 7 and not run["finished"]
+    assert "decoder" not in part.graphs  # the graph of the decoder before tuning is not kept
 
 
 def test_one_code_word_gives_the_batched_morph_values() -> None:

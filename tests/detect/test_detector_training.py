@@ -119,10 +119,12 @@ def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
         train_detector(BUNDLED_MODEL, cut, _config(4), on_log=stop_at_2)
     half = DeepMorphModel.load(cut)
     assert half.meta.detector is not None and half.meta.detector.record.step == 2
+    assert set(half.graphs) == {"decoder"}  # the decoder's is kept; a detector graph comes at the end
     res = runner.invoke(app, ["train-detector", str(BUNDLED_MODEL), "--out", str(cut), "--resume"])
     assert res.exit_code == 0, res.output
     a, b = DeepMorphModel.load(straight), DeepMorphModel.load(cut)
     assert a.meta.detector.record.finished and b.meta.detector.record.step == 4
+    assert a.graphs["detector"].data == b.graphs["detector"].data
     for key, val in a.detector_state.items():
         assert torch.equal(val, b.detector_state[key]), key
     # the codec networks are carried over untouched

@@ -181,7 +181,9 @@ def test_train_has_a_keyword_for_every_cli_option_with_its_default() -> None:
                 assert cli_default is None and keywords[name].default is None
             else:
                 api_default = keywords[name].default
-                assert api_default == cli_default or str(api_default) == cli_default, name  # --payload-bits: "24" or "auto"
+                assert api_default == cli_default or str(api_default) == cli_default, (
+                    name
+                )  # --payload-bits: "24" or "auto"
 
 
 def test_train_passes_each_keyword_on(tmp_path: Path) -> None:
