@@ -545,6 +545,7 @@ def validate(
     ] = 200,
     seed: SeedOpt = 0,
     save: Annotated[bool, typer.Option("--save", help="Store the result in the bundle (shown by info).")] = False,
+    threads: ThreadsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Read fresh random payloads back from renders and photos: what the model really reads."""
@@ -553,6 +554,7 @@ def validate(
     from deepmorph_core.validation import validate as run_validation
     from deepmorph_core.validation import validation_warning
 
+    use_threads(threads)
     m = DeepMorphModel.load(model)
     records = run_validation(m, default_registry(), samples, photos, seed=seed)
     if save:

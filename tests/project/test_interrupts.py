@@ -30,8 +30,19 @@ def _train(svg: Path, out: Path, steps: int, *extra: str) -> subprocess.Popen[st
     every = ["--checkpoint-every", str(CHECKPOINT_EVERY)]
     args = ["train", str(svg), "--out", str(out), "--steps", str(steps), *every, *TRAIN, *extra]
     return subprocess.Popen(
-        [sys.executable, "-m", "deepmorph", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", "deepmorph", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_as_at_a_terminal,
     )
+
+
+def _as_at_a_terminal() -> None:
+    """Ctrl-C's default action, as in a shell's foreground: a job a script starts in the
+    background (``cmd &``, as CI runners may) inherits SIGINT ignored, and Python then never
+    raises KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for_steps(log: Path, steps: int, proc: subprocess.Popen[str], timeout: float = 120) -> None:
