@@ -69,7 +69,8 @@ class ValidationRecord(BaseModel):
         samples: payloads tried.
         read: payloads read whole (the codec vouched and the payload was the one sent).
         wrong: payloads the codec vouched for that were not the one sent.
-        bit_accuracy: share of code bits the network read right (where it read any).
+        bit_accuracy: share of code bits the network read right, over the captures it read.
+        missed: captures in which the photo chain found no print (close-ups; ``None`` for renders).
         seconds: how long it took.
     """
 
@@ -82,6 +83,7 @@ class ValidationRecord(BaseModel):
     read: int = Field(ge=0)
     wrong: int = Field(ge=0)
     bit_accuracy: float | None = Field(default=None, ge=0.0, le=1.0)
+    missed: int | None = Field(default=None, ge=0)
     seconds: float = Field(ge=0.0)
 
     @property

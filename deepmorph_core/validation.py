@@ -109,10 +109,18 @@ def validation_warning(records: list[ValidationRecord], label: str) -> str | Non
     weak = [r for r in records if r.rate < TARGET_RATE or r.wrong]
     if not weak:
         return None
-    parts = [f"{r.name} {r.read}/{r.samples} read, {r.wrong} wrong" for r in weak]
+    parts = [f"{r.name} {r.read}/{r.samples} read, {r.wrong} wrong" + (f", {r.missed} not found" if r.missed else "")
+             for r in weak]  # fmt: skip
+    missed = sum(r.missed or 0 for r in weak)
+    misread = sum(r.samples - r.read - r.wrong - (r.missed or 0) for r in weak)
+    advice = []
+    if misread >= missed or any(r.wrong for r in weak):
+        advice.append("train with fewer --payload-bits (see `deepmorph capacity`), more --steps, or wider bounds")
+    if missed and missed >= misread:
+        advice.append("most captures not read were not found: a detector (`deepmorph train-detector`) finds them")
     return (
         f"{label}: validation read fewer than {TARGET_RATE:.0%} of fresh payloads ({'; '.join(parts)}); "
-        "train with fewer --payload-bits (see `deepmorph capacity`), more --steps, or wider bounds"
+        + "; ".join(advice)
     )
 
 

@@ -327,7 +327,27 @@ def train_detector(
         f"checkpoint written to {out} (continue with --resume)",
     )
     summary = loop.run(run, on_log)
+    _validate_close_ups_again(Path(out), config.seed)
     return DetectorSummary(Path(out), summary.log, summary.plot, summary.steps, summary.elapsed_s)
+
+
+def _validate_close_ups_again(out: Path, seed: int) -> None:
+    """Replace the bundle's close-up validation by one through the chain as it now is, with its
+    detector (the one stored after training found prints by framing the whole image), and warn
+    when it is weak. A bundle never validated (``--validation 0``) is left so."""
+    from deepmorph_core import validation
+    from deepmorph_detect.photo_validation import validate_close_ups
+
+    photos = validation.default_samples()[1]
+    model = DeepMorphModel.load(out)
+    if photos <= 0 or not model.meta.validation:
+        return
+    record = validate_close_ups(model, photos, seed)
+    model.meta.validation = [r for r in model.meta.validation if r.name != record.name] + [record]
+    model.save(out)
+    warning = validation.validation_warning(model.meta.validation, str(out))
+    if warning:
+        warnings.warn(DeepMorphWarning(warning), stacklevel=3)
 
 
 __all__ = [

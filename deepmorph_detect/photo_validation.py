@@ -35,12 +35,13 @@ def validate_close_ups(
     payloads = random_payloads(samples, codec.spec.payload_bits, rng)
     codes = codec.encode(payloads)
     locator = Locator(model)
-    read = wrong = right_bits = 0
+    read = wrong = right_bits = missed = 0
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
         photo = close_up_photo(render_svg(model.drawing.to_svg(values), PRINT_PX), severity, rng)
         found = locator.locate(photo)
         if not found:
+            missed += 1
             continue
         right_bits += int(((found[0].probabilities > 0.5) == (code == 1)).sum())
         vouched = [f for f in found if f.result.ok]
@@ -55,7 +56,8 @@ def validate_close_ups(
         samples=samples,
         read=read,
         wrong=wrong,
-        bit_accuracy=right_bits / (samples * codec.spec.code_bits),
+        bit_accuracy=right_bits / ((samples - missed) * codec.spec.code_bits) if missed < samples else None,
+        missed=missed,
         seconds=round(time.perf_counter() - start, 2),
     )
 

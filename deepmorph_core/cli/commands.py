@@ -408,6 +408,7 @@ def _validation_lines(records: list[dict[str, Any]]) -> list[str]:
     lines = []
     for r in records:
         acc = "" if r["bit_accuracy"] is None else f", code-bit accuracy {r['bit_accuracy']:.4f}"
+        acc += f", {r['missed']} not found" if r.get("missed") else ""
         lines.append(
             f"{r['name']} ({r['severity']}): {r['read']}/{r['samples']} read ({r['read'] / r['samples']:.1%}), "
             f"{r['wrong']} wrong{acc}; {r['seconds']:.0f} s"

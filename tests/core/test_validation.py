@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph_core import hookimpl
+from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.cli import application
 from deepmorph_core.errors import PluginError
 from deepmorph_core.model import DeepMorphModel
@@ -84,6 +85,17 @@ def test_warning_names_what_fell_short() -> None:
     assert validation_warning([record.model_copy(update={"read": 20, "wrong": 0})], "m.dmm") is None
     text = validation_warning([weak], "m.dmm")
     assert text is not None and "renders 10/20 read, 0 wrong" in text and "deepmorph capacity" in text
+
+
+def test_prints_the_chain_did_not_find_call_for_a_detector_not_fewer_bits() -> None:
+    """A close-up that nothing was found in says nothing about what the drawing carries."""
+    base = {"name": "close-ups", "description": "", "severity": "medium", "samples": 100, "seconds": 1.0}
+    unfound = ValidationRecord(**base, read=90, wrong=0, missed=8, bit_accuracy=0.999)
+    text = validation_warning([unfound], "m.dmm")
+    assert text is not None and "8 not found" in text and "train-detector" in text and "capacity" not in text
+    misread = ValidationRecord(**base, read=90, wrong=0, missed=2, bit_accuracy=0.97)
+    text = validation_warning([misread], "m.dmm")
+    assert text is not None and "deepmorph capacity" in text and "train-detector" not in text
 
 
 class _BadValidation:

@@ -10,6 +10,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.cli import application
 from deepmorph_core.loop import Interrupted
@@ -190,3 +191,20 @@ def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: 
     assert isinstance(detector.detect(image), list)
     res = runner.invoke(app, [*args[:-2], "--channels", "4"])
     assert res.exit_code != 0 and "--channels" in res.output
+
+
+def test_a_new_detector_replaces_the_stored_close_up_validation(tmp_path: Path) -> None:
+    """Close-ups validated after ``train`` found prints without a detector; once one is trained,
+    the chain they measured has changed, so the record is taken again (renders are kept)."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    common = {"severity": "medium", "samples": 2, "read": 0, "wrong": 0, "seconds": 0.0}
+    model.meta.validation = [
+        ValidationRecord(name="renders", description="kept", **common),
+        ValidationRecord(name="close-ups", description="stale", missed=2, **common),
+    ]
+    start = tmp_path / "m.dmm"
+    model.save(start)
+    train_detector(start, start, _config(1))
+    records = {r.name: r for r in DeepMorphModel.load(start).meta.validation}
+    assert records["renders"].description == "kept"
+    assert records["close-ups"].description != "stale" and records["close-ups"].samples == 2
