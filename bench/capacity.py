@@ -272,7 +272,17 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
 
 # -- report ------------------------------------------------------------------------------------
 
-HEADERS = ["drawing", "N_v", "visible", "predicted", "largest at 99 %", "ratio", "hard %", "train min", "sizes tried"]
+HEADERS = ["drawing", "N_v", "visible", "predicted", "largest at 99 %", "ratio", "hard %", "train min",
+           "sizes tried: renders / close-ups % (prints not found)"]  # fmt: skip
+
+
+def _rates(size: dict[str, Any]) -> str:
+    """Renders and medium close-ups read, in %, and the close-ups where no print was found."""
+    r, c = size["renders"], size["close_ups"]
+    missed = c.get("missed")
+    return f"{100 * r['read'] / r['samples']:.1f} / {100 * c['read'] / c['samples']:.1f}" + (
+        f" ({missed})" if missed else ""
+    )
 
 
 def rows(drawings: list[dict[str, Any]]) -> list[list[Any]]:
@@ -280,11 +290,7 @@ def rows(drawings: list[dict[str, Any]]) -> list[list[Any]]:
     for d in drawings:
         best = [s for s in d["sizes"] if s["payload_bits"] == d["largest_passing"]]
         hard = best[0]["hard_close_ups"] if best else None
-        tried = ", ".join(
-            f"{s['payload_bits']}:{100 * s['renders']['read'] / s['renders']['samples']:.0f}/"
-            f"{100 * s['close_ups']['read'] / s['close_ups']['samples']:.0f}"
-            for s in d["sizes"]
-        )
+        tried = ", ".join(f"{s['payload_bits']}: {_rates(s)}" for s in d["sizes"])
         out.append(
             [
                 d["drawing"],
