@@ -13,7 +13,7 @@ The decoder reads code bits from the variables a renderer shows. What limits a d
 What is left are the drawing's *readable groups*. A trained decoder reads about
 :data:`CODE_BITS_PER_GROUP` code bits per readable group reliably enough for whole payloads to
 come back from 99 % of captures (measured on the bundled ghost: 38 code bits from 57 groups read
-99 % of payloads, 52 did not; ``docs/training.md`` has the panel it was checked on). The largest
+99 % of payloads, 52 did not; ``bench/README.md`` has the panel it was checked on). The largest
 payload is then the largest one whose code (CRC and a BCH code correcting one or two bit errors,
 :func:`~deepmorph_core.codec.choose_codec`) fits in that many code bits.
 """
@@ -105,7 +105,8 @@ class CapacityReport:
             )
         twins = self.visible - self.readable_groups
         if twins > 0:
-            lines.append(f"{twins} visible variables repeat another's effect (they count once)")
+            what = "visible variable repeats" if twins == 1 else "visible variables repeat"
+            lines.append(f"{twins} {what} another's effect (counted once)")
         if self.static:
             where = ", ".join(str(line) for line in self.static[:8]) + (" ..." if len(self.static) > 8 else "")
             lines.append(f"{len(self.static)} elements do not morph (dm:fixed or no bounds): lines {where}")
