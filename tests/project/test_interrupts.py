@@ -45,6 +45,12 @@ def _as_at_a_terminal() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _resume(svg: Path, out: Path, steps: int) -> subprocess.CompletedProcess[str]:
+    """``deepmorph train --resume`` of the checkpoint at ``out`` up to ``steps``, to the end."""
+    args = ["train", str(svg), "--out", str(out), "--resume", "--steps", str(steps), "--validation", "8,0"]
+    return subprocess.run([sys.executable, "-m", "deepmorph", *args], capture_output=True, text=True, timeout=120)
+
+
 def _wait_for_steps(log: Path, steps: int, proc: subprocess.Popen[str], timeout: float = 120) -> None:
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
@@ -76,25 +82,7 @@ def test_sigterm_and_ctrl_c_leave_a_checkpoint_that_resumes(svg: Path, tmp_path:
     assert "Traceback" not in err and "interrupted at step" in err and "checkpoint written" in err
     step = DeepMorphModel.load(out).meta.record.step
     assert step >= 14 and not DeepMorphModel.load(out).meta.record.finished
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "deepmorph",
-            "train",
-            str(svg),
-            "--out",
-            str(out),
-            "--resume",
-            "--steps",
-            str(step + 6),
-            "--validation",
-            "8,0",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = _resume(svg, out, step + 6)
     assert done.returncode == 0, done.stderr
     finished = DeepMorphModel.load(out).meta.record
     assert finished.finished and finished.step == step + 6
@@ -115,25 +103,7 @@ def test_kill_9_at_any_moment_loses_at_most_one_checkpoint_interval(svg: Path, t
             record = DeepMorphModel.load(out).meta.record  # never corrupt
             assert logged - record.step <= CHECKPOINT_EVERY + 2, (logged, record.step)
     strays = [p.name for p in tmp_path.iterdir() if p.name.startswith(".dm-")]
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "deepmorph",
-            "train",
-            str(svg),
-            "--out",
-            str(out),
-            "--resume",
-            "--steps",
-            "120",
-            "--validation",
-            "8,0",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = _resume(svg, out, 120)
     assert done.returncode == 0, done.stderr
     assert DeepMorphModel.load(out).meta.record.finished
     log_steps = [json.loads(x)["step"] for x in log.read_text().splitlines()]
