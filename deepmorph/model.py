@@ -135,6 +135,7 @@ def train(
     seed: int = 0,
     encoder_init: Literal["spread", "random"] = "spread",
     spatial_transformer: bool = True,
+    readout: bool = True,
     device: Literal["cpu", "cuda"] = "cpu",
     threads: int | None = None,
     resume: bool = False,
@@ -162,7 +163,7 @@ def train(
         severity: the capture corruption reached at the end of the curriculum.
         real_render_share: share of each batch drawn by resvg.
         small_prints: share of each batch captured as a small print.
-        seed, encoder_init, spatial_transformer, device, threads: the run and its networks.
+        seed, encoder_init, spatial_transformer, readout, device, threads: the run and its networks.
         resume: continue the checkpoint at ``out``.
         checkpoint_every: steps between checkpoints.
         move, shift, scale, rotate: default bounds for elements the SVG gives none
@@ -206,6 +207,7 @@ def train(
             "seed": seed,
             "encoder_init": encoder_init,
             "spatial_transformer": spatial_transformer,
+            "readout": readout,
             "device": device,
             "threads": threads,
             "checkpoint_every": checkpoint_every,

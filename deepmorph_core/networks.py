@@ -137,6 +137,10 @@ class DecoderConfig(BaseModel):
         spatial_transformer: resample each image through a learned homography before reading
             it (:class:`~deepmorph_core.spatial.SpatialTransformer`). Off by default, so a
             bundle without this field loads without one.
+        readout: a linear readout of the image's pixels added to the CNN's logits (a matched
+            filter per bit). Training fits it by least squares where the CNN alone stalls
+            (:func:`~deepmorph_core.train.fit_readout`) and leaves it out where it does not.
+            Off by default, so a bundle without this field loads without one.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -147,6 +151,7 @@ class DecoderConfig(BaseModel):
     )
     hidden: int = Field(default=128, ge=8, le=2048)
     spatial_transformer: bool = False
+    readout: bool = False
 
 
 def decoder_parameters(code_bits: int, image_size: tuple[int, int], config: DecoderConfig) -> int:
@@ -161,6 +166,8 @@ def decoder_parameters(code_bits: int, image_size: tuple[int, int], config: Deco
         total += 9 * c_in * c_out + 3 * c_out
         c_in, h, w = c_out, (h + 1) // 2, (w + 1) // 2
     total += c_in * h * w * config.hidden + config.hidden + config.hidden * code_bits + code_bits
+    if config.readout:
+        total += image_size[0] * image_size[1] * code_bits + code_bits
     if config.spatial_transformer:  # its localisation network, at half resolution
         c_in, h, w = 1, image_size[0] // 2, image_size[1] // 2
         for c_out in SpatialTransformer.CHANNELS:
@@ -203,6 +210,10 @@ class Decoder(nn.Module):
             nn.ReLU(inplace=True),
             nn.Linear(cfg.hidden, code_bits),
         )
+        self.readout = nn.Linear(image_size[0] * image_size[1], code_bits) if cfg.readout else None
+        if self.readout is not None:  # contributes nothing until fitted (fit_readout) or trained
+            nn.init.zeros_(self.readout.weight)
+            nn.init.zeros_(self.readout.bias)
         self.image_size = image_size
 
     def forward(self, images: Tensor) -> Tensor:
@@ -214,7 +225,11 @@ class Decoder(nn.Module):
         if self.align is not None:
             images = self.align(images)
         # centre intensities so that white paper is +0.5 and black ink -0.5
-        return self.head(self.features(images - 0.5))
+        centred = images - 0.5
+        logits = self.head(self.features(centred))
+        if self.readout is not None:
+            logits = logits + self.readout(centred.flatten(1))
+        return logits
 
 
 def fused_for_inference(net: nn.Module) -> nn.Module:

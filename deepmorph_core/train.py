@@ -44,7 +44,7 @@ from deepmorph_core.framing import canonicalize, render_moments
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
-from deepmorph_core.networks import DecoderConfig, spread_weights
+from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.severity import LADDER
@@ -81,6 +81,10 @@ class TrainConfig(BaseModel):
         spatial_transformer: put a learned homography in front of the decoder
             (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
             perspective and turn that framing by ink moments leaves (``docs/training.md``).
+        readout: give the decoder a linear readout of the pixels, fitted by least squares
+            (:func:`fit_readout`) and then trained with the CNN where the CNN alone stalls in
+            stage 1 (below :data:`READOUT_STALL` of bits); left out of the bundle where it
+            does not (``docs/training.md``).
         freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
             :func:`tune_decoder` runs on a trained bundle.
@@ -106,6 +110,7 @@ class TrainConfig(BaseModel):
     curriculum: float = Field(default=0.5, ge=0, le=1)
     encoder_init: Literal["spread", "random"] = "spread"
     spatial_transformer: bool = True
+    readout: bool = True
     freeze_encoder: bool = False
     seed: int = 0
     device: Literal["cpu", "cuda"] = "cpu"
@@ -126,6 +131,71 @@ def variable_effects(model: DeepMorphModel) -> Tensor:
     """:meth:`MorphableDrawing.effects <deepmorph_core.morphable.MorphableDrawing.effects>` of
     the model's drawing with its own soft rasterizer."""
     return model.drawing.effects(model.rasterizer())
+
+
+#: Renders :func:`fit_readout` fits to, the ridge of its least squares, and the logit it aims at.
+READOUT_SAMPLES, READOUT_RIDGE, READOUT_MARGIN = 2048, 10.0, 3.0
+#: Stage 1 ending below this bit accuracy means the CNN has stalled: the readout is fitted then.
+READOUT_STALL = 0.85
+
+
+def readout_fitted(decoder: Decoder) -> bool:
+    """Whether the decoder's linear readout has been fitted (a dormant one is all zeros)."""
+    return decoder.readout is not None and bool(decoder.readout.weight.detach().abs().sum() > 0)
+
+
+def drop_dormant_readout(model: DeepMorphModel) -> None:
+    """Take a readout that was never fitted out of a finished model: it adds nothing, and the
+    bundle stays the CNN's alone."""
+    if model.decoder.readout is not None and not readout_fitted(model.decoder):
+        model.decoder.readout = None
+        model.meta.decoder = model.meta.decoder.model_copy(update={"readout": False})
+
+
+def fit_readout(
+    decoder: Decoder,
+    images: Callable[[Tensor, bool], Tensor],
+    code_bits: int,
+    generator: torch.Generator,
+    device: torch.device,
+    samples: int = READOUT_SAMPLES,
+    batch: int = 256,
+) -> None:
+    """Set the decoder's linear readout to the least-squares map from pixels to code bits.
+
+    Why: the CNN learns a code of up to about two thirds of a bit per readable variable, then
+    stalls far below what the pictures allow (on the ghost's 57 variables, 52 code bits: 81 %
+    of bits on clean renders after 1200 steps, where a linear map of the same renders tells
+    99.9 % apart). Training fits it where stage 1 ends below :data:`READOUT_STALL`, and goes on
+    from there. Fitted from the start where the CNN does learn, it made things worse: a linear
+    map reads misaligned and blurred pictures poorly (``docs/design-notes.md``).
+
+    How: ``samples`` random codes are drawn through ``images`` (the training's own renders at
+    the curriculum's current rung); the ridge solution (dual form: the Gram matrix of the
+    samples) maps centred pixels to ``+-READOUT_MARGIN`` logits.
+    """
+    readout = decoder.readout
+    if readout is None:
+        return
+    xs, ys = [], []
+    with torch.no_grad():
+        for start in range(0, samples, batch):
+            n = min(batch, samples - start)
+            bits = torch.randint(0, 2, (n, code_bits), generator=generator).float().to(device)
+            framed = images(bits, False)
+            if decoder.align is not None:
+                framed = decoder.align(framed)
+            xs.append((framed - 0.5).flatten(1).double().cpu())
+            ys.append((2.0 * bits - 1.0).double().cpu() * READOUT_MARGIN)
+    x, y = torch.cat(xs), torch.cat(ys)
+    mean_x, mean_y = x.mean(0), y.mean(0)
+    xc = x - mean_x
+    gram = xc @ xc.T
+    gram.diagonal().add_(READOUT_RIDGE)
+    weight = xc.T @ torch.linalg.solve(gram, y - mean_y)  # (D, N_b)
+    with torch.no_grad():
+        readout.weight.copy_(weight.T.to(readout.weight))
+        readout.bias.copy_((mean_y - mean_x @ weight).to(readout.bias))
 
 
 class CodecRun:
@@ -173,6 +243,8 @@ class CodecRun:
         self._window: list[float] = []
         self._prev_window: float | None = None
         self._restore(model.extra_tensors)
+        if model.decoder.readout is not None:  # dormant (all zero, untrained) until the CNN stalls
+            model.decoder.readout.requires_grad_(readout_fitted(model.decoder))
 
     # -- state ----------------------------------------------------------------------------
 
@@ -209,6 +281,7 @@ class CodecRun:
         decoder's ONNX graph."""
         self.model.meta.record = self.record
         if self.record.finished:
+            drop_dormant_readout(self.model)
             self.model.store_decoder_graph()
         self.model.save(self.out, extra=None if self.record.finished else self._extra_state())
 
@@ -313,6 +386,11 @@ class CodecRun:
             self._prev_window, self._window = mean, []
         if plateau or step >= limit:
             rec.stage, rec.stage2_start = 2, step
+            stalled = self._prev_window is not None and self._prev_window < READOUT_STALL
+            readout = self.model.decoder.readout
+            if stalled and readout is not None and not readout_fitted(self.model.decoder):
+                fit_readout(self.model.decoder, self.images, self.model.codec.spec.code_bits, self.gen, self.device)
+                readout.requires_grad_(True)
 
 
 @dataclass
@@ -397,6 +475,7 @@ def train_model(
                     **model.meta.train,
                     # the checkpoint's decoder decides (one without a transformer keeps none)
                     "spatial_transformer": model.meta.decoder.spatial_transformer,
+                    "readout": model.meta.decoder.readout,
                     **{k: v for k, v in overrides.items() if k in ("steps", "threads", "checkpoint_every")},
                 }
             )
@@ -419,7 +498,7 @@ def train_model(
                 {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
                 augment.config.model_dump(),
                 config.model_dump(),
-                decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer),
+                decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer, readout=config.readout),
                 label=label,
             )
     except ValidationError as exc:

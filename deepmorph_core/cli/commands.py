@@ -309,6 +309,13 @@ def train(
             help="Learn a homography in front of the decoder that undoes leftover perspective.",
         ),
     ] = True,
+    readout: Annotated[
+        bool,
+        typer.Option(
+            "--readout/--no-readout",
+            help="Add a linear readout of the pixels to the decoder, started from a least-squares fit.",
+        ),
+    ] = True,
     device: Annotated[Literal["cpu", "cuda"], typer.Option("--device", help="Where torch trains.")] = "cpu",
     threads: ThreadsOpt = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
@@ -352,6 +359,7 @@ def train(
                 "seed": seed,
                 "encoder_init": encoder_init,
                 "spatial_transformer": spatial_transformer,
+                "readout": readout,
                 "device": device,
                 "threads": threads,
                 "hard_fraction": hard_fraction,
@@ -447,7 +455,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         (
             "decoder",
             f"{'spatial transformer, then ' if dec['spatial_transformer'] else ''}CNN "
-            f"(stem {dec['stem']}, channels {list(dec['channels'])}, head {dec['hidden']})",
+            f"(stem {dec['stem']}, channels {list(dec['channels'])}, head {dec['hidden']})"
+            f"{' + linear readout' if dec.get('readout') else ''}",
         ),
         ("bounds defaults", json.dumps(data["bounds_defaults"]) or "-"),
         (

@@ -27,23 +27,30 @@ SVG = make_svg(
 IO = ({"image": [1, 1, 8, 8]}, {"out": [1, 2, 8, 8]})
 
 
-def tiny_model(spatial_transformer: bool) -> DeepMorphModel:
+def tiny_model(spatial_transformer: bool, readout: bool = False) -> DeepMorphModel:
     """A small untrained model of each decoder kind; the transformer's last layer is moved off
-    the identity so that its resampling (GridSample) really shifts pixels."""
-    config = DecoderConfig(stem=4, channels=(8, 8), hidden=16, spatial_transformer=spatial_transformer)
+    the identity so that its resampling (GridSample) really shifts pixels, and the readout off
+    zero so that it adds to the logits."""
+    config = DecoderConfig(stem=4, channels=(8, 8), hidden=16, spatial_transformer=spatial_transformer, readout=readout)
     torch.manual_seed(0)
     model = DeepMorphModel.create(
         SVG.decode(), "tiny.svg", {}, CodecSpec(payload_bits=4, crc_bits=8, bch_t=0), 32, {}, {}, {}, config
     )
     if model.decoder.align is not None:
         torch.nn.init.normal_(model.decoder.align.head[-1].weight, std=0.3)
+    if model.decoder.readout is not None:
+        torch.nn.init.normal_(model.decoder.readout.weight, std=0.1)
     return model.eval()
 
 
-@pytest.fixture(scope="module", params=[False, True], ids=["cnn", "spatial-transformer"])
+@pytest.fixture(
+    scope="module",
+    params=[(False, False), (True, False), (True, True)],
+    ids=["cnn", "spatial-transformer", "spatial-transformer+readout"],
+)
 def stored(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A bundle of each decoder kind with its decoder's graph stored."""
-    model = tiny_model(request.param)
+    model = tiny_model(*request.param)
     assert model.store_decoder_graph()
     path = tmp_path_factory.mktemp("graphs") / "tiny.dmm"
     model.save(path)
@@ -66,6 +73,10 @@ def test_each_decoder_kind_exports_and_runs_as_pytorch_does(stored: Path) -> Non
         plain = fused_for_inference(model.decoder)
         plain.align = None
         assert fast.difference(plain, frames) > 1e-3
+    if model.meta.decoder.readout:  # the graph holds the readout: without it the logits differ
+        cnn_only = fused_for_inference(model.decoder)
+        cnn_only.readout = None
+        assert fast.difference(cnn_only, frames) > 1e-3
 
 
 def test_a_graph_of_weights_trained_further_is_not_saved(stored: Path, tmp_path: Path) -> None:

@@ -222,11 +222,57 @@ def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_pat
         assert ("spatial transformer, then CNN" in shown) is expected, shown
 
 
+#: A code without error correction and a run without the validation (the readout tests' runs).
+UNCHECKED = {"crc_bits": 8, "ecc_t": 0, "validation_samples": (0, 0)}
+
+
+def test_a_stalled_cnn_gets_the_least_squares_readout(tiny_svg: Path, tmp_path: Path) -> None:
+    """Where stage 1 ends below READOUT_STALL of bits (forced here: a short plateau window and a
+    plateau that always triggers), the decoder's linear readout is fitted to the code's renders
+    and reads it at once, where the CNN alone is far behind; ``info`` says so."""
+    cfg = {**FAST, "steps": 21, "plateau_window": 10, "plateau_gain": 1.0, "stage1_max_fraction": 1.0}
+    accuracy = {}
+    for readout in (True, False):
+        out = tmp_path / f"r{readout}.dmm"
+        summary = train_model(tiny_svg, out, payload_bits=8, train={**cfg, "readout": readout}, **UNCHECKED)
+        assert summary.stage2_start == 20
+        model = DeepMorphModel.load(out)
+        assert model.meta.decoder.readout is readout and (model.decoder.readout is not None) is readout
+        accuracy[readout] = soft_bit_accuracy(model)
+    assert accuracy[True] > 0.95 and accuracy[True] - accuracy[False] > 0.1, accuracy
+    res = runner.invoke(app, ["info", str(tmp_path / "rTrue.dmm")])
+    assert "linear readout" in " ".join(res.stdout.split())
+
+
+def test_a_cnn_that_learns_trains_as_without_the_readout(
+    tiny_svg: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A dormant readout changes nothing: where stage 1 does not stall, the run equals one
+    without the readout weight for weight, and the bundle holds none (nor does one written
+    before the readout existed, the bundled ghost)."""
+    monkeypatch.setattr("deepmorph_core.train.READOUT_STALL", 0.0)
+    cfg = {**FAST, "steps": 30, "plateau_window": 10, "seed": 4}
+    models = {}
+    for readout in (True, False):
+        out = tmp_path / f"r{readout}.dmm"
+        train_model(tiny_svg, out, payload_bits=4, train={**cfg, "readout": readout}, **UNCHECKED)
+        models[readout] = DeepMorphModel.load(out)
+        assert models[readout].decoder.readout is None and models[readout].meta.decoder.readout is False
+    for (name, a), (_, b) in zip(models[True].decoder.state_dict().items(), models[False].decoder.state_dict().items()):
+        torch.testing.assert_close(a, b, rtol=0, atol=0, msg=name)
+    torch.testing.assert_close(models[True].encoder.linear.weight, models[False].encoder.linear.weight, rtol=0, atol=0)
+    base = ["train", str(tiny_svg), "--steps", "1", "--image-width", "32", "--batch", "2", "--threads", "1"]
+    res = runner.invoke(app, [*base, "--no-readout", "--payload-bits", "4", "--out", str(tmp_path / "cli.dmm")])
+    assert res.exit_code == 0, res.output
+    assert DeepMorphModel.load(tmp_path / "cli.dmm").meta.train["readout"] is False
+    assert DeepMorphModel.load(BUNDLED_MODEL).decoder.readout is None
+
+
 def test_resume_keeps_the_checkpoints_decoder(tiny_svg: Path, tmp_path: Path) -> None:
     """A checkpoint without the transformer (``--no-spatial-transformer``, or one written before
     it existed) resumes without it, whatever the new default is."""
     out = tmp_path / "plain.dmm"
-    cfg = {**FAST, "steps": 20, "checkpoint_every": 5, "spatial_transformer": False}
+    cfg = {**FAST, "steps": 20, "checkpoint_every": 5, "spatial_transformer": False, "readout": False}
 
     def stop_at_10(total: int, done: int):
         def on_log(m):
@@ -239,12 +285,14 @@ def test_resume_keeps_the_checkpoints_decoder(tiny_svg: Path, tmp_path: Path) ->
         train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_10)
     checkpoint = DeepMorphModel.load(out)
     del checkpoint.meta.train["spatial_transformer"]  # as written before the transformer existed
+    del checkpoint.meta.train["readout"]  # and before the readout
     checkpoint.save(out, extra=checkpoint.extra_tensors)
     train_model(tiny_svg, out, payload_bits=4, crc_bits=8, ecc_t=0, resume=True)
     done = DeepMorphModel.load(out)
     assert done.meta.record.finished and done.meta.record.step == 20
     assert done.meta.decoder.spatial_transformer is False and done.decoder.align is None
     assert done.meta.train.get("spatial_transformer", False) is False
+    assert done.meta.decoder.readout is False and done.decoder.readout is None
 
 
 def test_variables_a_renderer_does_not_show_do_not_count() -> None:

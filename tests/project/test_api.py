@@ -191,13 +191,13 @@ def test_train_passes_each_keyword_on(tmp_path: Path) -> None:
     model = deepmorph.train(
         BUNDLED_DRAWING, tmp_path / "m.dmm", payload_bits=4, crc_bits=8, ecc_t=0, steps=3, batch=2, image_width=32,
         severity="none", real_render_share=0.5, small_prints=0.25, seed=5, encoder_init="random",
-        spatial_transformer=False, threads=1, checkpoint_every=2, move=0.7, shift=0.3, scale=(0.95, 1.05),
+        spatial_transformer=False, readout=False, threads=1, checkpoint_every=2, move=0.7, shift=0.3, scale=(0.95, 1.05),
         rotate=(-2, 2), on_log=logs.append,
     )  # fmt: skip
     info = model.info()
     assert (info["payload_bits"], info["codec"]["crc_bits"], info["codec"]["bch_t"]) == (4, 8, 0)
     settings = {"steps": 3, "batch": 2, "width": 32, "severity": "none", "hard_fraction": 0.5, "small_prints": 0.25,
-                "seed": 5, "encoder_init": "random", "spatial_transformer": False, "threads": 1,
+                "seed": 5, "encoder_init": "random", "spatial_transformer": False, "readout": False, "threads": 1,
                 "checkpoint_every": 2}  # fmt: skip
     assert {k: info["train"][k] for k in settings} == settings
     assert info["bounds_defaults"] == {"move": 0.7, "shift": [0.3, 0.3], "scale": [0.95, 1.05], "rotate": [-2, 2]}
