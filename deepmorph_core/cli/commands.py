@@ -313,7 +313,7 @@ def train(
         bool,
         typer.Option(
             "--readout/--no-readout",
-            help="Add a linear readout of the pixels to the decoder, started from a least-squares fit.",
+            help="Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares.",
         ),
     ] = True,
     device: Annotated[Literal["cpu", "cuda"], typer.Option("--device", help="Where torch trains.")] = "cpu",
