@@ -3,7 +3,7 @@
 :class:`Locator` only sequences the stages, each a module with one job:
 
 1. **propose** (:mod:`~deepmorph_detect.propose`): the detector plugin's candidates; when none
-   of them is the drawing, the whole image framed by its ink;
+   of them is the drawing, the whole image framed by its ink, then the same in flat light;
 2. **align** (:mod:`~deepmorph_detect.align`): each candidate aligned to the unmorphed drawing,
    kept when it correlates and its outline can be a print (a photo without the drawing gives an
    empty list, not a guess);
@@ -34,7 +34,7 @@ from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker
 from deepmorph_detect.fastrender import template_renderer
 from deepmorph_detect.pose import Placer
-from deepmorph_detect.propose import InkFrame, whole_frame
+from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
@@ -97,6 +97,7 @@ class Locator:
         self.synthesis = MorphSynthesis(model, self.template, renderer=self.renderer)
         view_width = model.width * RECTIFY_WIDTH_FACTOR
         thickness = ink_thickness(self.template, view_width)
+        self.ink_share = thickness / view_width
         self.aligner = Aligner(self.template, min_correlation, thickness, view_width)
         self.reader = Reader(model, self.template, self.morphs, self.synthesis, thickness)
         self.checker = PayloadChecker(model, self.template, self.morphs, self.synthesis)
@@ -128,6 +129,11 @@ class Locator:
         found = self.aligner.verify(pyramid, candidates, gray)
         if not found:
             found = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
+        if not found:  # a sharp shadow across a print that fills the frame: framed, aligned and read in flat light
+            flat, framed = whole_frame_in_flat_light(gray, self.ink, self.template, self.frame_corners, self.ink_share)
+            if framed:
+                found = self.aligner.verify(ImagePyramid(flat), framed)
+                gray = flat
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment

@@ -38,7 +38,7 @@ from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
 from deepmorph_detect.refine import ImagePyramid, refine
 from deepmorph_detect.scene_folders import write_scenes
-from deepmorph_detect.scenes import Placement, SceneMaker
+from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
 
 app = application()  # core's commands and every installed plugin's
 
@@ -442,6 +442,32 @@ def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
         (det,) = locator.locate(photo, camera=scene.camera)
         assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
         assert np.abs(det.corners - truth.corners).max() < 2.0
+
+
+def test_a_close_up_cut_by_a_sharp_shadow_is_framed_in_flat_light(model: DeepMorphModel) -> None:
+    """Without a detector a close-up is framed by the ink of the whole image. A sharp shadow
+    across a corner of the print (60 % darker, 1.5 px penumbra) is ink to Otsu, and ECC in the
+    photo bends to its edge: the whole frame does not align in any of these photos. In flat
+    light it is framed, aligned and read in every one."""
+    from deepmorph_core.payload import random_payloads
+    from deepmorph_core.render import render_svg
+
+    no_detector = DeepMorphModel.load(BUNDLED_MODEL)
+    no_detector.meta.detector = None
+    locator = Locator(no_detector)
+    assert locator.detector is None
+    for seed, payload in enumerate(random_payloads(3, model.codec.spec.payload_bits, np.random.default_rng(3))):
+        photo = close_up_photo(render_svg(model.encode(payload), 400), "easy", np.random.default_rng(seed))
+        h, w = photo.shape[:2]
+        y, x = np.mgrid[0:h, 0:w]
+        for turn in (0.5, 2.0):
+            side = (x - 0.62 * w) * np.cos(turn) + (y - 0.62 * h) * np.sin(turn)
+            shaded = np.clip(photo * (1 - 0.6 / (1 + np.exp(-side / 1.5)))[..., None], 0, 255).astype(np.uint8)
+            gray = to_gray(shaded)
+            whole = whole_frame(gray, locator.ink, locator.template, locator.frame_corners)
+            assert locator.aligner.verify(ImagePyramid(gray), whole) == []
+            (found,) = locator.locate(shaded)
+            assert found.result.ok and np.array_equal(found.result.payload, payload), (seed, turn)
 
 
 def test_folded_or_mirrored_outlines_are_not_prints() -> None:
