@@ -444,11 +444,13 @@ def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
         assert np.abs(det.corners - truth.corners).max() < 2.0
 
 
-def test_a_close_up_cut_by_a_sharp_shadow_is_framed_in_flat_light(model: DeepMorphModel) -> None:
+@pytest.mark.parametrize("size", [240, 480])
+def test_a_close_up_cut_by_a_sharp_shadow_is_framed_in_flat_light(model: DeepMorphModel, size: int) -> None:
     """Without a detector a close-up is framed by the ink of the whole image. A sharp shadow
     across a corner of the print (60 % darker, 1.5 px penumbra) is ink to Otsu, and ECC in the
     photo bends to its edge: the whole frame does not align in any of these photos. In flat
-    light it is framed, aligned and read in every one."""
+    light it is framed, aligned and read in every one (at 480 px the light is estimated on the
+    photo shrunk to half)."""
     from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
 
@@ -457,7 +459,7 @@ def test_a_close_up_cut_by_a_sharp_shadow_is_framed_in_flat_light(model: DeepMor
     locator = Locator(no_detector)
     assert locator.detector is None
     for seed, payload in enumerate(random_payloads(3, model.codec.spec.payload_bits, np.random.default_rng(3))):
-        photo = close_up_photo(render_svg(model.encode(payload), 400), "easy", np.random.default_rng(seed))
+        photo = close_up_photo(render_svg(model.encode(payload), 400), "easy", np.random.default_rng(seed), size)
         h, w = photo.shape[:2]
         y, x = np.mgrid[0:h, 0:w]
         for turn in (0.5, 2.0):
