@@ -76,34 +76,41 @@ def normalise_contrast(gray: np.ndarray) -> np.ndarray | None:
     return np.clip(out, 0.0, 1.0, out=out)
 
 
-def flatten_illumination(gray: np.ndarray, feature_px: float, work_side: int | None = None) -> np.ndarray:
+def flatten_illumination(gray: np.ndarray, feature_px: float) -> np.ndarray:
     """Divide out shadows and slow changes of light: paper becomes 1 everywhere.
 
-    The paper's brightness under the ink is estimated by a grey closing (a max filter, then a
-    min filter) wider than any ink feature, so that strokes vanish from it, then smoothed. A
-    shadow edge across a print otherwise reads as ink: it drags the ink framing off and the
+    A shadow edge across a print otherwise reads as ink: it drags the ink framing off and the
     payload with it.
 
     Args:
         gray: ``(H, W)`` float image, 1 = white.
         feature_px: the thickest ink feature (stroke or fill) in pixels.
-        work_side: estimate the paper's light on the image shrunk to at most this many pixels
-            a side, then enlarged: the closing's cost grows with its width (a whole 640x480
-            photo 0.3 s at full size, 1920x1080 20 s); a shadow's edge then stays in the
-            result as a band about as wide as the shrink factor. ``None``: full size.
 
     Returns:
         ``(H, W)`` float32 in ``[0, 1]``.
     """
-    h, w = gray.shape
-    scale = 1.0 if work_side is None else min(1.0, work_side / max(h, w))
-    small = gray if scale == 1.0 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    k = int(1.5 * feature_px * scale) | 1
-    k = max(5, min(k, (min(small.shape) // 2) | 1))
-    closed = cv2.morphologyEx(small, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-    paper = cv2.GaussianBlur(closed, (0, 0), k / 4)
-    if scale != 1.0:
-        paper = cv2.resize(paper, (w, h), interpolation=cv2.INTER_LINEAR)
+    return divided_by_paper(gray, paper_light(gray, feature_px))
+
+
+def paper_light(gray: np.ndarray, feature_px: float) -> np.ndarray:
+    """The paper's brightness under the ink: a grey closing (a max filter, then a min filter)
+    wider than any ink feature, so that strokes vanish from it, then smoothed.
+
+    Its cost grows with the closing's width (a whole 640x480 photo 0.3 s at full size): for a
+    whole photo, estimate it on the photo shrunk and enlarge it (``cv2.resize``).
+
+    Args:
+        gray: ``(H, W)`` float image, 1 = white.
+        feature_px: the thickest ink feature (stroke or fill) in pixels.
+    """
+    k = int(1.5 * feature_px) | 1
+    k = max(5, min(k, (min(gray.shape) // 2) | 1))
+    closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    return cv2.GaussianBlur(closed, (0, 0), k / 4)
+
+
+def divided_by_paper(gray: np.ndarray, paper: np.ndarray) -> np.ndarray:
+    """``gray`` in flat light: divided by :func:`paper_light`'s estimate, float32 in ``[0, 1]``."""
     return np.clip(gray / np.maximum(paper, 1e-3), 0.0, 1.0).astype(np.float32)
 
 

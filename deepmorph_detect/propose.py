@@ -15,14 +15,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from deepmorph_core.photo import flatten_illumination, ink_mask, normalise_contrast
+from deepmorph_core.photo import divided_by_paper, ink_mask, normalise_contrast, paper_light
 from deepmorph_core.protocols import Candidate
 from deepmorph_detect.camera import project
 from deepmorph_detect.refine import Template
 
-# the longest side a whole image is framed in flat light at: the closing that estimates the
-# paper's light must be wider than the ink, and its cost grows with that width (640x480 at full
-# size 0.3 s; shrunk to 240, 2.6 ms); the ink's moments need no finer image
+# the longest side a whole image's paper light is estimated and its ink framed at: the closing
+# must be wider than the ink, and its cost grows with that width (640x480 at full size 0.3 s;
+# shrunk to 240, 2.6 ms); the ink's moments need no finer image
 FLAT_LIGHT_SIDE = 240
 
 
@@ -82,9 +82,10 @@ def whole_frame_in_flat_light(
 
     Otsu takes a sharp shadow across a print (or the desk beside it) for ink, and the ink's
     moments then frame the shadow too; ECC in the photo itself bends to the shadow's edge. In
-    flat light both see the drawing alone. The ink is framed on the photo shrunk to at most
-    :data:`FLAT_LIGHT_SIDE` pixels (a photo without the drawing costs only that), the candidate
-    scaled back.
+    flat light both see the drawing alone. The paper's light is estimated and the ink framed on
+    the photo shrunk to at most :data:`FLAT_LIGHT_SIDE` pixels (a photo without the drawing
+    costs only that); the candidate is scaled back, and the light enlarged and divided out of
+    the whole photo only when something was framed.
 
     Args:
         ink_share: the drawing's thickest ink feature as a share of its frame's width; the
@@ -97,9 +98,8 @@ def whole_frame_in_flat_light(
     h, w = gray.shape
     scale = min(1.0, FLAT_LIGHT_SIDE / max(h, w))
     small = gray if scale == 1.0 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    framed = whole_frame(
-        flatten_illumination(small, max(ink_share * max(small.shape), 1.0)), ink, template, frame_corners
-    )
+    paper = paper_light(small, max(ink_share * max(small.shape), 1.0))
+    framed = whole_frame(divided_by_paper(small, paper), ink, template, frame_corners)
     if not framed:
         return gray, []
     to_photo = np.diag([1 / scale, 1 / scale, 1.0])
@@ -113,7 +113,9 @@ def whole_frame_in_flat_light(
         )
         for cand in framed
     ]
-    return flatten_illumination(gray, max(ink_share * max(h, w), 1.0), FLAT_LIGHT_SIDE), candidates
+    if scale != 1.0:
+        paper = cv2.resize(paper, (w, h), interpolation=cv2.INTER_LINEAR)
+    return divided_by_paper(gray, paper), candidates
 
 
 __all__ = ["FLAT_LIGHT_SIDE", "InkFrame", "quad_bbox", "whole_frame", "whole_frame_in_flat_light"]
