@@ -24,6 +24,7 @@ ratio to the visible variables, and the training time; over the panel, the media
     .venv/bin/python bench/capacity.py --feather /work/shared/data/drawings/feather --threads 2
     .venv/bin/python bench/capacity.py --feather ... --reuse      # evaluate kept bundles again
     .venv/bin/python bench/capacity.py --feather ... --only ghost,bold
+    .venv/bin/python bench/capacity.py --feather ... --measured earlier.json   # continue a search
 """
 
 from __future__ import annotations
@@ -210,6 +211,40 @@ def train_size(
     return DeepMorphModel.load(path), path, True
 
 
+def measure_size(
+    name: str,
+    svg: Path,
+    move: float | None,
+    bits: int,
+    code: tuple[int | None, int | None],
+    args: argparse.Namespace,
+    unrelated: list,
+) -> dict[str, Any]:
+    """One size of one drawing: its model (trained or kept) read back as in :func:`evaluate`."""
+    model, path, trained = train_size(name, svg, move, bits, code, args)
+    rec = model.meta.record
+    ev = evaluate(model.eval(), args, unrelated, args.seed + 7919 * bits)
+    r, c, h = ev["renders"], ev["close_ups"], ev["hard_close_ups"]
+    print(
+        f"[{name} @ {bits}] renders {r['read']}/{r['samples']}, close-ups {c['read']}/{c['samples']}, "
+        f"hard {h['read']}/{h['samples']}, wrong {ev['wrong']}, false accepts "
+        f"{ev['unrelated']['false_accepts']}/{ev['unrelated']['n']}: {'pass' if ev['passed'] else 'fail'}",
+        flush=True,
+    )
+    return {
+        "payload_bits": bits,
+        "code_bits": model.codec.spec.code_bits,
+        "bch_t": model.codec.spec.bch_t,
+        "crc_bits": model.codec.spec.crc_bits,
+        "bundle": str(path),
+        "trained_now": trained,
+        "train_s": round(rec.elapsed_s, 1),
+        "threads": rec.threads,
+        "steps": rec.step,
+        **ev,
+    }
+
+
 def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespace, unrelated: list) -> dict[str, Any]:
     from deepmorph_core.capacity import predict
     from deepmorph_core.morphable import MorphableDrawing
@@ -222,33 +257,15 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
     sizes: list[dict[str, Any]] = []
     bits, direction = start, 0
     while 1 <= bits and len(sizes) < args.sizes:
-        model, path, trained = train_size(name, svg, move, bits, code, args)
-        rec = model.meta.record
-        ev = evaluate(model.eval(), args, unrelated, args.seed + 7919 * bits)
-        sizes.append(
-            {
-                "payload_bits": bits,
-                "code_bits": model.codec.spec.code_bits,
-                "bch_t": model.codec.spec.bch_t,
-                "crc_bits": model.codec.spec.crc_bits,
-                "bundle": str(path),
-                "trained_now": trained,
-                "train_s": round(rec.elapsed_s, 1),
-                "threads": rec.threads,
-                "steps": rec.step,
-                **ev,
-            }
-        )
-        r, c, h = ev["renders"], ev["close_ups"], ev["hard_close_ups"]
-        print(
-            f"[{name} @ {bits}] renders {r['read']}/{r['samples']}, close-ups {c['read']}/{c['samples']}, "
-            f"hard {h['read']}/{h['samples']}, wrong {ev['wrong']}, false accepts "
-            f"{ev['unrelated']['false_accepts']}/{ev['unrelated']['n']}: {'pass' if ev['passed'] else 'fail'}",
-            flush=True,
-        )
+        size = args.measured_sizes.get((name, bits))
+        if size is None:
+            size = measure_size(name, svg, move, bits, code, args, unrelated)
+        else:
+            print(f"[{name} @ {bits}] measured before: {'pass' if size['passed'] else 'fail'}", flush=True)
+        sizes.append(size)
         if direction == 0:
-            direction = 1 if ev["passed"] else -1
-        elif (direction == 1) != ev["passed"]:
+            direction = 1 if size["passed"] else -1
+        elif (direction == 1) != size["passed"]:
             break
         bits += direction * STEP_BITS
     passing = [s["payload_bits"] for s in sizes if s["passed"]]
@@ -268,6 +285,18 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
         "off_by": best - report.payload_bits,
         "sizes": sizes,
     }
+
+
+def measured_sizes(paths: list[Path]) -> dict[tuple[str, int], dict[str, Any]]:
+    """``(drawing, payload bits) -> size`` from the JSON of earlier runs (later files win)."""
+    import json
+
+    out: dict[tuple[str, int], dict[str, Any]] = {}
+    for path in paths:
+        for drawing in json.loads(path.read_text())["drawings"]:
+            for size in drawing["sizes"]:
+                out[drawing["drawing"], size["payload_bits"]] = size
+    return out
 
 
 # -- report ------------------------------------------------------------------------------------
@@ -341,7 +370,13 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS / "capacity.json")
+    ap.add_argument(
+        "--measured", type=Path, nargs="*", default=[],
+        help="JSON of earlier runs: sizes measured there are taken as they are (the last file wins) and the "
+        "search goes on from them",
+    )  # fmt: skip
     args = ap.parse_args()
+    args.measured_sizes = measured_sizes(args.measured)
     threads = set_threads(args.threads)
     args.models_dir.mkdir(parents=True, exist_ok=True)
     drawings = panel(args.feather)

@@ -12,8 +12,8 @@ The decoder reads code bits from the variables a renderer shows. What limits a d
 
 What is left are the drawing's *readable groups*. A trained decoder reads about
 :data:`CODE_BITS_PER_GROUP` code bits per readable group reliably enough for whole payloads to
-come back from 99 % of captures (measured on the bundled ghost: 38 code bits from 57 groups read
-99 % of payloads, 52 did not; ``bench/README.md`` has the panel it was checked on). The largest
+come back from 99 % of captures, up to :data:`LARGEST_CODE_MEASURED` code bits: the capacity
+panel (``bench/capacity.py``, ``bench/README.md``) is what both were fitted on. The largest
 payload is then the largest one whose code (CRC and a BCH code correcting one or two bit errors,
 :func:`~deepmorph_core.codec.choose_codec`) fits in that many code bits.
 """
@@ -33,7 +33,10 @@ from deepmorph_core.networks import twin_groups
 from deepmorph_core.payload import MAX_PAYLOAD_BITS
 
 #: Code bits a decoder reads reliably per readable group (see the module docstring).
-CODE_BITS_PER_GROUP = 0.67
+CODE_BITS_PER_GROUP = 0.75
+#: The largest code a model was measured to read from 99 % of captures; the prediction does not
+#: reach beyond it (a drawing with many readable groups is not predicted to carry more).
+LARGEST_CODE_MEASURED = 52
 #: BCH codes the predicted size may use: correcting one or two bit errors.
 ECC_CHOICES = (2, 1)
 #: A variable this visible or less is weak: it reads, but a wider bound would help most.
@@ -97,6 +100,12 @@ class CapacityReport:
     def limits(self) -> list[str]:
         """What limits the capacity, and where loosening bounds would help, in lines."""
         lines = []
+        if _code_bits_of_groups(self.readable_groups) > LARGEST_CODE_MEASURED:
+            lines.append(
+                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read; "
+                f"{self.readable_groups} readable variables may carry more (train above it: the validation says "
+                "what reads)"
+            )
         hidden = self.n_variables - self.visible
         if hidden:
             lines.append(
@@ -132,6 +141,10 @@ class CapacityReport:
 
 def code_bits_for(readable_groups: int) -> int:
     """Code bits a decoder reads reliably from ``readable_groups`` groups."""
+    return min(_code_bits_of_groups(readable_groups), LARGEST_CODE_MEASURED)
+
+
+def _code_bits_of_groups(readable_groups: int) -> int:
     return int(math.floor(CODE_BITS_PER_GROUP * readable_groups + 1e-9))
 
 
@@ -221,6 +234,7 @@ def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | N
 
 __all__ = [
     "CODE_BITS_PER_GROUP",
+    "LARGEST_CODE_MEASURED",
     "CapacityReport",
     "ElementCapacity",
     "code_bits_for",

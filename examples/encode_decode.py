@@ -1,7 +1,10 @@
 """Runnable example of the Python API: train a small model, hide a payload, print it at 30 mm
 as SVG, PNG and PDF, and read it back from the PNG, from the PDF and from a simulated photo.
 
-    .venv/bin/python examples/encode_decode.py            # about a minute on one core
+    .venv/bin/python examples/encode_decode.py [FOLDER]   # about a minute on one core
+
+Its files (drawing, model, codes) go to ``FOLDER``, created if missing, or to a new temporary
+folder whose path it prints.
 
 It trains on a tiny drawing for a few hundred steps (a real model trains for thousands; see
 ``deepmorph train --help``), so expect most but not all payloads to come back.
@@ -9,6 +12,7 @@ It trains on a tiny drawing for a few hundred steps (a real model trains for tho
 
 from __future__ import annotations
 
+import sys
 import tempfile
 from pathlib import Path
 
@@ -25,8 +29,9 @@ DRAWING = """<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" 
 </svg>"""
 
 
-def main() -> None:
-    work = Path(tempfile.mkdtemp(prefix="deepmorph-example-"))
+def main(folder: str | None = None) -> None:
+    work = Path(folder) if folder else Path(tempfile.mkdtemp(prefix="deepmorph-example-"))
+    work.mkdir(parents=True, exist_ok=True)
     svg = work / "drawing.svg"
     svg.write_text(DRAWING)
 
@@ -57,4 +62,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1] if len(sys.argv) > 1 else None)

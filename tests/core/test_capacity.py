@@ -8,7 +8,14 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from deepmorph_core.capacity import CODE_BITS_PER_GROUP, largest_payload, predict, size_warning
+from deepmorph_core.capacity import (
+    CODE_BITS_PER_GROUP,
+    LARGEST_CODE_MEASURED,
+    code_bits_for,
+    largest_payload,
+    predict,
+    size_warning,
+)
 from deepmorph_core.cli import application
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.errors import DeepMorphError
@@ -49,6 +56,21 @@ def test_prediction_counts_readable_variables_and_names_what_limits_them() -> No
     assert bigger is not None and bigger.payload_bits > report.payload_bits  # more bits, more payload
     limits = " ".join(report.limits())
     assert "1 of 28 variables change nothing a renderer shows" in limits and "shape 1 (<polyline>" in limits
+
+
+def test_the_prediction_grows_with_readable_groups_up_to_the_largest_code_measured() -> None:
+    bits = [code_bits_for(groups) for groups in range(0, 200)]
+    assert bits == sorted(bits) and bits[0] == 0
+    assert bits[40] == int(CODE_BITS_PER_GROUP * 40) and max(bits) == LARGEST_CODE_MEASURED
+
+
+def test_a_drawing_with_more_readable_variables_than_measured_is_told_where_the_prediction_stops() -> None:
+    strokes = "".join(f'<polyline points="{2 + x} 2 {3 + x} 12 {2 + x} 22"/>' for x in range(0, 20, 1))
+    crowded = make_svg(f'<g stroke="black" stroke-width="0.5" fill="none" dm:move="0.8">{strokes}</g>')
+    report = predict(MorphableDrawing.load(crowded))
+    assert report.readable_groups * CODE_BITS_PER_GROUP > LARGEST_CODE_MEASURED
+    assert report.code_bits == LARGEST_CODE_MEASURED
+    assert any(f"stops at {LARGEST_CODE_MEASURED} code bits" in line for line in report.limits())
 
 
 def test_every_payload_size_that_fits_is_the_largest() -> None:

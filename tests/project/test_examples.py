@@ -10,10 +10,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_encode_decode_example_runs() -> None:
+def test_encode_decode_example_runs(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's packages, whatever is installed
     result = subprocess.run(
-        [sys.executable, str(ROOT / "examples" / "encode_decode.py")],
+        [sys.executable, str(ROOT / "examples" / "encode_decode.py"), str(tmp_path / "example")],
         capture_output=True,
         text=True,
         timeout=600,
@@ -27,3 +27,5 @@ def test_encode_decode_example_runs() -> None:
     assert len(decoded) == 3
     assert any("0xA5 ok=True" in line for line in decoded)
     assert not any("ok=True" in line and "0xA5" not in line for line in decoded)  # never a wrong payload
+    written = {p.name for p in (tmp_path / "example").iterdir()}
+    assert {"drawing.svg", "model.dmm", "code.svg", "code.png", "code.pdf"} <= written
