@@ -100,11 +100,12 @@ class CapacityReport:
     def limits(self) -> list[str]:
         """What limits the capacity, and where loosening bounds would help, in lines."""
         lines = []
-        if _code_bits_of_groups(self.readable_groups) > LARGEST_CODE_MEASURED:
+        uncapped = _code_bits_of_groups(self.readable_groups)
+        if uncapped > LARGEST_CODE_MEASURED:
             lines.append(
-                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read; "
-                f"{self.readable_groups} readable variables may carry more (train above it: the validation says "
-                "what reads)"
+                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read "
+                f"({self.readable_groups} readable variables would give {uncapped}); above it only a training's "
+                "validation says what reads"
             )
         hidden = self.n_variables - self.visible
         if hidden:
@@ -140,11 +141,13 @@ class CapacityReport:
 
 
 def code_bits_for(readable_groups: int) -> int:
-    """Code bits a decoder reads reliably from ``readable_groups`` groups."""
+    """Code bits a decoder reads reliably from ``readable_groups`` groups: :data:`CODE_BITS_PER_GROUP`
+    each, at most :data:`LARGEST_CODE_MEASURED`."""
     return min(_code_bits_of_groups(readable_groups), LARGEST_CODE_MEASURED)
 
 
 def _code_bits_of_groups(readable_groups: int) -> int:
+    """:data:`CODE_BITS_PER_GROUP` per group, before the cap (rounded down)."""
     return int(math.floor(CODE_BITS_PER_GROUP * readable_groups + 1e-9))
 
 
