@@ -30,6 +30,7 @@ ratio to the visible variables, and the training time; over the panel, the media
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
@@ -289,8 +290,6 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
 
 def measured_sizes(paths: list[Path]) -> dict[tuple[str, int], dict[str, Any]]:
     """``(drawing, payload bits) -> size`` from the JSON of earlier runs (later files win)."""
-    import json
-
     out: dict[tuple[str, int], dict[str, Any]] = {}
     for path in paths:
         for drawing in json.loads(path.read_text())["drawings"]:

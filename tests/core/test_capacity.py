@@ -65,7 +65,7 @@ def test_the_prediction_grows_with_readable_groups_up_to_the_largest_code_measur
 
 
 def test_a_drawing_with_more_readable_variables_than_measured_is_told_where_the_prediction_stops() -> None:
-    strokes = "".join(f'<polyline points="{2 + x} 2 {3 + x} 12 {2 + x} 22"/>' for x in range(0, 20, 1))
+    strokes = "".join(f'<polyline points="{2 + x} 2 {3 + x} 12 {2 + x} 22"/>' for x in range(20))
     crowded = make_svg(f'<g stroke="black" stroke-width="0.5" fill="none" dm:move="0.8">{strokes}</g>')
     report = predict(MorphableDrawing.load(crowded))
     assert report.readable_groups * CODE_BITS_PER_GROUP > LARGEST_CODE_MEASURED
