@@ -4,7 +4,9 @@ The panel (:func:`panel`), fixed before any tuning: 12 Feather icons picked by t
 count at the default move (2 % of the viewBox width): for 12 targets evenly spaced from 20 to 100
 variables, in order, the icon not yet picked whose count is nearest (ties: alphabetical); plus
 the bundled ghost with its own bounds. The Feather set has few icons above 54 variables, so the
-upper targets take the nearest there are.
+upper targets take the nearest there are. The **held-out** icons (``--held-out``), for checking
+the prediction on drawings no constant was fitted on: the same rule run again without the panel's
+icons (the runner-up at every target; no ghost).
 
 For each drawing: ``deepmorph capacity``'s prediction ``P``; a model trained at ``P`` with the
 predicted code and otherwise the default settings (``deepmorph train --payload-bits auto``),
@@ -25,6 +27,7 @@ ratio to the visible variables, and the training time; over the panel, the media
     .venv/bin/python bench/capacity.py --feather ... --reuse      # evaluate kept bundles again
     .venv/bin/python bench/capacity.py --feather ... --only ghost,bold
     .venv/bin/python bench/capacity.py --feather ... --measured earlier.json   # continue a search
+    .venv/bin/python bench/capacity.py --feather ... --held-out --only bell-off --sizes 1
 """
 
 from __future__ import annotations
@@ -52,8 +55,18 @@ PASS_RATE = 0.99
 # -- the panel ---------------------------------------------------------------------------------
 
 
-def panel(feather: Path) -> list[tuple[str, Path, float | None]]:
-    """``(name, svg, move)`` of the panel drawings, by the rule in the module docstring."""
+def panel(feather: Path, held_out: bool = False) -> list[tuple[str, Path, float | None]]:
+    """``(name, svg, move)`` of the panel drawings, by the rule in the module docstring; with
+    ``held_out``, the held-out icons instead (no ghost)."""
+    counts = _variable_counts(feather)
+    picked = _pick_by_targets(counts, set())
+    if held_out:
+        return _pick_by_targets(counts, {name for name, _, _ in picked})
+    return [*picked, ("ghost", GHOST, None)]
+
+
+def _variable_counts(feather: Path) -> dict[str, tuple[int, Path, float]]:
+    """``name -> (variables, svg, move)`` of every Feather icon that loads, at the default move."""
     from deepmorph_core.errors import DeepMorphError
     from deepmorph_core.morphable import MorphableDrawing
 
@@ -65,14 +78,21 @@ def panel(feather: Path) -> list[tuple[str, Path, float | None]]:
             counts[path.stem] = (MorphableDrawing.load(path, move=move).n_variables, path, move)
         except DeepMorphError:
             continue
+    return counts
+
+
+def _pick_by_targets(
+    counts: dict[str, tuple[int, Path, float]], excluded: set[str]
+) -> list[tuple[str, Path, float | None]]:
+    """For each target in order, the icon not yet picked nor ``excluded`` nearest in variables."""
     picked: list[tuple[str, Path, float | None]] = []
     lo, hi = TARGETS
     for i in range(PANEL_SIZE):
         target = lo + i * (hi - lo) / (PANEL_SIZE - 1)
-        taken = {name for name, _, _ in picked}
+        taken = excluded | {name for name, _, _ in picked}
         name = min((n for n in counts if n not in taken), key=lambda n: (abs(counts[n][0] - target), n))
         picked.append((name, counts[name][1], counts[name][2]))
-    return [*picked, ("ghost", GHOST, None)]
+    return picked
 
 
 def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int) -> list[tuple[str, Any]]:
@@ -289,12 +309,22 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
 
 
 def measured_sizes(paths: list[Path]) -> dict[tuple[str, int], dict[str, Any]]:
-    """``(drawing, payload bits) -> size`` from the JSON of earlier runs (later files win)."""
+    """``(drawing, payload bits) -> size`` from the JSON of earlier runs (later files win).
+
+    Raises:
+        SystemExit: a file that cannot be read or is not this benchmark's JSON, naming it.
+    """
     out: dict[tuple[str, int], dict[str, Any]] = {}
     for path in paths:
-        for drawing in json.loads(path.read_text())["drawings"]:
-            for size in drawing["sizes"]:
-                out[drawing["drawing"], size["payload_bits"]] = size
+        try:
+            for drawing in json.loads(path.read_text())["drawings"]:
+                for size in drawing["sizes"]:
+                    if not {"passed", "renders", "close_ups"} <= size.keys():
+                        raise KeyError("passed, renders or close_ups")
+                    out[drawing["drawing"], int(size["payload_bits"])] = size
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            why = f"{type(exc).__name__}: {exc}"
+            raise SystemExit(f"--measured {path}: not a capacity benchmark result ({why})") from None
     return out
 
 
@@ -361,6 +391,7 @@ def main() -> None:
     ap.add_argument("--models-dir", type=Path, default=RESULTS / "capacity_models")
     ap.add_argument("--reuse", action="store_true", help="evaluate finished bundles in --models-dir again")
     ap.add_argument("--only", help="comma-separated drawing names of the panel to run")
+    ap.add_argument("--held-out", action="store_true", help="the held-out icons instead of the panel")
     ap.add_argument("--samples", type=int, default=1000, help="payloads read from renders")
     ap.add_argument("--photos", type=int, default=1000, help="payloads read from medium close-ups")
     ap.add_argument("--hard", type=int, default=200, help="payloads read from hard close-ups")
@@ -378,8 +409,8 @@ def main() -> None:
     args.measured_sizes = measured_sizes(args.measured)
     threads = set_threads(args.threads)
     args.models_dir.mkdir(parents=True, exist_ok=True)
-    drawings = panel(args.feather)
-    print("panel:", ", ".join(name for name, _, _ in drawings), flush=True)
+    drawings = panel(args.feather, args.held_out)
+    print("held-out icons:" if args.held_out else "panel:", ", ".join(name for name, _, _ in drawings), flush=True)
     if args.only:
         keep = set(args.only.split(","))
         drawings = [d for d in drawings if d[0] in keep]

@@ -23,12 +23,11 @@ from deepmorph_core.bundle import BundleMeta, TrainingRecord, check_weights, loa
 from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning, SvgError
-from deepmorph_core.framing import align_to_frame, render_moments
+from deepmorph_core.framing import render_moments
 from deepmorph_core.graphs import GraphError, StoredGraph, make_graph, read_graphs, weights_fingerprint
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
 from deepmorph_core.payload import Payload, PayloadLike
-from deepmorph_core.photo import to_gray
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
@@ -320,18 +319,6 @@ class DeepMorphModel:
         """Per-bit probabilities for decoder-ready images ``(B, 1, H, W)``."""
         with torch.no_grad():
             return torch.sigmoid(self.decoder(images))
-
-    def decode_framed(self, image: np.ndarray, soft: bool = True) -> list[Detection]:
-        """Decode an image in which the drawing fills the frame, framed by its ink alone (no
-        detection, no alignment check; the photo chain's :class:`~deepmorph_detect.locate.Locator`
-        does both)."""
-        gray = to_gray(image)
-        aligned = align_to_frame(gray, self.image_size, self.canonical_moments())
-        if aligned is None:
-            return []
-        frame, bbox = aligned
-        probs = self.probabilities(torch.from_numpy(frame)[None, None])[0].numpy()
-        return [Detection(self.codec.decode(probs, soft=soft), probs, bbox)]
 
     def info(self) -> dict[str, Any]:
         """A JSON-ready description of the bundle."""
