@@ -8,10 +8,10 @@ upper targets take the nearest there are. The **held-out** icons (``--held-out``
 the prediction on drawings no constant was fitted on: the same rule run again without the panel's
 icons (the runner-up at every target; no ghost).
 
-For each drawing: ``deepmorph capacity``'s prediction ``P``; a model trained at ``P`` with the
-predicted code and otherwise the default settings (``deepmorph train --payload-bits auto``),
-then at ``P + 4`` while that passes or at ``P - 4`` while it fails (at most three sizes,
-``--sizes``); each model read back with fresh payloads:
+For each drawing: ``deepmorph capacity``'s prediction ``P``; a model trained at ``P`` (4 bits
+where ``P`` is 0) with the predicted code and otherwise the default settings (``deepmorph train
+--payload-bits auto``), then at ``P + 4`` while that passes or at ``P - 4`` while it fails (at
+most three sizes, ``--sizes``); each model read back with fresh payloads:
 
 * **renders**: 1000 resvg renders under the training corruption at ``medium``
   (:func:`deepmorph_core.validation.validate_renders`);
@@ -273,7 +273,7 @@ def run_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespa
     t0 = time.perf_counter()
     report = predict(MorphableDrawing.load(svg, move=move))
     predict_s = time.perf_counter() - t0
-    start = max(report.payload_bits, STEP_BITS)
+    start = report.payload_bits or STEP_BITS  # as auto; a drawing predicted nothing is tried at 4
     code = (report.codec.crc_bits, report.codec.bch_t) if report.codec else (None, None)  # as train --payload-bits auto
     sizes: list[dict[str, Any]] = []
     bits, direction = start, 0
