@@ -126,7 +126,7 @@ def train(
     payload_bits: int | Literal["auto"] = 24,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
-    steps: int = 3000,
+    steps: int = 4000,
     batch: int = 32,
     image_width: int = 96,
     severity: Severity = "medium",

@@ -33,7 +33,7 @@ from deepmorph_core.networks import twin_groups
 from deepmorph_core.payload import MAX_PAYLOAD_BITS
 
 #: Code bits a decoder reads reliably per readable group (see the module docstring).
-CODE_BITS_PER_GROUP = 0.67
+CODE_BITS_PER_GROUP = 0.70
 #: The largest code a model was measured to read from 99 % of captures; the prediction does not
 #: reach beyond it (a drawing with many readable groups is not predicted to carry more).
 LARGEST_CODE_MEASURED = 52

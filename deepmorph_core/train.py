@@ -74,7 +74,8 @@ class TrainConfig(BaseModel):
         severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
             at the end of the curriculum.
         curriculum: share of ``steps`` over which corruption ramps up through the milder presets
-            (a decoder facing full corruption from a random start stays at chance).
+            (a decoder facing full corruption from a random start stays at chance); by default
+            the first 1500 of 4000 steps, so the last 2500 train at ``severity``.
         encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
             variables at full range (:func:`deepmorph_core.networks.spread_weights`), for far
             fewer bit errors under corruption. ``random``: the paper's dense random matrix.
@@ -96,7 +97,7 @@ class TrainConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    steps: int = Field(default=3000, ge=1, le=10_000_000)
+    steps: int = Field(default=4000, ge=1, le=10_000_000)
     batch: int = Field(default=32, ge=2, le=4096)
     width: int = Field(default=96, ge=32, le=512)
     lr: float = Field(default=2e-3, gt=0, le=1)
@@ -107,7 +108,7 @@ class TrainConfig(BaseModel):
     hard_fraction: float = Field(default=0.25, ge=0, le=1)
     small_prints: float = Field(default=0.0, ge=0, le=1)
     severity: Literal["none", "easy", "medium", "hard"] = "medium"
-    curriculum: float = Field(default=0.5, ge=0, le=1)
+    curriculum: float = Field(default=0.375, ge=0, le=1)
     encoder_init: Literal["spread", "random"] = "spread"
     spatial_transformer: bool = True
     readout: bool = True

@@ -275,7 +275,7 @@ def train(
         Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
     ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 3000,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 4000,
     batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
     width: Annotated[
         int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")

@@ -201,7 +201,7 @@ def test_training_warns_when_the_code_outnumbers_the_visible_variables(tiny_svg:
     res = runner.invoke(app, [*base, "--payload-bits", "24", "--out", str(tmp_path / "big.dmm")])
     text = " ".join(res.stderr.split())
     assert res.exit_code == 0 and "warning:" in text, text
-    assert "26 readable variables are predicted to carry 17" in text and "is 4 bits (--payload-bits auto)" in text
+    assert "26 readable variables are predicted to carry 18" in text and "is 5 bits (--payload-bits auto)" in text
     res = runner.invoke(app, [*base, "--payload-bits", "4", "--out", str(tmp_path / "small.dmm")])
     assert res.exit_code == 0 and "warning" not in res.stderr
 

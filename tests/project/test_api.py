@@ -17,6 +17,7 @@ from PIL import Image
 import deepmorph
 from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
 from deepmorph_core.cli import application
+from deepmorph_core.train import TrainConfig
 from deepmorph_detect.scenes import close_up_photo
 
 PAYLOAD = 0xA1B2C3
@@ -164,6 +165,7 @@ def test_the_pdf_is_the_print_size_and_its_raster_decodes(ghost: deepmorph.Model
 # CLI options whose keyword is spelled otherwise in Python, and options that only shape output
 ALIASES = {"svg": "drawing", "crc": "crc_bits"}
 PRESENTATION = {"json", "help"}
+TRAIN_SETTINGS = {"image_width": "width", "real_render_share": "hard_fraction"}  # keyword -> TrainConfig field
 
 
 def test_train_has_a_keyword_for_every_cli_option_with_its_default() -> None:
@@ -184,6 +186,9 @@ def test_train_has_a_keyword_for_every_cli_option_with_its_default() -> None:
                 assert api_default == cli_default or str(api_default) == cli_default, (
                     name
                 )  # --payload-bits: "24" or "auto"
+            setting = TRAIN_SETTINGS.get(name, name)
+            if setting in TrainConfig.model_fields:  # the training defaults are the library's, not copies
+                assert keywords[name].default == TrainConfig.model_fields[setting].default, name
 
 
 def test_train_passes_each_keyword_on(tmp_path: Path) -> None:
