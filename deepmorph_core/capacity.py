@@ -34,8 +34,9 @@ from deepmorph_core.payload import MAX_PAYLOAD_BITS
 
 #: Code bits a decoder reads reliably per readable group (see the module docstring).
 CODE_BITS_PER_GROUP = 0.70
-#: The largest code a model was measured to read from 99 % of captures; the prediction does not
-#: reach beyond it (a drawing with many readable groups is not predicted to carry more).
+#: The largest code a model of a crowded drawing (many readable groups in a small space, which
+#: the count of groups does not see) was measured to read from 99 % of captures; the prediction
+#: does not reach beyond it (a drawing with many readable groups is not predicted to carry more).
 LARGEST_CODE_MEASURED = 52
 #: BCH codes the predicted size may use: correcting one or two bit errors.
 ECC_CHOICES = (2, 1)
@@ -103,9 +104,9 @@ class CapacityReport:
         uncapped = _code_bits_of_groups(self.readable_groups)
         if uncapped > LARGEST_CODE_MEASURED:
             lines.append(
-                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read "
-                f"({self.readable_groups} readable variables would give {uncapped}); above it only a training's "
-                "validation says what reads"
+                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read on a "
+                f"crowded drawing ({self.readable_groups} readable variables would give {uncapped}); above it only "
+                "a training's validation says what reads"
             )
         hidden = self.n_variables - self.visible
         if hidden:
