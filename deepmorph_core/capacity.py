@@ -37,7 +37,7 @@ CODE_BITS_PER_GROUP = 0.70
 #: The largest code a model of a crowded drawing (many readable groups in a small space, which
 #: the count of groups does not see) was measured to read from 99 % of captures; the prediction
 #: does not reach beyond it (a drawing with many readable groups is not predicted to carry more).
-LARGEST_CODE_MEASURED = 52
+LARGEST_CODE_MEASURED = 58
 #: BCH codes the predicted size may use: correcting one or two bit errors.
 ECC_CHOICES = (2, 1)
 #: A variable this visible or less is weak: it reads, but a wider bound would help most.
