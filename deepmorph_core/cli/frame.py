@@ -37,11 +37,15 @@ def _escape(m: re.Match[str]) -> str:
 
 class _Console(Console):
     """A console that never reads markup in what it prints and escapes control characters in
-    every string it is given (paths and names come from users and from files)."""
+    every string it is given (paths and names come from users and from files). Text written to
+    a pipe or a file is not wrapped: one result stays on one line for the program reading it,
+    however long its path."""
 
     def print(self, *objects: Any, **kwargs: Any) -> None:  # noqa: A003 - rich's name
         kwargs.setdefault("markup", False)
         kwargs.setdefault("highlight", False)
+        if not self.is_terminal and all(isinstance(o, str) for o in objects):
+            kwargs.setdefault("soft_wrap", True)
         super().print(*(safe(o) if isinstance(o, str) else o for o in objects), **kwargs)
 
 

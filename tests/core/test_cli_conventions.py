@@ -172,3 +172,13 @@ def test_the_readmes_usage_block_uses_existing_commands_and_flags() -> None:
         assert command in commands, line
         for flag in (w for w in words[2:] if w.startswith("--")):
             assert any(f.command == command for f in flags.get(flag, [])), (command, flag)
+
+
+def test_a_piped_result_stays_on_one_line_however_long_its_path(tmp_path: Path) -> None:
+    folder = tmp_path / ("a-long-folder-name-" * 5)
+    folder.mkdir()
+    blank = folder / "blank.png"
+    cv2.imwrite(str(blank), np.full((240, 320), 255, np.uint8))
+    res = run("decode", BUNDLED_MODEL, blank)
+    lines = [line for line in res.stdout.splitlines() if str(blank) in line]
+    assert len(lines) == 1 and "no drawing found" in lines[0], res.stdout
