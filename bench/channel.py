@@ -1,0 +1,297 @@
+"""The channel a drawing's morph variables form: how many payload bits a perfect decoder could read.
+
+For each drawing of bench/capacity.py's panel: the encoder's spread start at one code bit per
+group of look-alike variables (:func:`deepmorph_core.networks.spread_weights`), ``--samples``
+resvg renders of random codes at 96 px framed by their ink as decoding frames photos, then the
+photometric steps of the ``medium`` corruption (blur, motion blur, light, contrast, noise, JPEG;
+its residual perspective, scale, turn and shift left out, so alignment counts as perfect). A
+ridge map from the pixels to each group's encoder output, fitted on all but the last 1000
+renders and measured on those, gives the rms error ``sigma`` of reading the group, in units of
+its range (the full morph is 1). From ``sigma``, per readable group: the capacity of a Gaussian
+channel whose input is limited to that range (Blahut-Arimoto) and its dispersion. Over the
+groups: their sum, the same for one bit per group (today's code), and the normal approximation
+of the information bits a code of that many symbols carries with 99 % of its words right
+(Polyanskiy, Poor and Verdu 2010); less the default CRC, the payload a perfect decoder could
+carry at 99 %, and its ratio to the visible variables (issue 26 asks for 0.8).
+
+``--bundles`` reads trained models' drawings with the same codes through the whole ``medium``
+corruption and each model's spatial transformer instead: what their alignment leaves on top of
+the photometric noise.
+
+    .venv/bin/python bench/channel.py --feather /work/shared/data/drawings/feather
+    .venv/bin/python bench/channel.py --feather ... --only airplay,flag --bundles m1.dmm m2.dmm
+
+A linear reading is not the best one, so ``sigma`` is what a linear decoder meets, and the
+payload a ceiling for decoders that read no better; the CNN's bit errors sit at that level.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+
+WIDTH = 96
+TEST_SAMPLES = 1000
+RIDGE = 10.0
+WORD_RATE = 0.99
+GEOMETRIC_STEPS = {"perspective", "scale", "rotation", "translation"}
+SIGMA_GRID = np.linspace(0.02, 0.6, 59)
+
+
+# -- the channel of one variable ---------------------------------------------------------------
+
+
+def amplitude_limited(sigma: float, inputs: int = 41, outputs: int = 801, iters: int = 600) -> tuple[float, float]:
+    """Capacity (bits) and dispersion (bits^2) of ``y = x + N(0, sigma^2)`` with ``x`` in
+    ``[0, 1]``: Blahut-Arimoto over ``inputs`` evenly spaced levels, ``y`` on a fine grid."""
+    x = np.linspace(0.0, 1.0, inputs)
+    y = np.linspace(-5 * sigma, 1 + 5 * sigma, outputs)
+    channel = np.exp(-((y[None] - x[:, None]) ** 2) / (2 * sigma**2))
+    channel /= channel.sum(1, keepdims=True)
+    p = np.full(inputs, 1.0 / inputs)
+    for _ in range(iters):
+        info = np.log2(channel / (p @ channel)[None] + 1e-300)
+        p *= np.exp2((channel * info).sum(1))
+        p /= p.sum()
+    info = np.log2(channel / (p @ channel)[None] + 1e-300)
+    capacity = float((p[:, None] * channel * info).sum())
+    dispersion = float((p[:, None] * channel * (info - capacity) ** 2).sum())
+    return capacity, dispersion
+
+
+def binary_input(sigma: float, outputs: int = 2001) -> float:
+    """Capacity (bits) of the same channel with the input at one end or the other (one bit per group)."""
+    y = np.linspace(-5 * sigma, 1 + 5 * sigma, outputs)
+    channel = np.exp(-((y[None] - np.array([0.0, 1.0])[:, None]) ** 2) / (2 * sigma**2))
+    channel /= channel.sum(1, keepdims=True)
+    return float(0.5 * (channel * np.log2(channel / channel.mean(0)[None] + 1e-300)).sum())
+
+
+class ChannelTable:
+    """Capacity, dispersion and binary capacity against sigma, computed once and interpolated."""
+
+    def __init__(self) -> None:
+        rows = [(*amplitude_limited(s), binary_input(s)) for s in SIGMA_GRID]
+        self.capacity, self.dispersion, self.binary = (np.array(col) for col in zip(*rows))
+
+    def __call__(self, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        s = np.clip(sigma, SIGMA_GRID[0], SIGMA_GRID[-1])
+        return tuple(np.interp(s, SIGMA_GRID, col) for col in (self.capacity, self.dispersion, self.binary))
+
+
+def information_at(capacity: float, dispersion: float, symbols: int, word_rate: float = WORD_RATE) -> float:
+    """Normal approximation of the information bits a code of ``symbols`` uses of channels with
+    summed ``capacity`` and ``dispersion`` carries with ``word_rate`` of its words right."""
+    if symbols == 0:
+        return 0.0
+    q = statistics.NormalDist().inv_cdf(word_rate)
+    return max(0.0, capacity - math.sqrt(dispersion) * q + 0.5 * math.log2(symbols))
+
+
+def payload_within(information_bits: float) -> int:
+    """The largest payload whose bits and default CRC fit in ``information_bits`` (0 if none)."""
+    from deepmorph_core.codec import choose_codec
+
+    for payload in range(int(information_bits), 0, -1):
+        if payload + choose_codec(payload, bch_t=0).crc_bits <= information_bits:
+            return payload
+    return 0
+
+
+# -- reading the groups ------------------------------------------------------------------------
+
+
+def ridge_rms(pixels: np.ndarray, targets: np.ndarray, test: int) -> np.ndarray:
+    """Rms error per target column of a ridge map fitted on all rows but the last ``test``."""
+    fit, held = slice(None, -test), slice(-test, None)
+    mean_x, mean_t = pixels[fit].mean(0), targets[fit].mean(0)
+    x = pixels - mean_x
+    gram = x[fit].T @ x[fit] + RIDGE * np.eye(x.shape[1])
+    weights = np.linalg.solve(gram, x[fit].T @ (targets[fit] - mean_t))
+    return np.sqrt(((x[held] @ weights + mean_t - targets[held]) ** 2).mean(0))
+
+
+def photometric(width: int) -> Any:
+    """The ``medium`` corruption without its geometric steps."""
+    from deepmorph_core.corruption import build_pipeline
+    from deepmorph_core.severity import residual_steps
+
+    steps = [
+        {"name": name, "p": p, "params": params}
+        for name, p, params in residual_steps("medium", width)
+        if name not in GEOMETRIC_STEPS
+    ]
+    return build_pipeline("medium", width, {"steps": steps})
+
+
+def framed_renders(drawing: Any, unit: Any, width: int) -> Any:
+    """resvg renders of the encoder outputs ``unit`` (B, N_v), framed by their ink: (B, 1, H, W)."""
+    import torch
+
+    from deepmorph_core.framing import canonicalize, render_moments
+    from deepmorph_core.render import render_svg
+
+    values = drawing.values_from_unit(unit)
+    height, _ = drawing.drawing.pixel_size(width)
+    real = torch.from_numpy(np.stack([render_svg(drawing.to_svg(v), width) for v in values])[:, None])
+    base = torch.from_numpy(render_svg(drawing.to_svg(drawing.neutral_values()[0]), width))[None, None]
+    return canonicalize(real, render_moments(real), render_moments(base)[0], (height, width))
+
+
+def corrupted(images: Any, steps: Callable[[Any, Any], Any], seed: int, batch: int = 500) -> np.ndarray:
+    """``steps(images, generator)`` over ``images`` in batches, as float64 rows of pixels."""
+    import torch
+
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        out = [steps(images[i : i + batch], generator) for i in range(0, len(images), batch)]
+    return torch.cat(out).flatten(1).numpy().astype(np.float64)
+
+
+def group_sigma(drawing: Any, steps: Callable[[Any, Any], Any], args: argparse.Namespace) -> tuple[np.ndarray, int]:
+    """Rms error of a linear reading of each readable group of ``drawing`` through ``steps``
+    (the spread start at one code bit per group), and the visible variables."""
+    import torch
+
+    from deepmorph_core.capacity import INVISIBLE
+    from deepmorph_core.networks import spread_weights, twin_groups
+
+    effects = drawing.effects(drawing.rasterizer(WIDTH))
+    groups = twin_groups(effects)
+    shown = drawing.visibility(WIDTH) > INVISIBLE
+    firsts = [members[0] for members, _ in groups if shown[members].any()]
+    weights = spread_weights(effects, len(groups), torch.Generator().manual_seed(args.seed))
+    rng = np.random.default_rng(args.seed + 1)
+    bits = torch.from_numpy(rng.integers(0, 2, (args.samples + TEST_SAMPLES, len(groups))).astype(np.float32))
+    unit = torch.sigmoid((2 * bits - 1) @ weights.T)
+    pixels = corrupted(framed_renders(drawing, unit, WIDTH), steps, args.seed + 2)
+    return ridge_rms(pixels, unit[:, firsts].numpy().astype(np.float64), TEST_SAMPLES), int(shown.sum())
+
+
+def measure_drawing(name: str, svg: Path, move: float | None, args: argparse.Namespace, table_: ChannelTable) -> dict:
+    """A panel drawing read with perfect alignment (the photometric steps of ``medium``)."""
+    from deepmorph_core.morphable import MorphableDrawing
+
+    start = time.perf_counter()
+    drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
+    pipeline = photometric(WIDTH)
+    sigma, visible = group_sigma(drawing, lambda x, g: pipeline(x, generator=g), args)
+    return {
+        "name": name,
+        "view": "perfect alignment",
+        "variables": drawing.n_variables,
+        "visible": visible,
+        **channel_summary(sigma, visible, table_),
+        "seconds": round(time.perf_counter() - start, 1),
+    }
+
+
+def measure_bundle(path: Path, args: argparse.Namespace, table_: ChannelTable) -> dict:
+    """A trained model's drawing read through the whole ``medium`` corruption and the model's
+    spatial transformer: what its alignment leaves (the same codes as :func:`measure_drawing`)."""
+    from deepmorph_core.corruption import build_pipeline
+    from deepmorph_core.model import DeepMorphModel
+
+    start = time.perf_counter()
+    model = DeepMorphModel.load(path).eval()
+    if model.width != WIDTH:
+        raise SystemExit(f"{path}: the model reads {model.width} px; this benchmark measures {WIDTH} px")
+    pipeline = build_pipeline("medium", WIDTH)
+    align = model.decoder.align
+
+    def steps(images: Any, generator: Any) -> Any:
+        view = pipeline(images, generator=generator)
+        return view if align is None else align(view)
+
+    sigma, visible = group_sigma(model.drawing, steps, args)
+    return {
+        "name": f"{model.meta.drawing_name} ({path.name})",
+        "view": "medium, the model's spatial transformer",
+        "variables": model.drawing.n_variables,
+        "visible": visible,
+        **channel_summary(sigma, visible, table_),
+        "seconds": round(time.perf_counter() - start, 1),
+    }
+
+
+def channel_summary(sigma: np.ndarray, visible: int, table_: ChannelTable) -> dict:
+    capacity, dispersion, binary = table_(sigma)
+    information = information_at(float(capacity.sum()), float(dispersion.sum()), len(sigma))
+    payload = payload_within(information)
+    return {
+        "readable_groups": len(sigma),
+        "sigma": [round(float(s), 4) for s in sigma],
+        "sigma_median": float(np.median(sigma)),
+        "sigma_worst": float(sigma.max()),
+        "capacity_bits": float(capacity.sum()),
+        "binary_bits": float(binary.sum()),
+        "information_at_99": information,
+        "payload_at_99": payload,
+        "ratio": payload / visible if visible else 0.0,
+    }
+
+
+HEADERS = [
+    "drawing", "view", "visible", "readable groups", "sigma median", "sigma worst", "capacity bits",
+    "one bit per group", "information bits at 99 %", "payload at 99 %", "payload / visible",
+]  # fmt: skip
+
+
+def rows(results: list[dict]) -> list[list[Any]]:
+    return [
+        [
+            r["name"], r["view"], r["visible"], r["readable_groups"],
+            round(r["sigma_median"], 3), round(r["sigma_worst"], 3),
+            round(r["capacity_bits"], 1), round(r["binary_bits"], 1), round(r["information_at_99"], 1),
+            r["payload_at_99"], round(r["ratio"], 2),
+        ]
+        for r in results
+    ]  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--feather", type=Path, required=True, help="the Feather icon folder")
+    ap.add_argument("--only", help="comma-separated drawing names of the panel to run")
+    ap.add_argument("--held-out", action="store_true", help="the held-out icons instead of the panel")
+    ap.add_argument("--bundles", type=Path, nargs="*", default=[], help="trained models measured on their own view")
+    ap.add_argument("--samples", type=int, default=6000, help="renders the ridge map is fitted on")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / "channel.json")
+    args = ap.parse_args()
+    threads = set_threads(args.threads)
+    from capacity import panel
+
+    drawings = panel(args.feather, args.held_out)
+    if args.only:
+        keep = set(args.only.split(","))
+        drawings = [d for d in drawings if d[0] in keep]
+    table_ = ChannelTable()
+    done: list[dict] = []
+    jobs = [("drawing", d) for d in drawings] + [("bundle", b) for b in args.bundles]
+    for kind, job in jobs:
+        done.append(measure_drawing(*job, args, table_) if kind == "drawing" else measure_bundle(job, args, table_))
+        print(table(HEADERS, rows(done[-1:])).splitlines()[-1], flush=True)
+        write_json(args.out, {"environment": {**environment(), "threads": threads}, "drawings": done})
+    print(table(HEADERS, rows(done)))
+    if drawings:
+        ratios = [r["ratio"] for r in done[: len(drawings)]]
+        print(f"payload / visible at 99 % with perfect alignment: median {statistics.median(ratios):.2f}, "
+              f"worst {min(ratios):.2f}, best {max(ratios):.2f}")  # fmt: skip
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
