@@ -12,7 +12,7 @@ channel whose input is limited to that range (Blahut-Arimoto) and its dispersion
 groups: their sum, the same for one bit per group (today's code), and the normal approximation
 of the information bits a code of that many symbols carries with 99 % of its words right
 (Polyanskiy, Poor and Verdu 2010); less the default CRC, the payload a perfect decoder could
-carry at 99 %, and its ratio to the visible variables (issue 26 asks for 0.8).
+carry at 99 %, and its ratio to the visible variables.
 
 ``--bundles`` reads trained models' drawings with the same codes through the whole ``medium``
 corruption and each model's spatial transformer instead: what their alignment leaves on top of
@@ -226,6 +226,8 @@ def measure_bundle(path: Path, args: argparse.Namespace, table_: ChannelTable) -
 
 
 def channel_summary(sigma: np.ndarray, visible: int, table_: ChannelTable) -> dict:
+    """What groups read with rms errors ``sigma`` carry: summed capacity, the same with one bit
+    per group, the information a code carries at :data:`WORD_RATE`, its payload and ratio."""
     capacity, dispersion, binary = table_(sigma)
     information = information_at(float(capacity.sum()), float(dispersion.sum()), len(sigma))
     payload = payload_within(information)
