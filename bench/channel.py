@@ -137,16 +137,11 @@ def photometric(width: int) -> Any:
 
 def framed_renders(drawing: Any, unit: Any, width: int) -> Any:
     """resvg renders of the encoder outputs ``unit`` (B, N_v), framed by their ink: (B, 1, H, W)."""
-    import torch
-
     from deepmorph_core.framing import canonicalize, render_moments
-    from deepmorph_core.render import render_svg
 
-    values = drawing.values_from_unit(unit)
-    height, _ = drawing.drawing.pixel_size(width)
-    real = torch.from_numpy(np.stack([render_svg(drawing.to_svg(v), width) for v in values])[:, None])
-    base = torch.from_numpy(render_svg(drawing.to_svg(drawing.neutral_values()[0]), width))[None, None]
-    return canonicalize(real, render_moments(real), render_moments(base)[0], (height, width))
+    real = drawing.render_real(drawing.values_from_unit(unit), width)
+    base = drawing.render_real(drawing.neutral_values(), width)
+    return canonicalize(real, render_moments(real), render_moments(base)[0], tuple(real.shape[-2:]))
 
 
 def corrupted(images: Any, steps: Callable[[Any, Any], Any], seed: int, batch: int = 500) -> np.ndarray:

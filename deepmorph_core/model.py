@@ -29,7 +29,6 @@ from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
 from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
-from deepmorph_core.render import render_svg
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 #: What a drawing to train on may have: the analysis before training renders every variable's
@@ -299,20 +298,15 @@ class DeepMorphModel:
     def real_renders(self, values: Tensor) -> Tensor:
         """resvg renders ``(k, 1, H, W)`` (paper white) of ``(k, N_v)`` morph values at the
         decoder's width."""
-        h, w = self.image_size
-        out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
-        for i in range(values.shape[0]):
-            out[i, 0] = render_svg(self.drawing.to_svg(values[i].detach().cpu()), w)
-        return torch.from_numpy(out).to(values.device)
+        return self.drawing.render_real(values, self.width).to(values.device)
 
     # -- decoding -------------------------------------------------------------------------
 
     def canonical_moments(self) -> Tensor:
         """Ink moments (cx, cy, sx, sy) of the unmorphed drawing in the decoder's frame."""
         if not hasattr(self, "_moments"):
-            h, w = self.image_size
-            base = render_svg(self.drawing.to_svg(self.drawing.neutral_values()[0]), w)
-            self._moments = render_moments(torch.from_numpy(base)[None, None])[0]
+            base = self.drawing.render_real(self.drawing.neutral_values(), self.width)
+            self._moments = render_moments(base)[0]
         return self._moments
 
     def probabilities(self, images: Tensor) -> Tensor:

@@ -28,7 +28,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
-from deepmorph_core.render import render_svg_ink
+from deepmorph_core.render import render_svg, render_svg_ink
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 # a variable changing the picture by at most this share of the median variable is invisible: it
@@ -127,6 +127,15 @@ class MorphableDrawing:
     def to_svg(self, values: Tensor) -> str:
         """One morph ``(N_v,)`` written back as an SVG document."""
         return self.space.write_svg(values)
+
+    def render_real(self, values: Tensor, width: int) -> Tensor:
+        """resvg renders ``(B, 1, H, W)`` (paper white = 1) of ``(B, N_v)`` values at ``width``
+        pixels, on the CPU."""
+        h, w = self.drawing.pixel_size(width)
+        out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
+        for i in range(values.shape[0]):
+            out[i, 0] = render_svg(self.to_svg(values[i].detach().cpu()), w)
+        return torch.from_numpy(out)
 
     def render_hard(self, values: Tensor | None, width: int = 96) -> np.ndarray:
         """Render one morph (or the base drawing, for ``None``) with the real renderer, as ink."""
