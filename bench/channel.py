@@ -52,19 +52,28 @@ SIGMA_GRID = np.linspace(0.02, 0.6, 59)
 # -- the channel of one variable ---------------------------------------------------------------
 
 
-def amplitude_limited(sigma: float, inputs: int = 41, outputs: int = 801, iters: int = 600) -> tuple[float, float]:
-    """Capacity (bits) and dispersion (bits^2) of ``y = x + N(0, sigma^2)`` with ``x`` in
-    ``[0, 1]``: Blahut-Arimoto over ``inputs`` evenly spaced levels, ``y`` on a fine grid."""
-    x = np.linspace(0.0, 1.0, inputs)
+def gaussian_channel(levels: np.ndarray, sigma: float, outputs: int) -> np.ndarray:
+    """``P(y | x)`` of ``y = x + N(0, sigma^2)`` for inputs ``levels`` in ``[0, 1]``, ``y`` on a
+    grid of ``outputs`` points reaching five ``sigma`` beyond the range: ``(len(levels), outputs)``."""
     y = np.linspace(-5 * sigma, 1 + 5 * sigma, outputs)
-    channel = np.exp(-((y[None] - x[:, None]) ** 2) / (2 * sigma**2))
-    channel /= channel.sum(1, keepdims=True)
+    channel = np.exp(-((y[None] - levels[:, None]) ** 2) / (2 * sigma**2))
+    return channel / channel.sum(1, keepdims=True)
+
+
+def information_density(p: np.ndarray, channel: np.ndarray) -> np.ndarray:
+    """``log2 P(y | x) / P(y)`` (bits) for the input distribution ``p``."""
+    return np.log2(channel / (p @ channel)[None] + 1e-300)
+
+
+def amplitude_limited(sigma: float, inputs: int = 41, outputs: int = 801, iters: int = 600) -> tuple[float, float]:
+    """Capacity (bits) and dispersion (bits^2) of the Gaussian channel with its input held to
+    ``[0, 1]``: Blahut-Arimoto over ``inputs`` evenly spaced levels."""
+    channel = gaussian_channel(np.linspace(0.0, 1.0, inputs), sigma, outputs)
     p = np.full(inputs, 1.0 / inputs)
     for _ in range(iters):
-        info = np.log2(channel / (p @ channel)[None] + 1e-300)
-        p *= np.exp2((channel * info).sum(1))
+        p *= np.exp2((channel * information_density(p, channel)).sum(1))
         p /= p.sum()
-    info = np.log2(channel / (p @ channel)[None] + 1e-300)
+    info = information_density(p, channel)
     capacity = float((p[:, None] * channel * info).sum())
     dispersion = float((p[:, None] * channel * (info - capacity) ** 2).sum())
     return capacity, dispersion
@@ -72,10 +81,9 @@ def amplitude_limited(sigma: float, inputs: int = 41, outputs: int = 801, iters:
 
 def binary_input(sigma: float, outputs: int = 2001) -> float:
     """Capacity (bits) of the same channel with the input at one end or the other (one bit per group)."""
-    y = np.linspace(-5 * sigma, 1 + 5 * sigma, outputs)
-    channel = np.exp(-((y[None] - np.array([0.0, 1.0])[:, None]) ** 2) / (2 * sigma**2))
-    channel /= channel.sum(1, keepdims=True)
-    return float(0.5 * (channel * np.log2(channel / channel.mean(0)[None] + 1e-300)).sum())
+    p = np.array([0.5, 0.5])
+    channel = gaussian_channel(np.array([0.0, 1.0]), sigma, outputs)
+    return float((p[:, None] * channel * information_density(p, channel)).sum())
 
 
 class ChannelTable:
@@ -277,11 +285,16 @@ def main() -> None:
         drawings = [d for d in drawings if d[0] in keep]
     table_ = ChannelTable()
     done: list[dict] = []
-    jobs = [("drawing", d) for d in drawings] + [("bundle", b) for b in args.bundles]
-    for kind, job in jobs:
-        done.append(measure_drawing(*job, args, table_) if kind == "drawing" else measure_bundle(job, args, table_))
-        print(table(HEADERS, rows(done[-1:])).splitlines()[-1], flush=True)
+
+    def record(result: dict) -> None:
+        done.append(result)
+        print(table(HEADERS, rows([result])).splitlines()[-1], flush=True)
         write_json(args.out, {"environment": {**environment(), "threads": threads}, "drawings": done})
+
+    for name, svg, move in drawings:
+        record(measure_drawing(name, svg, move, args, table_))
+    for bundle in args.bundles:
+        record(measure_bundle(bundle, args, table_))
     print(table(HEADERS, rows(done)))
     if drawings:
         ratios = [r["ratio"] for r in done[: len(drawings)]]
