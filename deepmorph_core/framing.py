@@ -106,13 +106,44 @@ def align_to_frame(
     mask, box = found
     moments = mask_moments_one(mask)
     goal = target.detach().cpu().numpy() if isinstance(target, Tensor) else np.asarray(target)
-    src = norm
-    shrink = float(goal[2]) / float(moments[2])
-    factor = int(1 / max(shrink, 1e-6)) // 2
-    if factor > 1:  # area-average large photos first so that thin strokes survive
-        src = cv2.resize(norm, (norm.shape[1] // factor, norm.shape[0] // factor), interpolation=cv2.INTER_AREA)
-        moments = moments * np.array([src.shape[1] / norm.shape[1], src.shape[0] / norm.shape[0]] * 2)
+    src, moments = shrink_to_frame(norm, moments, float(goal[2]))
     return canonicalize_one(np.ascontiguousarray(src, dtype=np.float32), moments, goal, size), box
+
+
+#: how far a source's scale may be from a whole multiple of the frame's and still be averaged by
+#: that multiple (:func:`shrink_to_frame`)
+WHOLE_MULTIPLE_SLACK = 0.1
+
+
+def shrink_to_frame(gray: np.ndarray, moments: np.ndarray, target_spread: float) -> tuple[np.ndarray, np.ndarray]:
+    """Area-average a source larger than the decoder's frame down to about the frame's scale.
+
+    A render at the decoder's width is an area average of the drawing over each pixel; sampling
+    a larger image bilinearly instead skips pixels, and the edges it leaves sit up to a fraction
+    of a pixel off, which is what the morphs are made of. A source about a whole multiple larger
+    (a rectified view is two decoder widths wide) is averaged over blocks of that many pixels,
+    any other by its exact ratio, which reads less well (``docs/design-notes.md``).
+
+    Args:
+        gray: ``(h, w)`` float32 image.
+        moments: ``(4,)`` cx, cy, sx, sy of its ink in its pixels.
+        target_spread: the ink's ``sx`` in the decoder's frame.
+
+    Returns:
+        The image at about the frame's scale (``gray`` itself when it is not larger) and its
+        ink's moments in its pixels.
+    """
+    ratio = float(moments[2]) / target_spread
+    whole = round(ratio)
+    if whole >= 2 and abs(ratio - whole) <= WHOLE_MULTIPLE_SLACK:
+        size = (gray.shape[1] // whole, gray.shape[0] // whole)
+    elif ratio > 1 + WHOLE_MULTIPLE_SLACK:
+        size = (max(1, round(gray.shape[1] / ratio)), max(1, round(gray.shape[0] / ratio)))
+    else:
+        return gray, moments
+    small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+    scale = np.array([small.shape[1] / gray.shape[1], small.shape[0] / gray.shape[0]] * 2)
+    return small, moments * scale
 
 
 def canonicalize_one(

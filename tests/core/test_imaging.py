@@ -82,6 +82,18 @@ def test_photo_framing_matches_render_framing(ghost, width: int, pad: int, tol: 
     assert box[0] >= pad and box[2] <= width + pad
 
 
+@pytest.mark.parametrize("width", [192, 240, 288])
+def test_larger_sources_keep_their_edges_where_the_render_has_them(ghost, width: int) -> None:
+    """A source two to three decoder widths wide is area-averaged, not sampled, into the frame:
+    its edges (where the morphs are read) land within a tenth of the render's intensity of
+    where a render at the frame's width puts them (sampling leaves 0.15-0.18)."""
+    md, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    frame, _ = align_to_frame(render_svg(md.to_svg(md.neutral_values()[0]), width), (96, 96), target)
+    edges = (base > 0.02) & (base < 0.98)
+    assert np.abs(frame - base)[edges].mean() < 0.12
+
+
 def test_blank_and_flat_images_have_no_drawing(ghost) -> None:
     md, base = ghost
     target = render_moments(torch.from_numpy(base)[None, None])[0]
