@@ -15,6 +15,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from deepmorph_core.kernels import area_resize
 from deepmorph_core.photo import ink_mask, normalise_contrast
 
 
@@ -141,7 +142,7 @@ def shrink_to_frame(gray: np.ndarray, moments: np.ndarray, target_spread: float)
         size = (max(1, round(gray.shape[1] / ratio)), max(1, round(gray.shape[0] / ratio)))
     else:
         return gray, moments
-    small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+    small = area_resize(gray, size)
     scale = np.array([small.shape[1] / gray.shape[1], small.shape[0] / gray.shape[0]] * 2)
     return small, moments * scale
 
