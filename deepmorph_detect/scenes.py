@@ -2,10 +2,10 @@
 
 A scene is a photo of one or more printed drawings. Each drawing is a payload morph rendered by
 the real renderer (resvg), printed on paper with a margin, placed in 3-D in front of a pinhole
-camera (tilt up to 60 degrees, any in-plane rotation, 10-70 % of the frame width), composited
-over a real photo or procedural clutter, then lit, shadowed, blurred, noised and
-JPEG-compressed. Because the pose is sampled in 3-D, the truth holds the homography, the
-corners and the camera pose of every drawing exactly.
+camera (tilt up to 60 degrees, any in-plane rotation, 10-70 % of the frame width) that averages
+the print over each of its pixels, composited over a real photo or procedural clutter, then lit,
+shadowed, blurred, noised and JPEG-compressed. Because the pose is sampled in 3-D, the truth
+holds the homography, the corners and the camera pose of every drawing exactly.
 
 Scenes can also hold other drawings (bundled Feather icons, printed the same way), an ArUco
 marker and a QR code at the same printed size: the negatives and baselines of
@@ -423,11 +423,45 @@ def _print_and_place(
     sheet[m : m + ah, m : m + aw] = art
     sheet_rgb = (ink_tone + (1 - ink_tone) * sheet)[..., None] * paper_tone[None, None, :]
     shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
-    M = art_to_image @ shift
+    sheet_rgb, M = _captured_scale(sheet_rgb, art_to_image @ shift)
     warped = cv2.warpPerspective(sheet_rgb, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-    mask = cv2.warpPerspective(np.ones(sheet.shape, np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpPerspective(np.ones(sheet_rgb.shape[:2], np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
     img *= 1 - mask[..., None]
     img += warped * mask[..., None]
+
+
+def _captured_scale(sheet: np.ndarray, sheet_to_image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The sheet area-averaged to about the size it has in the photo, and its map to the photo.
+
+    A camera pixel integrates the light that falls on it; a bilinear warp from a much finer
+    sheet only samples it, and the edges it leaves jump with the sampling phase by up to a
+    fraction of a pixel, which is what morphs are made of. Averaged first to its mean scale in
+    the photo (the square root of the area ratio; one scale for the whole sheet, so a steeply
+    tilted print's far side is still sampled at up to about twice), the sheet is warped at about
+    one sheet pixel per photo pixel.
+
+    Args:
+        sheet: ``(h, w, C)`` float image.
+        sheet_to_image: ``(3, 3)`` homography from sheet pixels to photo pixels.
+
+    Returns:
+        The sheet, averaged when it is larger in pixels than its image in the photo, and the
+        homography from its pixels to the photo's.
+    """
+    h, w = sheet.shape[:2]
+    corners = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], dtype=np.float64) @ sheet_to_image.T
+    quad = corners[:, :2] / corners[:, 2:3]
+    x, y = quad[:, 0], quad[:, 1]
+    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    scale = math.sqrt(area / (w * h))
+    if scale >= 1.0:
+        return sheet, sheet_to_image
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    small = cv2.resize(sheet, size, interpolation=cv2.INTER_AREA)
+    fx, fy = w / size[0], h / size[1]
+    # a pixel centre of the small sheet sits at (x + 0.5) * f - 0.5 in sheet pixels
+    small_to_sheet = np.array([[fx, 0, 0.5 * fx - 0.5], [0, fy, 0.5 * fy - 0.5], [0, 0, 1]], dtype=np.float64)
+    return small, sheet_to_image @ small_to_sheet
 
 
 def _photograph(img: np.ndarray, sv: PhotoRanges, rng: np.random.Generator) -> np.ndarray:

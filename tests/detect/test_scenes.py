@@ -42,3 +42,20 @@ def test_close_ups_are_seeded_and_every_photo_severity_makes_one(ghost_render) -
     assert all(10 < d < 245 for d in darkest)
     with pytest.raises(DeepMorphError, match="'none' has no photo settings"):
         close_up_photo(render, "none", np.random.default_rng(0))
+
+
+def test_a_print_finer_than_the_photo_is_averaged_by_the_camera_not_sampled() -> None:
+    """Stripes of a 3-pixel period on the sheet fall 1.1 photo pixels apart at a scale of 0.37,
+    finer than the photo resolves: a camera integrates them to an even grey (0.035 of spread
+    measured), where sampling the sheet at points leaves stripes of full contrast (0.26)."""
+    from deepmorph_detect.scenes import _print_and_place
+
+    art = np.ones((400, 400), np.float32)
+    art[:, ::3] = 0.0
+    scale = 0.37
+    art_to_image = np.array([[scale, 0, 120 - 200 * scale], [0, scale, 120 - 200 * scale], [0, 0, 1.0]])
+    img = np.zeros((240, 240, 3), np.float32)
+    _print_and_place(img, art, art_to_image, 0.1, 400, np.random.default_rng(0))
+    patch = img[100:140, 100:140, 1]
+    assert patch.std() < 0.08
+    assert 0.55 < patch.mean() < 0.7  # the stripes' mean (2/3) in the paper and ink tones
