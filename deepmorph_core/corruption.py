@@ -171,11 +171,7 @@ class AugmentPipeline(nn.Module):
 
     @staticmethod
     def _warp(steps: list[Any], images: Tensor, generator: torch.Generator | None) -> Tensor:
-        chosen, matrix = steps[0].draw_matrices(images, generator)
-        for step in steps[1:]:
-            c, m = step.draw_matrices(images, generator)
-            chosen, matrix = chosen | c, m @ matrix
-        return warp_chosen(images, chosen, matrix)
+        return warp_chosen(images, *fused_matrices(steps, images, generator))
 
     def extra_repr(self) -> str:
         return "\n".join(repr(step) for step in self.steps)
@@ -209,6 +205,20 @@ def apply_to(images: Tensor, chosen: Tensor, fn: Callable[[Tensor, Tensor | slic
     if idx.numel() == images.shape[0]:
         return fn(images, slice(None))
     return images.index_copy(0, idx, fn(images[idx], idx))
+
+
+def fused_matrices(steps: list[Any], images: Tensor, generator: torch.Generator | None) -> tuple[Tensor, Tensor]:
+    """One warp for consecutive geometric ``steps``: the samples any of them chose, and the
+    product of their matrices (the first step's applied first).
+
+    Shape:
+        images: ``(B, C, H, W)``; returns ``(B,)`` bool and ``(B, 3, 3)`` pixel-space matrices.
+    """
+    chosen, matrix = steps[0].draw_matrices(images, generator)
+    for step in steps[1:]:
+        c, m = step.draw_matrices(images, generator)
+        chosen, matrix = chosen | c, m @ matrix
+    return chosen, matrix
 
 
 def warp_white(images: Tensor, matrix: Tensor) -> Tensor:

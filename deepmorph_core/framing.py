@@ -78,6 +78,15 @@ def canonicalize(images: Tensor, moments: Tensor, target: Tensor, size: tuple[in
     return out.clamp(0.0, 1.0)
 
 
+def frame_renders(images: Tensor, target: Tensor, size: tuple[int, int]) -> Tensor:
+    """Clean renders framed by their own ink, as training and validation frame theirs.
+
+    Shape:
+        images ``(B, 1, h, w)``, target ``(4,)`` -> ``(B, 1, H, W)`` with ``(H, W) = size``.
+    """
+    return canonicalize(images, render_moments(images), target, size)
+
+
 def render_moments(images: Tensor) -> Tensor:
     """Ink moments of clean renders ``(B, 1, H, W)`` (ink = darker than 0.5): ``(B, 4)``."""
     with torch.no_grad():

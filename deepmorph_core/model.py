@@ -23,7 +23,6 @@ from deepmorph_core.bundle import BundleMeta, TrainingRecord, check_weights, loa
 from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning, SvgError
-from deepmorph_core.framing import render_moments
 from deepmorph_core.graphs import GraphError, StoredGraph, make_graph, read_graphs, weights_fingerprint
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
@@ -305,8 +304,7 @@ class DeepMorphModel:
     def canonical_moments(self) -> Tensor:
         """Ink moments (cx, cy, sx, sy) of the unmorphed drawing in the decoder's frame."""
         if not hasattr(self, "_moments"):
-            base = self.drawing.render_real(self.drawing.neutral_values(), self.width)
-            self._moments = render_moments(base)[0]
+            self._moments = self.drawing.neutral_moments(self.width)
         return self._moments
 
     def probabilities(self, images: Tensor) -> Tensor:

@@ -25,6 +25,7 @@ from torch import Tensor
 from deepmorph_core.bounds import BoundSpec, format_validation_error
 from deepmorph_core.drawing import Drawing, load_drawing
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.framing import render_moments
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
@@ -115,6 +116,11 @@ class MorphableDrawing:
     def neutral_values(self, batch: int = 1) -> Tensor:
         """Values of the unmorphed drawing ``(batch, N_v)``."""
         return self.space.values_from_unit(self.space.neutral_unit(batch))
+
+    def neutral_moments(self, width: int) -> Tensor:
+        """Ink moments ``(4,)`` (cx, cy, sx, sy) of the unmorphed drawing's resvg render at
+        ``width`` pixels: where framing puts every morph's ink."""
+        return render_moments(self.render_real(self.neutral_values(), width))[0]
 
     def rasterizer(self, width: int, **settings: Any) -> SoftRasterizer:
         """A soft rasterizer module for this drawing (see :class:`RasterSettings`)."""

@@ -40,7 +40,7 @@ from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
-from deepmorph_core.framing import canonicalize, render_moments
+from deepmorph_core.framing import frame_renders
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
@@ -299,7 +299,7 @@ class CodecRun:
             images = 1.0 - self.raster(soft) if len(soft) else values.new_empty((0, 1, *self.model.image_size))
         if k:
             images = torch.cat([self.model.real_renders(values[:k]), images], 0)
-        images = canonicalize(images, render_moments(images), self.target, self.model.image_size)
+        images = frame_renders(images, self.target, self.model.image_size)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
             return self.augment_now()(images, generator=self.gen)

@@ -24,7 +24,7 @@ import torch
 
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.corruption import build_pipeline
-from deepmorph_core.framing import canonicalize, render_moments
+from deepmorph_core.framing import frame_renders
 from deepmorph_core.payload import random_payloads
 
 if TYPE_CHECKING:
@@ -69,7 +69,7 @@ def validate_renders(
         values = model.morph_values(torch.from_numpy(chunk.astype(np.float32)))
         real = model.real_renders(values)
         with torch.no_grad():
-            framed = augment(canonicalize(real, render_moments(real), target, size), generator=generator)
+            framed = augment(frame_renders(real, target, size), generator=generator)
         probs = model.probabilities(framed).numpy().astype(np.float64)
         right_bits += int(((probs > 0.5) == (chunk == 1)).sum())
         for result, payload in zip(codec.decode_batch(probs), payloads[lo : lo + batch]):
