@@ -49,6 +49,8 @@ RIDGE = 10.0
 WORD_RATE = 0.99
 GEOMETRIC_STEPS = {"perspective", "scale", "rotation", "translation"}
 SIGMA_GRID = np.linspace(0.02, 0.6, 59)
+#: the views of a panel drawing (``--undone-warp`` adds the second)
+PERFECT, UNDONE = "perfect alignment", "medium's warp undone exactly"
 
 
 # -- the channel of one variable ---------------------------------------------------------------
@@ -132,15 +134,15 @@ def ridge_rms(pixels: np.ndarray, targets: np.ndarray, test: int) -> np.ndarray:
     return np.sqrt(((x[held] @ weights + mean_t - targets[held]) ** 2).mean(0))
 
 
-def photometric(width: int) -> Any:
-    """The ``medium`` corruption without its geometric steps."""
+def medium_part(width: int, geometric: bool) -> Any:
+    """The ``medium`` corruption with only its geometric steps (``geometric``) or without them."""
     from deepmorph_core.corruption import build_pipeline
     from deepmorph_core.severity import residual_steps
 
     steps = [
         {"name": name, "p": p, "params": params}
         for name, p, params in residual_steps("medium", width)
-        if name not in GEOMETRIC_STEPS
+        if (name in GEOMETRIC_STEPS) == geometric
     ]
     return build_pipeline("medium", width, {"steps": steps})
 
@@ -196,10 +198,10 @@ def undone_warp(width: int) -> Callable[[Any, Any], Any]:
     perfect alignment that pays for resampling the picture twice, as a photo's view is."""
     import torch
 
-    from deepmorph_core.corruption import build_pipeline, fused_matrices, warp_white
+    from deepmorph_core.corruption import fused_matrices, warp_white
 
-    geometry = [step for step in build_pipeline("medium", width).steps if hasattr(step, "draw_matrices")]
-    light = photometric(width)
+    geometry = medium_part(width, geometric=True).steps
+    light = medium_part(width, geometric=False)
 
     def steps(images: Any, generator: Any) -> Any:
         _, matrix = fused_matrices(geometry, images, generator)
@@ -217,10 +219,10 @@ def measure_drawing(
     from deepmorph_core.morphable import MorphableDrawing
 
     drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
-    pipeline = photometric(WIDTH)
-    views = {"perfect alignment": lambda x, g: pipeline(x, generator=g)}
+    pipeline = medium_part(WIDTH, geometric=False)
+    views = {PERFECT: lambda x, g: pipeline(x, generator=g)}
     if args.undone_warp:
-        views["medium's warp undone exactly"] = undone_warp(WIDTH)
+        views[UNDONE] = undone_warp(WIDTH)
     start = time.perf_counter()
     sigmas, visible = group_sigma(drawing, views, args)
     seconds = round(time.perf_counter() - start, 1)
@@ -338,7 +340,7 @@ def main() -> None:
     for bundle in args.bundles:
         record(measure_bundle(bundle, args, table_))
     print(table(HEADERS, rows(done)))
-    for view in ("perfect alignment", "medium's warp undone exactly"):
+    for view in (PERFECT, UNDONE):
         ratios = [r["ratio"] for r in done if r["view"] == view]
         if ratios:
             print(f"payload / visible at 99 %, {view}: median {statistics.median(ratios):.2f}, "

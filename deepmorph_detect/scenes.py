@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.kernels import area_resize
 from deepmorph_core.render import render_svg
 from deepmorph_core.severity import PhotoRanges, photo_ranges
 from deepmorph_detect.backgrounds import random_background
@@ -421,11 +422,12 @@ def _print_and_place(
     ink_tone = rng.uniform(0.0, 0.15)
     sheet = np.ones((ah + 2 * m, aw + 2 * m), np.float32)
     sheet[m : m + ah, m : m + aw] = art
-    sheet_rgb = (ink_tone + (1 - ink_tone) * sheet)[..., None] * paper_tone[None, None, :]
     shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
-    sheet_rgb, M = _captured_scale(sheet_rgb, art_to_image @ shift)
+    # the tones are affine in the sheet's value, so averaging before tinting is the same
+    sheet, M = _captured_scale(sheet, art_to_image @ shift)
+    sheet_rgb = (ink_tone + (1 - ink_tone) * sheet)[..., None] * paper_tone[None, None, :]
     warped = cv2.warpPerspective(sheet_rgb, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-    mask = cv2.warpPerspective(np.ones(sheet_rgb.shape[:2], np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpPerspective(np.ones(sheet.shape, np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
     img *= 1 - mask[..., None]
     img += warped * mask[..., None]
 
@@ -441,23 +443,20 @@ def _captured_scale(sheet: np.ndarray, sheet_to_image: np.ndarray) -> tuple[np.n
     one sheet pixel per photo pixel.
 
     Args:
-        sheet: ``(h, w, C)`` float image.
+        sheet: ``(h, w)`` float32 image.
         sheet_to_image: ``(3, 3)`` homography from sheet pixels to photo pixels.
 
     Returns:
         The sheet, averaged when it is larger in pixels than its image in the photo, and the
         homography from its pixels to the photo's.
     """
-    h, w = sheet.shape[:2]
-    corners = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], dtype=np.float64) @ sheet_to_image.T
-    quad = corners[:, :2] / corners[:, 2:3]
-    x, y = quad[:, 0], quad[:, 1]
-    area = 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-    scale = math.sqrt(area / (w * h))
+    h, w = sheet.shape
+    quad = project(sheet_to_image, np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64))
+    scale = math.sqrt(cv2.contourArea(quad.astype(np.float32)) / (w * h))
     if scale >= 1.0:
         return sheet, sheet_to_image
     size = (max(1, round(w * scale)), max(1, round(h * scale)))
-    small = cv2.resize(sheet, size, interpolation=cv2.INTER_AREA)
+    small = area_resize(sheet, size)
     fx, fy = w / size[0], h / size[1]
     # a pixel centre of the small sheet sits at (x + 0.5) * f - 0.5 in sheet pixels
     small_to_sheet = np.array([[fx, 0, 0.5 * fx - 0.5], [0, fy, 0.5 * fy - 0.5], [0, 0, 1]], dtype=np.float64)
