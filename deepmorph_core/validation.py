@@ -56,27 +56,17 @@ def validate_renders(
     if samples < 1:
         raise ValueError(f"samples must be at least 1, got {samples}")
     start = time.perf_counter()
-    model.eval()
     codec = model.codec
     payloads = random_payloads(samples, codec.spec.payload_bits, np.random.default_rng(seed))
     codes = codec.encode(payloads)
-    augment = build_pipeline(severity, model.width)
-    generator = torch.Generator().manual_seed(seed + 1)
-    target, size = model.canonical_moments(), model.image_size
-    read = wrong = right_bits = 0
-    for lo in range(0, samples, batch):
-        chunk = codes[lo : lo + batch]
-        values = model.morph_values(torch.from_numpy(chunk.astype(np.float32)))
-        real = model.real_renders(values)
-        with torch.no_grad():
-            framed = augment(frame_renders(real, target, size), generator=generator)
-        probs = model.probabilities(framed).numpy().astype(np.float64)
-        right_bits += int(((probs > 0.5) == (chunk == 1)).sum())
-        for result, payload in zip(codec.decode_batch(probs), payloads[lo : lo + batch]):
-            if result.ok:
-                same = bool(np.array_equal(result.payload, payload))
-                read += same
-                wrong += not same
+    probs = read_renders(model, codes, severity, seed, batch)
+    right_bits = int(((probs > 0.5) == (codes == 1)).sum())
+    read = wrong = 0
+    for result, payload in zip(codec.decode_batch(probs), payloads):
+        if result.ok:
+            same = bool(np.array_equal(result.payload, payload))
+            read += same
+            wrong += not same
     return ValidationRecord(
         name="renders",
         description=f"resvg renders at {model.width} px under the training corruption",
@@ -87,6 +77,26 @@ def validate_renders(
         bit_accuracy=right_bits / (samples * codec.spec.code_bits),
         seconds=round(time.perf_counter() - start, 2),
     )
+
+
+def read_renders(
+    model: DeepMorphModel, codes: np.ndarray, severity: str = SEVERITY, seed: int = 0, batch: int = 100
+) -> np.ndarray:
+    """The decoder's ``P(bit = 1)``, ``(B, N_b)`` float64, on resvg renders of ``codes``
+    (``(B, N_b)`` code words) framed by their ink and put through the ``severity`` corruption,
+    whose random draws come from ``seed + 1``, ``batch`` renders per decoder call."""
+    model.eval()
+    augment = build_pipeline(severity, model.width)
+    generator = torch.Generator().manual_seed(seed + 1)
+    target, size = model.canonical_moments(), model.image_size
+    probs = []
+    for lo in range(0, len(codes), batch):
+        values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)))
+        real = model.real_renders(values)
+        with torch.no_grad():
+            framed = augment(frame_renders(real, target, size), generator=generator)
+        probs.append(model.probabilities(framed).numpy().astype(np.float64))
+    return np.concatenate(probs)
 
 
 def validate(
