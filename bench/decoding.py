@@ -137,7 +137,8 @@ def measure(path: Path, samples: int, garbage: int, seed: int) -> dict[str, Any]
     bound = (1 + candidates) * 2.0**-spec.crc_bits
     t0 = time.perf_counter()
     payloads = random_payloads(samples, spec.payload_bits, np.random.default_rng(seed))
-    probs = read_renders(model, codec.encode(payloads), "medium", seed)
+    codes = codec.encode(payloads)
+    probs = read_renders(model, codes, "medium", seed)
     seconds_read = time.perf_counter() - t0
 
     def by_codec(p: np.ndarray) -> np.ndarray | None:
@@ -159,7 +160,7 @@ def measure(path: Path, samples: int, garbage: int, seed: int) -> dict[str, Any]
         "bound": bound,
         "samples": samples,
         "garbage": garbage,
-        "bit_accuracy": float(((probs > 0.5) == (codec.encode(payloads) == 1)).mean()),
+        "bit_accuracy": float(((probs > 0.5) == (codes == 1)).mean()),
         "seconds_reading": round(seconds_read, 1),
     }
     for name, decode in (("codec", by_codec), ("ml", ml.decode)):
