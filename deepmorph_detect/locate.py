@@ -3,7 +3,8 @@
 :class:`Locator` only sequences the stages, each a module with one job:
 
 1. **propose** (:mod:`~deepmorph_detect.propose`): the detector plugin's candidates; when none
-   of them is the drawing, the whole image framed by its ink, then the same in flat light;
+   of them is the drawing or is read, the whole image framed by its ink, then the same in flat
+   light;
 2. **align** (:mod:`~deepmorph_detect.align`): each candidate aligned to the unmorphed drawing,
    kept when it correlates and its outline can be a print (a photo without the drawing gives an
    empty list, not a guess);
@@ -29,7 +30,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Detector
-from deepmorph_detect.align import MIN_CORRELATION, Aligner, ink_thickness
+from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
 from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker
 from deepmorph_detect.fastrender import template_renderer
@@ -127,13 +128,29 @@ class Locator:
         gray, cam, pyramid = self.frame(image, camera)
         candidates = self.detector.detect(gray) if self.detector is not None else []
         found = self.aligner.verify(pyramid, candidates, gray)
-        if not found:
-            found = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
-        if not found:  # a sharp shadow across a print that fills the frame: framed, aligned and read in flat light
+        results = self.decode_each(gray, found, cam, soft)
+        if any(located.result.ok for located in results):
+            return results
+        # Nothing read: the whole image framed by its ink, a scan or a print filling the frame.
+        # Also where the detector's outline aligned but did not read: on a close-up of a drawing
+        # whose every point may move, the alignment from that outline can absorb part of the
+        # morph into the homography, and the morph check then cannot confirm a right payload.
+        whole = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
+        if not whole:  # a sharp shadow across a print that fills the frame: in flat light
             flat, framed = whole_frame_in_flat_light(gray, self.ink, self.template, self.frame_corners, self.ink_share)
             if framed:
-                found = self.aligner.verify(ImagePyramid(flat), framed)
+                whole = self.aligner.verify(ImagePyramid(flat), framed)
                 gray = flat
+        whole_results = self.decode_each(gray, whole, cam, soft)
+        if not found:
+            return whole_results
+        read = [located for located in whole_results if located.result.ok]
+        # a drawing the whole image read replaces the detector's unread reading of it
+        return read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
+
+    def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
+        """Each aligned drawing decoded (:meth:`decode_drawing`); one whose payload is not read
+        only when it aligns at least :data:`UNREAD_MARGIN` above ``min_correlation``."""
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment

@@ -1,9 +1,9 @@
 """Proposing where a drawing may be in a photo: the detector's candidates, or the whole image.
 
 The detector plugin (:class:`~deepmorph_core.protocols.Detector`) proposes a quadrilateral per
-drawing. When it proposes none that aligns (or the model has no detector), the whole image is
-tried as one candidate framed by its ink: a scan or a cropped photo in which the drawing fills
-the frame; when that does not align either, the whole image again in flat light
+drawing. When it proposes none that aligns and is read (or the model has no detector), the
+whole image is tried as one candidate framed by its ink: a scan or a cropped photo in which the
+drawing fills the frame; when that does not align either, the whole image again in flat light
 (:func:`whole_frame_in_flat_light`: a sharp shadow across the print is not ink). Alignment
 (:mod:`deepmorph_detect.align`) decides which candidates are the drawing.
 """
