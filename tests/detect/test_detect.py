@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import deepmorph_detect.locate as locate_module
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.cli import application
 from deepmorph_core.codec import PayloadCodec
@@ -36,7 +37,8 @@ from deepmorph_detect.camera import (
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
-from deepmorph_detect.refine import ImagePyramid, refine
+from deepmorph_detect.refine import Alignment, ImagePyramid, refine
+from deepmorph_detect.results import Located
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
 
@@ -409,8 +411,6 @@ def test_a_shadow_across_the_print_is_read_at_the_second_look(
     for photo, payload in zip(photos, payloads):
         (det,) = locator.locate(photo)
         assert det.result.ok and np.array_equal(det.result.payload, payload)
-    import deepmorph_detect.locate as locate_module
-
     monkeypatch.setattr(Reader, "read_again", lambda self, *args: [])
     monkeypatch.setattr(Reader, "read_by_synthesis", lambda self, pyramid, H, readings: readings[0])
     monkeypatch.setattr(locate_module, "whole_frame", lambda *args: [])  # nor the whole image, framed
@@ -480,7 +480,16 @@ class DetectorUnread(Locator):
     """A locator whose readings from the detector's outlines fail their check, as they can on a
     close-up when the alignment from an outline takes part of the morph for the pose."""
 
-    def decode_drawing(self, gray, pyramid, alignment, score, cam, source, soft):  # type: ignore[no-untyped-def]
+    def decode_drawing(
+        self,
+        gray: np.ndarray,
+        pyramid: ImagePyramid,
+        alignment: Alignment,
+        score: float,
+        cam: Camera,
+        source: str,
+        soft: bool,
+    ) -> Located:
         located = super().decode_drawing(gray, pyramid, alignment, score, cam, source, soft)
         if source == "detector":
             located.result = replace(located.result, ok=False)
@@ -493,16 +502,13 @@ def test_a_close_up_the_detector_aligns_but_does_not_read_is_read_from_the_whole
 ) -> None:
     """On a close-up of a drawing whose every point may move, the alignment from a detector's
     outline can absorb part of the morph into the homography, so that the morph check cannot
-    confirm a right payload (a fresh `codesandbox` model with its detector lost 16 of 1000 medium
-    close-ups so). A drawing the detector's outline aligns but does not read is then read from
+    confirm a right payload. A drawing the detector's outline aligns but does not read is then read from
     the whole frame too, which replaces the unread reading; one the outline reads costs no more."""
     from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
 
     (payload,) = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(5))
     photo = close_up_photo(render_svg(model.encode(payload), 400), "medium", np.random.default_rng(5))
-    import deepmorph_detect.locate as locate_module
-
     framings: list[int] = []
     monkeypatch.setattr(locate_module, "whole_frame", lambda *args: framings.append(1) or whole_frame(*args))
     (read,) = Locator(model).locate(photo)
