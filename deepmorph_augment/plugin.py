@@ -15,6 +15,7 @@ if TYPE_CHECKING:
 def deepmorph_register_augmentations(register: Register) -> None:
     """Register the built-in capture corruptions (imported here, not at load: see hookspecs)."""
     from deepmorph_augment.blur import Blur
+    from deepmorph_augment.colour import ChromaSubsampling, InkFade, PaperTint, WhiteBalance
     from deepmorph_augment.defocus import Defocus
     from deepmorph_augment.gaussian_noise import GaussianNoise
     from deepmorph_augment.intensity import Intensity
@@ -27,6 +28,6 @@ def deepmorph_register_augmentations(register: Register) -> None:
     from deepmorph_augment.scale import Scale
     from deepmorph_augment.translation import Translation
 
-    for cls in (Perspective, Scale, Rotation, Translation, Blur, Defocus, MotionBlur, Lighting, Intensity,
-                GaussianNoise, SaltPepper, Jpeg):  # fmt: skip
+    for cls in (InkFade, PaperTint, WhiteBalance, ChromaSubsampling, Perspective, Scale, Rotation, Translation,
+                Blur, Defocus, MotionBlur, Lighting, Intensity, GaussianNoise, SaltPepper, Jpeg):  # fmt: skip
         register.augmentation(cls)

@@ -21,7 +21,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
 from deepmorph_core.payload import Payload
 from deepmorph_core.pdf import MM_PER_INCH, check_width_mm, svg_to_pdf
-from deepmorph_core.render import raster_size, render_svg, sized_svg
+from deepmorph_core.render import raster_size, render_svg, render_svg_rgb, sized_svg
 
 MAX_RASTER_SIDE = 16_384  # pixels: a larger print is what the SVG (or a PDF) is for
 
@@ -106,12 +106,17 @@ class Code:
         return svg_to_pdf(self.svg, self.viewbox, width_mm)
 
     def png(self, width_mm: float = 50.0, dpi: int = 300) -> bytes:
-        """A PNG of the code ``width_mm`` wide at ``dpi`` dots per inch (recorded in the file)."""
+        """A PNG of the code ``width_mm`` wide at ``dpi`` dots per inch (recorded in the file), in
+        the drawing's colours (gray when every pixel is)."""
         px = print_pixels(width_mm, dpi)
         raster_size(self.viewbox, px)  # refused before rendering when too large
-        gray = np.clip(np.rint(self.render(px) * 255), 0, 255).astype(np.uint8)
+        rgb = render_svg_rgb(self.svg, px)
+        pixels = np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+        image = Image.fromarray(pixels, "RGB")
+        if (pixels[..., 0] == pixels[..., 1]).all() and (pixels[..., 1] == pixels[..., 2]).all():
+            image = image.convert("L")  # a black-and-white drawing stays a gray PNG
         buf = io.BytesIO()
-        Image.fromarray(gray, "L").save(buf, format="PNG", dpi=(dpi, dpi))
+        image.save(buf, format="PNG", dpi=(dpi, dpi))
         return buf.getvalue()
 
     def file(self, fmt: FileFormat, width_mm: float = 50.0, dpi: int = 300) -> bytes:

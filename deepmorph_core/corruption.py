@@ -2,9 +2,11 @@
 builds the steps from the plugin registry and applies them in a fixed physical order.
 
 Order (by each augmentation's ``stage``, :data:`~deepmorph_core.protocols.STAGES`; config
-order within a stage): geometry (fused into one warp), optics (blur, defocus, motion blur),
-lighting, intensity, noise, impulse (salt and pepper), custom (plugins that name no known
-stage), compression (JPEG). The output is clamped to ``[0, 1]``. The severity presets are
+order within a stage): colour (ink, paper, white balance, chroma subsampling: RGB images
+only), then the conversion to luminance, geometry (fused into one warp), optics (blur,
+defocus, motion blur), lighting, intensity, noise, impulse (salt and pepper), custom (plugins
+that name no known stage), compression (JPEG). Gray images skip the colour stage; the output
+is always gray, clamped to ``[0, 1]``. The severity presets are
 :mod:`deepmorph_core.severity`'s; the corruptions themselves are plugins
 (:mod:`deepmorph_augment` holds the built-in ones).
 """
@@ -21,6 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from torch import Tensor, nn
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.luminance import to_luminance
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import STAGES
 from deepmorph_core.severity import residual_steps
@@ -52,12 +55,12 @@ class AugmentConfig(BaseModel):
     steps: list[AugmentationSpec] = Field(default_factory=list, max_length=64)
 
     @classmethod
-    def preset(cls, severity: str, *, size: int | None = None) -> AugmentConfig:
+    def preset(cls, severity: str, *, size: int | None = None, colour: bool = False) -> AugmentConfig:
         """The decoder-frame corruption of a severity (:data:`deepmorph_core.severity.SEVERITIES`),
-        with its pixel-valued parameters scaled to images ``size`` pixels wide."""
-        return cls(
-            steps=[AugmentationSpec(name=n, p=p, params=params) for n, p, params in residual_steps(severity, size)]
-        )
+        with its pixel-valued parameters scaled to images ``size`` pixels wide, and its colour
+        steps appended when ``colour``."""
+        steps = residual_steps(severity, size, colour=colour)
+        return cls(steps=[AugmentationSpec(name=n, p=p, params=params) for n, p, params in steps])
 
     @classmethod
     def parse(cls, data: AugmentConfig | Mapping[str, Any]) -> AugmentConfig:
@@ -122,11 +125,17 @@ def _stage(step: Any) -> int:
     return STAGES.index(stage if stage in STAGES else "custom")
 
 
+_COLOUR = STAGES.index("colour")
+
+
 class AugmentPipeline(nn.Module):
     """Applies a config's augmentations in stage order, differentiably.
 
-    Consecutive geometric steps (those with ``draw_matrices``) are composed into one warp, so
-    the image is resampled once; their random draws are the same as applying them one by one.
+    RGB images go through the ``"colour"`` steps, then are converted to luminance
+    (:func:`~deepmorph_core.luminance.to_luminance`) for the other steps; gray images skip the
+    colour steps (no draws either). Consecutive geometric steps (those with ``draw_matrices``)
+    are composed into one warp, so the image is resampled once; their random draws are the
+    same as applying them one by one.
 
     Args:
         config: the steps (an :class:`AugmentConfig` or its ``model_dump()``).
@@ -144,8 +153,9 @@ class AugmentPipeline(nn.Module):
         built = [_build_step(i, spec, registry) for i, spec in enumerate(self.config.steps)]
         order = sorted(range(len(built)), key=lambda i: (_stage(built[i]), i))
         self.steps = [built[i] for i in order]
+        self._colour = [step for step in self.steps if _stage(step) == _COLOUR]
         self._runs: list[Any] = []  # an augmentation, or a list of geometric ones to fuse
-        for step in self.steps:
+        for step in self.steps[len(self._colour) :]:
             if hasattr(step, "draw_matrices"):
                 if self._runs and isinstance(self._runs[-1], list):
                     self._runs[-1].append(step)
@@ -155,13 +165,24 @@ class AugmentPipeline(nn.Module):
                 self._runs.append(step)
 
     def forward(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
-        """Corrupt ``images`` (``(B, 1, H, W)`` in ``[0, 1]``, white paper = 1).
+        """Corrupt ``images`` (gray or RGB in ``[0, 1]``, white paper = 1).
 
         Shape:
-            images: ``(B, C, H, W)``; returns the same shape, device and dtype, in ``[0, 1]``.
+            images: ``(B, 1, H, W)`` or ``(B, 3, H, W)``; returns ``(B, 1, H, W)``, same device
+            and dtype, in ``[0, 1]``.
+
+        Raises:
+            ValueError: not a floating batch of 1 or 3 channels.
         """
         check_images(images, "augment")
+        if images.shape[1] not in (1, 3):
+            shape = tuple(images.shape)
+            raise ValueError(f"augment: expected gray (B, 1, H, W) or RGB (B, 3, H, W) images, got {shape}")
         out = images
+        if images.shape[1] == 3:
+            for step in self._colour:
+                out = step(out, generator)
+            out = to_luminance(out)
         for run in self._runs:
             if isinstance(run, list):
                 out = self._warp(run, out, generator)
@@ -179,7 +200,8 @@ class AugmentPipeline(nn.Module):
 
 def check_images(images: Tensor, where: str) -> None:
     """Raise ``ValueError`` naming ``where`` unless ``images`` is a floating ``(B, C, H, W)``
-    batch (any channel count is accepted; the corruptions treat channels alike)."""
+    batch (any channel count is accepted: RGB for the colour steps, and the others treat
+    channels alike)."""
     if not isinstance(images, Tensor):
         raise ValueError(f"{where}: expected a tensor, got {type(images).__name__}")
     if images.dim() != 4:
@@ -247,7 +269,10 @@ def warp_chosen(images: Tensor, chosen: Tensor, matrix: Tensor) -> Tensor:
     return apply_to(images, chosen, lambda x, idx: warp_white(x, matrix[idx]))
 
 
-def build_pipeline(severity: str, width: int, config: dict[str, Any] | None = None) -> AugmentPipeline:
-    """The corruption pipeline of a severity preset at an image width (or of a stored config)."""
-    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width)
+def build_pipeline(
+    severity: str, width: int, config: dict[str, Any] | None = None, *, colour: bool = False
+) -> AugmentPipeline:
+    """The corruption pipeline of a severity preset at an image width, with its colour steps
+    when ``colour`` (or of a stored config)."""
+    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width, colour=colour)
     return AugmentPipeline(cfg)

@@ -10,6 +10,7 @@ written back (:meth:`Drawing.write`), as a fresh document of the modelled parts 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,9 +24,11 @@ from deepmorph_core.protocols import Primitive
 from deepmorph_core.render import raster_size
 from deepmorph_core.svg import policy
 from deepmorph_core.svg.policy import DM_NS
+from deepmorph_core.svg.css import Stylesheet, StylesheetError
+from deepmorph_core.svg.gradients import GRADIENT_TAGS, STOP_ATTRIBUTES, GradientError, Gradients
 from deepmorph_core.svg.reader import GEOMETRY_VERSION, GEOMETRY_VERSIONS, ElementReader
 from deepmorph_core.svg.secure import SVG_NS, parse_svg_bytes, read_svg_bytes
-from deepmorph_core.svg.style import Style, compute_style, declarations
+from deepmorph_core.svg.style import Paint, Style, compute_style, style_declarations
 from deepmorph_core.svg.values import parse_numbers, parse_transform
 
 #: The largest ratio of a viewBox's longer side to its shorter: what renders at a sane size.
@@ -34,6 +37,7 @@ MAX_ASPECT = 20.0
 #: points (a morph variable pair each).
 MAX_PRIMITIVES = 2_000
 MAX_CONTROL_POINTS = 10_000
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 @dataclass
@@ -95,7 +99,9 @@ class Drawing:
         skipped: ``(line, reason)`` for elements passed over (invisible ones).
         dropped: ``(line, what)`` for what DeepMorph cannot model and left out
             (``drop_unsupported``); empty otherwise, since such input is an error.
-        styles: every kept element's ``style=""`` reduced to the properties DeepMorph reads.
+        styles: every kept element's ``style=""`` reduced to the properties DeepMorph reads,
+            with what stylesheet rules give it written in (the output holds no ``<style>``).
+        gradients: the document's gradients; those the paints use are written back.
         geometry: the morph geometry version it was read for
             (:data:`~deepmorph_core.svg.reader.GEOMETRY_VERSION`).
     """
@@ -108,7 +114,23 @@ class Drawing:
     skipped: list[tuple[int | None, str]] = field(default_factory=list)
     dropped: list[tuple[int | None, str]] = field(default_factory=list)
     styles: dict[etree._Element, str] = field(default_factory=dict)
+    gradients: Gradients = field(default_factory=Gradients)
     geometry: int = GEOMETRY_VERSION
+
+    @property
+    def palette(self) -> list[Paint]:
+        """Every distinct paint the drawing lays down, in paint order of first use."""
+        seen: list[Paint] = []
+        for prim in self.primitives:
+            for paint in prim.style.palette:
+                if paint not in seen:
+                    seen.append(paint)
+        return seen
+
+    @property
+    def black_and_white(self) -> bool:
+        """Whether every paint is opaque black or white (the paper's drawings)."""
+        return all(paint.black_or_white for paint in self.palette)
 
     def write(self, root: etree._Element, twin: dict[etree._Element, etree._Element]) -> str:
         """The document under ``root`` (this drawing's tree, or a copy of it with a morph
@@ -120,7 +142,8 @@ class Drawing:
             tag = etree.QName(node).localname
             shapes[node] = (*policy.GEOMETRY.get(tag, ()), *getattr(prim.primitive, "attributes", ()))
         styles = {twin[el]: style for el, style in self.styles.items() if el in twin}
-        return etree.tostring(policy.sanitized(root, shapes, styles), encoding="unicode")
+        definitions = [twin[self.gradients.elements[i]] for i in self.gradients.used]
+        return etree.tostring(policy.sanitized(root, shapes, styles, definitions), encoding="unicode")
 
     def pixel_size(self, width: int) -> tuple[int, int]:
         """``(height, width)`` in pixels for a raster ``width`` pixels wide (aspect kept).
@@ -215,6 +238,15 @@ class _Walker:
 
     def run(self, root: etree._Element) -> Drawing:
         drawing = Drawing(self.source, root, self._viewbox(root), geometry=self.geometry)
+        try:
+            self.sheet = Stylesheet.from_root(root)
+        except StylesheetError as exc:
+            if not self.drop:
+                raise SvgError(str(exc), self.source, exc.line) from None
+            drawing.dropped.append((exc.line, f"CSS <style> ({exc})"))
+            self.sheet = Stylesheet()
+        drawing.gradients = Gradients.from_root(root, stop_style=self._sheet_declarations)
+        self.gradients = drawing.gradients
         self._frame(root, drawing.viewbox)
         root_bounds = self._bounds(root)
         self.defaults = root_bounds.over(self.cli_defaults)
@@ -223,6 +255,13 @@ class _Walker:
         self._walk(root, drawing, style, np.eye(3), (), move=None, fixed=bool(self.defaults.fixed), depth=0)
         for group in drawing.groups:
             group.centre = self._group_centre(drawing, group)
+        for gradient_id in drawing.gradients.used:  # stops keep the colours their rules give them
+            for stop in drawing.gradients.elements[gradient_id]:
+                if isinstance(stop.tag, str):
+                    decls = {**self._sheet_declarations(stop), **style_declarations(stop.get("style"))}
+                    kept = {k: v for k, v in decls.items() if k in STOP_ATTRIBUTES}
+                    if kept:
+                        drawing.styles[stop] = "; ".join(f"{k}: {v}" for k, v in kept.items())
         return drawing
 
     def _viewbox(self, root: etree._Element) -> tuple[float, float, float, float]:
@@ -261,28 +300,46 @@ class _Walker:
         except ValueError as exc:
             raise BoundsError(str(exc), self.source, element.sourceline) from None
 
+    def _sheet_declarations(self, element: etree._Element) -> dict[str, str]:
+        normal, important = self.sheet.declarations(element)
+        return {**normal, **important}
+
     def _style(self, drawing: Drawing, element: etree._Element, parent: Style) -> Style:
         """The element's computed style, its properties held to the policy; records the
-        ``style=""`` that will be written (the modelled properties only)."""
+        ``style=""`` that will be written (the modelled properties only).
+
+        The cascade: presentation attributes, then stylesheet rules, then ``style=""``, then
+        ``!important`` rules (:mod:`deepmorph_core.svg.css`)."""
         try:
-            props = declarations(dict(element.attrib), element.get("style"))
+            inline = style_declarations(element.get("style"))
         except ValueError as exc:
             raise self.error(element, str(exc)) from None
-        own = declarations({}, element.get("style")) if element.get("style") else {}
+        normal, important = self.sheet.declarations(element)
+        own = {**normal, **inline, **important}
+        props = {**{k: v for k, v in element.attrib.items() if "}" not in k}, **own}
         kept = {}
         for name, value in props.items():
             verdict = policy.property_verdict(name, value)
             if verdict == "unsupported" and (name in own or name in policy.DEFAULT_ONLY):
-                self.unsupported(drawing, element, f"{name}={value!r}")
+                self.unsupported(drawing, element, f"{name}={value!r}{policy.advice(name)}")
+                continue
+            missing = self.gradients.missing_paint(value) if name in ("fill", "stroke") else None
+            if missing is not None:
+                self.unsupported(drawing, element, f"{name}={value!r}: {missing}")
                 continue
             if verdict == "modelled":
                 kept[name] = value
         if own:
             drawing.styles[element] = "; ".join(f"{k}: {v}" for k, v in own.items() if k in kept)
         try:
-            return compute_style(kept, parent)
+            return compute_style(kept, parent, self._gradient)
+        except GradientError as exc:
+            raise SvgError(str(exc), self.source, exc.line) from None
         except ValueError as exc:
             raise self.error(element, str(exc)) from None
+
+    def _gradient(self, gradient_id: str) -> Paint | None:
+        return self.gradients.paint(gradient_id)
 
     def _transform(self, element: etree._Element) -> np.ndarray:
         raw = element.get("transform")
@@ -315,16 +372,16 @@ class _Walker:
                 raise self.error(el, f"unsupported: element <{name}> (scripts are never kept)")
             if name in policy.TEXT_ELEMENTS or name in policy.INERT_ELEMENTS:
                 continue
-            if name == "defs":  # nothing DeepMorph draws refers to definitions
+            if name == "defs":  # gradients and stylesheets are read where they are used
                 for child in el:
                     if isinstance(child.tag, str) and etree.QName(child).namespace in (SVG_NS, None):
                         inner = etree.QName(child).localname
                         if inner in policy.HOSTILE_ELEMENTS:
                             raise self.error(child, f"unsupported: element <{inner}> (scripts are never kept)")
-                        self.unsupported(drawing, child, f"<{inner}> in <defs>")
+                        if inner not in GRADIENT_TAGS and inner != "style":
+                            self.unsupported(drawing, child, f"<{inner}> in <defs>{policy.advice(inner)}")
                 continue
-            if name == "style":
-                self.unsupported(drawing, el, "CSS <style> (style elements and their rules)")
+            if name == "style" or name in GRADIENT_TAGS:  # read before the walk (css.py, gradients.py)
                 continue
             self.check_attributes(drawing, el)
             style = self._style(drawing, el, parent_style)
@@ -346,8 +403,9 @@ class _Walker:
                 continue
             kinds = self.registry.primitives_for_tag(name)
             if not kinds:
-                self.unsupported(drawing, el, f"element <{name}>")
+                self.unsupported(drawing, el, f"element <{name}>{policy.advice(name)}")
                 continue
+            self._check_size(el)
             if not style.visible:
                 drawing.skipped.append((el.sourceline, f"<{name}> invisible"))
                 continue
@@ -389,6 +447,23 @@ class _Walker:
                     el.sourceline,
                 )
             )
+
+    def _check_size(self, element: etree._Element) -> None:
+        """Refuse a shape whose geometry alone exceeds the control-point limit, before it is
+        parsed: every control point takes at most 7 numbers (an arc), so a ``d`` or ``points``
+        with more than 7 numbers per allowed point cannot fit (a 7 MB path fails in well under
+        a second instead of after the whole parse)."""
+        for attr in ("d", "points"):
+            raw = element.get(attr)
+            if raw is None or len(raw) < 7 * (MAX_CONTROL_POINTS - self.control_points):
+                continue
+            numbers = len(_NUMBER.findall(raw))
+            if numbers > 7 * (MAX_CONTROL_POINTS - self.control_points):
+                raise self.error(
+                    element,
+                    f"the {attr} of <{etree.QName(element).localname}> holds {numbers:,} numbers: more than the"
+                    f" {MAX_CONTROL_POINTS} control points a drawing may have; simplify it (a code needs far fewer)",
+                )
 
     @staticmethod
     def _group_centre(drawing: Drawing, group: MorphGroup) -> np.ndarray:

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from deepmorph_core.kernels import area_resize
+from deepmorph_core.luminance import to_luminance
 from deepmorph_core.photo import ink_mask, normalise_contrast
 
 
@@ -82,9 +83,10 @@ def frame_renders(images: Tensor, target: Tensor, size: tuple[int, int]) -> Tens
     """Clean renders framed by their own ink, as training and validation frame theirs.
 
     Shape:
-        images ``(B, 1, h, w)``, target ``(4,)`` -> ``(B, 1, H, W)`` with ``(H, W) = size``.
+        images ``(B, C, h, w)`` (gray, or colour framed by its luminance), target ``(4,)`` ->
+        ``(B, C, H, W)`` with ``(H, W) = size``.
     """
-    return canonicalize(images, render_moments(images), target, size)
+    return canonicalize(images, render_moments(to_luminance(images)), target, size)
 
 
 def render_moments(images: Tensor) -> Tensor:

@@ -294,10 +294,10 @@ class DeepMorphModel:
         value = Payload.of(payload, self.codec.spec.payload_bits)
         return Code(value, self.encode(value), self.drawing.drawing.viewbox)
 
-    def real_renders(self, values: Tensor) -> Tensor:
-        """resvg renders ``(k, 1, H, W)`` (paper white) of ``(k, N_v)`` morph values at the
-        decoder's width."""
-        return self.drawing.render_real(values, self.width).to(values.device)
+    def real_renders(self, values: Tensor, rgb: bool = False) -> Tensor:
+        """resvg renders ``(k, 1, H, W)`` (paper white; ``(k, 3, H, W)`` colour with ``rgb``) of
+        ``(k, N_v)`` morph values at the decoder's width."""
+        return self.drawing.render_real(values, self.width, rgb=rgb).to(values.device)
 
     # -- decoding -------------------------------------------------------------------------
 

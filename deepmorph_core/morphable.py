@@ -29,7 +29,7 @@ from deepmorph_core.framing import render_moments
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
-from deepmorph_core.render import render_svg, render_svg_ink
+from deepmorph_core.render import render_svg, render_svg_ink, render_svg_rgb
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 # a variable changing the picture by at most this share of the median variable is invisible: it
@@ -134,13 +134,22 @@ class MorphableDrawing:
         """One morph ``(N_v,)`` written back as an SVG document."""
         return self.space.write_svg(values)
 
-    def render_real(self, values: Tensor, width: int) -> Tensor:
-        """resvg renders ``(B, 1, H, W)`` (paper white = 1) of ``(B, N_v)`` values at ``width``
-        pixels, on the CPU."""
+    @property
+    def colour(self) -> bool:
+        """Whether any paint is other than opaque black or white: renders then come in colour."""
+        return not self.drawing.black_and_white
+
+    def render_real(self, values: Tensor, width: int, rgb: bool = False) -> Tensor:
+        """resvg renders ``(B, 1, H, W)`` luminance (paper white = 1), or ``(B, 3, H, W)``
+        colour with ``rgb``, of ``(B, N_v)`` values at ``width`` pixels, on the CPU."""
         h, w = self.drawing.pixel_size(width)
-        out = np.empty((values.shape[0], 1, h, w), dtype=np.float32)
+        out = np.empty((values.shape[0], 3 if rgb else 1, h, w), dtype=np.float32)
         for i in range(values.shape[0]):
-            out[i, 0] = render_svg(self.to_svg(values[i].detach().cpu()), w)
+            svg = self.to_svg(values[i].detach().cpu())
+            if rgb:
+                out[i] = render_svg_rgb(svg, w).transpose(2, 0, 1)
+            else:
+                out[i, 0] = render_svg(svg, w)
         return torch.from_numpy(out)
 
     def render_hard(self, values: Tensor | None, width: int = 96) -> np.ndarray:
@@ -208,7 +217,7 @@ class MorphableDrawing:
                     "variables": len(vs),
                     "fixed": p.fixed,
                     "bounds": p.bounds.model_dump(exclude_none=True),
-                    "paints": [f"{mode}:{'black' if c > 0 else 'white'}" for mode, c in p.style.paints],
+                    "paints": [f"{mode}:{paint.describe()}" for mode, paint in p.style.paints],
                 }
             )
         groups = [

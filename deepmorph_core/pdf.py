@@ -18,6 +18,7 @@ import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.render import render_svg, sized_svg
+from deepmorph_core.svg.plain_colours import plain_colours
 
 MM_PER_INCH = 25.4
 POINTS_PER_INCH = 72.0
@@ -71,7 +72,7 @@ def svg_to_pdf(svg: str, viewbox: tuple[float, float, float, float], width_mm: f
             f"{MAX_PAGE_POINTS:.0f} a side; print the SVG"
         )
     skia, pdfium = _skia(), _pdfium()
-    user_svg = sized_svg(svg, f"{vw:g}", f"{vh:g}")  # Skia's container: one unit per viewBox unit
+    user_svg = sized_svg(plain_colours(svg), f"{vw:g}", f"{vh:g}")  # Skia's container: one unit per viewBox unit
     dom = skia.SVGDOM.MakeFromStream(skia.MemoryStream(user_svg.encode("utf-8"), True))
     if dom is None:
         raise DeepMorphError("the PDF renderer (Skia) refused the drawing")
@@ -124,8 +125,8 @@ def render_pdf(data: bytes, width: int, page: int = 0) -> np.ndarray:
         if not 0 <= page < len(pdf):
             raise DeepMorphError(f"the PDF has {len(pdf)} pages; no page {page + 1}")
         sheet = pdf[page]
-        bitmap = sheet.render(scale=width / sheet.get_width(), grayscale=True, fill_color=(255, 255, 255, 255))
-        gray = np.asarray(bitmap.to_pil().convert("L"), dtype=np.float32) / 255.0
+        bitmap = sheet.render(scale=width / sheet.get_width(), fill_color=(255, 255, 255, 255))
+        gray = np.asarray(bitmap.to_pil().convert("RGB").convert("L"), dtype=np.float32) / 255.0  # BT.601, as render_svg
     finally:
         pdf.close()
     return gray[:, :width]  # PDFium rounds a fractional size up

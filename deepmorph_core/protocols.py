@@ -144,8 +144,10 @@ class PathSegment(Protocol):
 
 
 #: Pipeline order of the capture corruptions' stages (:mod:`deepmorph_core.corruption`); an
-#: augmentation without a ``stage`` (or with an unknown one) runs as ``"custom"``.
-STAGES = ("geometry", "optics", "lighting", "intensity", "noise", "impulse", "custom", "compression")
+#: augmentation without a ``stage`` (or with an unknown one) runs as ``"custom"``. ``"colour"``
+#: steps act on RGB images (ink, paper, white balance and JPEG's chroma loss change colours
+#: only) and only when the images are RGB; every later stage acts on their luminance.
+STAGES = ("colour", "geometry", "optics", "lighting", "intensity", "noise", "impulse", "custom", "compression")
 
 
 @runtime_checkable
@@ -165,7 +167,8 @@ class Augmentation(Protocol):
     name: ClassVar[str]
 
     def __call__(self, images: Tensor, generator: Any | None = None) -> Tensor:
-        """Corrupt ``(B, 1, H, W)`` images in ``[0, 1]``; differentiable w.r.t. ``images``."""
+        """Corrupt ``(B, 1, H, W)`` images in ``[0, 1]`` (``(B, 3, H, W)`` RGB for a ``"colour"``
+        stage step); differentiable w.r.t. ``images``."""
         ...
 
 

@@ -6,6 +6,12 @@ in pixels; black paints add, white paints subtract, and the sum is squashed with
 between runs of different colour, so that a white stroke over black strokes shows white
 (bottom-up layering).
 
+Colour drawings go beyond the paper, which drew black and white only: each run of one paint
+is composited over what lies below it (``over``, bottom-up in paint order) with its colour and
+alpha, its coverage squashed exactly as a black run's is, so a single black run draws the same
+either way. Drawings whose every paint is opaque black or white keep the paper's blend, so the
+models trained on them render as they were trained.
+
 Three departures from a literal reading (benchmarked in ``bench/``):
 
 * **Culling.** The paper names the rasterizer's memory as its bottleneck. A paint is evaluated
@@ -21,12 +27,15 @@ Three departures from a literal reading (benchmarked in ``bench/``):
 * **Normalised squash.** ``sigmoid(t (x - 0.5))`` is rescaled so that 0 ink maps to exactly 0
   and 1 to exactly 1; otherwise blank paper would read as faint grey everywhere.
 
-Output is *ink* in ``[0, 1]`` (1 = black); :func:`ink_to_image` gives paper-white images.
+Output is *ink* in ``[0, 1]`` (1 = black; for colour, one minus the BT.601 luminance that the
+photo chain reads); :func:`ink_to_image` gives paper-white images and
+:meth:`SoftRasterizer.render_rgb` the colours.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import torch
@@ -36,6 +45,7 @@ from deepmorph_core.flat import flat_stroke_sdf
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.outline import Frame, Outline, pixel_bbox, pixel_grid
 from deepmorph_core.primitive import outline_paint_sdf
+from deepmorph_core.svg.style import Paint
 
 #: Reach of the sigmoid beyond which a pixel's contribution is treated as zero: sigmoid(-8) ~ 3e-4.
 _SIGMOID_REACH = 8.0
@@ -87,6 +97,7 @@ class SoftRasterizer(nn.Module):
         self.settings = settings or RasterSettings()
         self.height, self.width = space.drawing.pixel_size(self.settings.width)
         self._runs = _paint_runs(space)
+        self.black_and_white = space.drawing.black_and_white
 
     def forward(self, values: Tensor) -> Tensor:
         """Render morph values.
@@ -95,8 +106,51 @@ class SoftRasterizer(nn.Module):
             values: ``(B, N_v)`` morph values (:meth:`MorphSpace.values_from_unit`).
 
         Returns:
-            ``(B, 1, H, W)`` ink in ``[0, 1]``.
+            ``(B, 1, H, W)`` ink in ``[0, 1]``: for a colour drawing, one minus the luminance
+            (BT.601) of its composited colours, what the photo chain reads from a photo.
         """
+        if self.black_and_white:
+            return self._squashed(values)
+        return 1.0 - self._composited(values, [[paint.luminance] for paint, _ in self._runs])
+
+    def render_rgb(self, values: Tensor) -> Tensor:
+        """Render morph values in colour: ``(B, 3, H, W)`` sRGB on white paper, in ``[0, 1]``."""
+        if self.black_and_white:
+            return (1.0 - self._squashed(values)).expand(-1, 3, -1, -1)
+        return self._composited(values, [list(paint.rgb) for paint, _ in self._runs])
+
+    def _squashed(self, values: Tensor) -> Tensor:
+        """The paper's black-and-white blend: black runs add ink, white runs take it away, with
+        the normalised squash between runs and at the end."""
+        acc: Tensor | None = None
+        for (paint, _), cover in zip(self._runs, self._run_covers(values)):
+            contribution = paint.ink_sign * cover
+            acc = contribution if acc is None else normalised_squash(acc, self.settings.squash) + contribution
+        if acc is None:
+            B, H, W = values.shape[0], self.height, self.width
+            return torch.zeros(B, 1, H, W, dtype=values.dtype, device=values.device)
+        return normalised_squash(acc, self.settings.squash)[:, None]
+
+    def _composited(self, values: Tensor, colours: list[list[float]]) -> Tensor:
+        """Colour runs composited bottom-up over white paper (``over``): each run's coverage,
+        squashed as a black run is, times its paint's alpha, lays its colour down.
+
+        Args:
+            colours: per run, its colour in the output's ``C`` channels.
+
+        Returns:
+            ``(B, C, H, W)``.
+        """
+        B, H, W = values.shape[0], self.height, self.width
+        image = torch.ones(B, len(colours[0]) if colours else 1, H, W, dtype=values.dtype, device=values.device)
+        for (paint, _), colour, cover in zip(self._runs, colours, self._run_covers(values)):
+            alpha = (normalised_squash(cover, self.settings.squash) * paint.alpha)[:, None]
+            tint = torch.tensor(colour, dtype=values.dtype, device=values.device)[None, :, None, None]
+            image = image * (1.0 - alpha) + tint * alpha
+        return image
+
+    def _run_covers(self, values: Tensor) -> Iterator[Tensor]:
+        """Each paint run's coverage ``(B, H, W)`` in ``[0, 1]``, bottom run first."""
         st = self.settings
         B, dtype, device = values.shape[0], values.dtype, values.device
         H, W = self.height, self.width
@@ -105,9 +159,8 @@ class SoftRasterizer(nn.Module):
         if st.blend not in ("union", "sum"):
             raise ValueError(f"blend must be 'union' or 'sum', got {st.blend!r}")
         union = st.blend == "union"
-        acc: Tensor | None = None
         reach = _SIGMOID_REACH / st.sharpness
-        for colour, paints in self._runs:
+        for _, paints in self._runs:
             # Covers are gathered with the canvas positions they land on and added with a single
             # index_add: in-place slice additions would make autograd copy the whole canvas once
             # per paint in the backward pass.
@@ -153,11 +206,7 @@ class SoftRasterizer(nn.Module):
                 )
                 canvas = canvas.index_add(0, torch.cat(positions), cover)
             canvas = canvas.t().reshape(B, H, W)
-            contribution = colour * (-torch.expm1(canvas) if union else canvas)
-            acc = contribution if acc is None else normalised_squash(acc, st.squash) + contribution
-        if acc is None:
-            return torch.zeros(B, 1, H, W, dtype=dtype, device=device)
-        return normalised_squash(acc, st.squash)[:, None]
+            yield -torch.expm1(canvas) if union else canvas
 
 
 def stroke_half_width(frame: Frame, stroke_width: float, mode: str) -> Tensor:
@@ -166,9 +215,9 @@ def stroke_half_width(frame: Frame, stroke_width: float, mode: str) -> Tensor:
     return scale * (stroke_width / 2) if mode == "stroke" else torch.zeros_like(scale)
 
 
-def _paint_runs(space: MorphSpace) -> list[tuple[int, list[tuple[int, str]]]]:
-    """Group paints in document order into runs of one colour: ``[(colour, [(prim, mode)])]``."""
-    runs: list[tuple[int, list[tuple[int, str]]]] = []
+def _paint_runs(space: MorphSpace) -> list[tuple[Paint, list[tuple[int, str]]]]:
+    """Group paints in paint order into runs of one paint: ``[(paint, [(prim, mode)])]``."""
+    runs: list[tuple[Paint, list[tuple[int, str]]]] = []
     for prim in space.drawing.primitives:
         for mode, colour in prim.style.paints:
             if runs and runs[-1][0] == colour:

@@ -20,6 +20,7 @@ from lxml import etree
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.svg.plain_colours import plain_colours
 from deepmorph_core.svg.secure import parse_svg_bytes
 from deepmorph_core.svg.values import parse_numbers
 
@@ -78,8 +79,19 @@ def at_viewbox_size(svg_text: str) -> str:
     return etree.tostring(root, encoding="unicode")
 
 
+def _render_png(svg_text: str, width: int) -> Image.Image:
+    try:
+        png = resvg_py.svg_to_bytes(
+            svg_string=at_viewbox_size(plain_colours(svg_text)), width=width, background="#ffffff", dpi=CSS_DPI
+        )
+    except Exception as exc:  # the parser's SvgError; resvg's ValueError/RuntimeError
+        raise DeepMorphError(f"the SVG renderer refused the drawing: {exc}") from None
+    return Image.open(io.BytesIO(bytes(png)))
+
+
 def render_svg(svg_text: str, width: int) -> np.ndarray:
-    """Render SVG text with resvg on white paper, its viewBox ``width`` pixels across.
+    """Render SVG text with resvg on white paper, its viewBox ``width`` pixels across, as
+    luminance (BT.601, PIL's ``L``: how the photo chain turns a colour photo to gray).
 
     Returns:
         ``(H, W)`` float32 image intensity in ``[0, 1]`` (1 = white).
@@ -87,13 +99,13 @@ def render_svg(svg_text: str, width: int) -> np.ndarray:
     Raises:
         DeepMorphError: a document resvg (or the secure parser before it) refuses.
     """
-    try:
-        png = resvg_py.svg_to_bytes(
-            svg_string=at_viewbox_size(svg_text), width=width, background="#ffffff", dpi=CSS_DPI
-        )
-    except Exception as exc:  # the parser's SvgError; resvg's ValueError/RuntimeError
-        raise DeepMorphError(f"the SVG renderer refused the drawing: {exc}") from None
-    img = Image.open(io.BytesIO(bytes(png))).convert("L")
+    img = _render_png(svg_text, width).convert("RGB").convert("L")
+    return np.asarray(img, dtype=np.float32) / 255.0
+
+
+def render_svg_rgb(svg_text: str, width: int) -> np.ndarray:
+    """Like :func:`render_svg`, in colour: ``(H, W, 3)`` float32 sRGB in ``[0, 1]``."""
+    img = _render_png(svg_text, width).convert("RGB")
     return np.asarray(img, dtype=np.float32) / 255.0
 
 

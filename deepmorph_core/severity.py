@@ -7,7 +7,9 @@ A severity names how rough a capture is. Two things read it:
   centre and spread (:mod:`deepmorph_core.framing`) removes the photo's translation and scale;
   what remains is a little residual scale, shift, rotation and perspective, then blur, light,
   noise and compression at the decoder's size. Pixel-valued parameters are given for
-  :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width.
+  :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width. Colour prints add the
+  severity's colour steps (:attr:`Severity.colour`: faded ink, tinted paper, white balance,
+  chroma subsampling), asked for with ``residual_steps(name, size, colour=True)``.
 * **the photo simulator** (:mod:`deepmorph_detect.scenes`), through :attr:`Severity.photo`:
   tilt, print size, blur, noise, light, shadows, contrast, motion and JPEG of a whole photo,
   and how far a close-up (a print filling the frame) may turn.
@@ -68,11 +70,13 @@ class Severity:
         name: ``none``, ``easy``, ``medium`` or ``hard``.
         residual: the decoder-frame corruption steps ``(name, p, params)``.
         photo: the photo simulator's ranges (``None`` for ``none``).
+        colour: the colour steps of a colour print (the pipeline's ``"colour"`` stage, on RGB).
     """
 
     name: str
     residual: tuple[Step, ...] = field(default=())
     photo: PhotoRanges | None = None
+    colour: tuple[Step, ...] = field(default=())
 
 
 SEVERITIES: dict[str, Severity] = {
@@ -93,6 +97,12 @@ SEVERITIES: dict[str, Severity] = {
             ("jpeg", 0.5, {"quality": [70.0, 95.0]}),
         ),
         photo=PhotoRanges(30, (0.25, 0.7), (0.2, 0.7), (0.003, 0.012), 0.15, 0.15, (0.8, 1.0), (80, 95), 0.0, 2),
+        colour=(
+            ("ink_fade", 1.0, {"desaturation": [0.0, 0.1], "black_lift": [0.0, 0.03]}),
+            ("paper_tint", 1.0, {"grey": [0.0, 0.015], "warmth": 0.02}),
+            ("white_balance", 1.0, {"temperature": 0.04, "tint": 0.02}),
+            ("chroma_subsampling", 0.5, {}),
+        ),
     ),
     "medium": Severity(
         "medium",
@@ -110,6 +120,12 @@ SEVERITIES: dict[str, Severity] = {
             ("jpeg", 0.8, {"quality": [40.0, 90.0]}),
         ),
         photo=PhotoRanges(45, (0.15, 0.7), (0.3, 1.1), (0.008, 0.025), 0.3, 0.35, (0.6, 0.95), (55, 90), 0.15, 5),
+        colour=(
+            ("ink_fade", 1.0, {"desaturation": [0.0, 0.25], "black_lift": [0.0, 0.08]}),
+            ("paper_tint", 1.0, {"grey": [0.0, 0.03], "warmth": 0.04}),
+            ("white_balance", 1.0, {"temperature": 0.1, "tint": 0.04}),
+            ("chroma_subsampling", 1.0, {}),
+        ),
     ),
     "hard": Severity(
         "hard",
@@ -128,6 +144,12 @@ SEVERITIES: dict[str, Severity] = {
             ("jpeg", 0.9, {"quality": [20.0, 80.0]}),
         ),
         photo=PhotoRanges(60, (0.10, 0.7), (0.4, 1.6), (0.015, 0.045), 0.45, 0.5, (0.45, 0.9), (35, 75), 0.35, 10),
+        colour=(
+            ("ink_fade", 1.0, {"desaturation": [0.0, 0.45], "black_lift": [0.0, 0.15]}),
+            ("paper_tint", 1.0, {"grey": [0.0, 0.08], "warmth": 0.08}),
+            ("white_balance", 1.0, {"temperature": 0.18, "tint": 0.07, "cast": 0.03}),
+            ("chroma_subsampling", 1.0, {}),
+        ),
     ),
 }
 
@@ -162,12 +184,14 @@ def photo_ranges(name: str) -> PhotoRanges:
     return photo
 
 
-def residual_steps(name: str, size: int | None = None) -> list[Step]:
+def residual_steps(name: str, size: int | None = None, *, colour: bool = False) -> list[Step]:
     """The residual corruption steps of a severity, pixel parameters scaled to ``size``-pixel
-    images (:data:`PRESET_SIZE` when ``None``)."""
+    images (:data:`PRESET_SIZE` when ``None``), followed by its colour steps when ``colour``
+    (for RGB renders; the pipeline skips them on gray ones)."""
     factor = (size or PRESET_SIZE) / PRESET_SIZE
+    level = severity(name)
     steps = []
-    for step_name, p, params in severity(name).residual:
+    for step_name, p, params in level.residual + (level.colour if colour else ()):
         scaled = {
             key: ([v * factor for v in value] if isinstance(value, list) else value * factor)
             if (step_name, key) in PIXEL_PARAMS

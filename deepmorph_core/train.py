@@ -221,8 +221,10 @@ class CodecRun:
         model.decoder.to(self.device)
         self.raster = model.rasterizer()
         self.target = model.canonical_moments()
+        self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
         self._augments = {
-            sev: build_pipeline(sev, model.width).to(self.device) for sev in LADDER[: LADDER.index(config.severity)]
+            sev: build_pipeline(sev, model.width, colour=self.colour).to(self.device)
+            for sev in LADDER[: LADDER.index(config.severity)]
         }
         stored = model.meta.augment or None
         self._augments[config.severity] = build_pipeline(config.severity, model.width, stored).to(self.device)
@@ -296,9 +298,12 @@ class CodecRun:
             values = self.model.drawing.values_from_unit(unit)
             # the first k rows are drawn by the real renderer only (the soft raster would be thrown away)
             soft = values[k:]
-            images = 1.0 - self.raster(soft) if len(soft) else values.new_empty((0, 1, *self.model.image_size))
+            if not len(soft):
+                images = values.new_empty((0, 3 if self.colour else 1, *self.model.image_size))
+            else:
+                images = self.raster.render_rgb(soft) if self.colour else 1.0 - self.raster(soft)
         if k:
-            images = torch.cat([self.model.real_renders(values[:k]), images], 0)
+            images = torch.cat([self.model.real_renders(values[:k], rgb=self.colour), images], 0)
         images = frame_renders(images, self.target, self.model.image_size)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
@@ -307,7 +312,7 @@ class CodecRun:
         return torch.cat([full, self.small_prints(images[images.shape[0] - small :])], 0)
 
     def small_prints(self, images: Tensor) -> Tensor:
-        """``(k, 1, H, W)`` framed renders captured as one small print size: shrunk (area) to a
+        """``(k, C, H, W)`` framed renders captured as one small print size: shrunk (area) to a
         width drawn from :data:`SMALL_PRINT_SCALE`, corrupted there by the current rung's
         preset scaled to that width, enlarged again (bilinear). Differentiable."""
         h, w = images.shape[-2:]
@@ -316,7 +321,7 @@ class CodecRun:
         small_h = max(8, round(small_w * h / w))
         key = (self._rung(), small_w)
         if key not in self._small_augments:
-            self._small_augments[key] = build_pipeline(key[0], small_w).to(self.device)
+            self._small_augments[key] = build_pipeline(key[0], small_w, colour=self.colour).to(self.device)
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
         return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
@@ -485,7 +490,7 @@ def train_model(
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
             config = TrainConfig(**overrides)
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
-            augment = build_pipeline(config.severity, config.width)
+            augment = build_pipeline(config.severity, config.width, colour=md.colour)
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
             spec = _payload_code(payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn)

@@ -86,13 +86,14 @@ def read_renders(
     (``(B, N_b)`` code words) framed by their ink and put through the ``severity`` corruption,
     whose random draws come from ``seed + 1``, ``batch`` renders per decoder call."""
     model.eval()
-    augment = build_pipeline(severity, model.width)
+    colour = model.drawing.colour
+    augment = build_pipeline(severity, model.width, colour=colour)
     generator = torch.Generator().manual_seed(seed + 1)
     target, size = model.canonical_moments(), model.image_size
     probs = []
     for lo in range(0, len(codes), batch):
         values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)))
-        real = model.real_renders(values)
+        real = model.real_renders(values, rgb=colour)
         with torch.no_grad():
             framed = augment(frame_renders(real, target, size), generator=generator)
         probs.append(model.probabilities(framed).numpy().astype(np.float64))

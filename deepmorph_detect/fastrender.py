@@ -25,6 +25,7 @@ import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.render import render_svg
+from deepmorph_core.svg.plain_colours import plain_colours
 
 try:
     import skia
@@ -62,7 +63,7 @@ def render_svg_skia(
     """
     if skia is None:
         raise DeepMorphError(f"the SVG renderer Skia is not available: {SKIA_UNAVAILABLE}")
-    dom = skia.SVGDOM.MakeFromStream(skia.MemoryStream(svg_text.encode("utf-8"), True))
+    dom = skia.SVGDOM.MakeFromStream(skia.MemoryStream(plain_colours(svg_text).encode("utf-8"), True))
     if dom is None:
         raise DeepMorphError("the SVG renderer (Skia) refused the drawing")
     _, _, vw, vh = viewbox

@@ -29,6 +29,7 @@ from lxml import etree
 SVG_NS = "http://www.w3.org/2000/svg"
 DM_NS = "urn:deepmorph:1"  # the namespace of the dm: bound-spec attributes
 XML_NS = "http://www.w3.org/XML/1998/namespace"
+XLINK_NS = "http://www.w3.org/1999/xlink"
 
 #: Containers: ``<a>`` is written as ``<g>`` (its link dropped).
 CONTAINERS = frozenset({"g", "a"})
@@ -62,9 +63,10 @@ MODELLED_PROPERTIES = frozenset(
         "fill-opacity",
         "stroke-opacity",
         "color",
+        "paint-order",
     }
 )
-#: Properties that cannot change how black-and-white shapes are drawn here (text, fonts,
+#: Properties that cannot change how the shapes are drawn here (text, fonts,
 #: interaction, colour management, editors' own): dropped.
 INERT_PROPERTIES = frozenset(
     {
@@ -127,7 +129,6 @@ DEFAULT_ONLY = {
     "marker-start": ("none",),
     "marker-mid": ("none",),
     "marker-end": ("none",),
-    "paint-order": ("normal", "fill stroke markers", "fill stroke", "fill"),
     "vector-effect": ("none",),
     "mix-blend-mode": ("normal",),
     "isolation": ("auto",),
@@ -166,6 +167,30 @@ CONDITIONAL = frozenset({"requiredFeatures", "requiredExtensions", "systemLangua
 #: Root attributes that are modelled (the frame of the drawing).
 ROOT_ATTRIBUTES = ("viewBox", "width", "height")
 
+#: What to do about elements DeepMorph cannot model, by tag.
+ADVICE = {
+    "text": "outline the text (convert it to paths) in the design tool",
+    "tspan": "outline the text (convert it to paths) in the design tool",
+    "textPath": "outline the text (convert it to paths) in the design tool",
+    "image": "trace the bitmap into shapes, or leave it out",
+    "use": "expand the reference into plain shapes (unlink the symbol or clone)",
+    "symbol": "expand the symbol into plain shapes",
+    "filter": "flatten the effect (expand the appearance) in the design tool",
+    "clipPath": "flatten the effect (release the clipping path, then expand) in the design tool",
+    "pattern": "expand the pattern into shapes, or fill with a colour",
+    "marker": "expand the markers into shapes",
+    "clip-path": "flatten the effect (release the clipping path, then expand) in the design tool",
+    "mask": "flatten the effect (release the mask, then expand) in the design tool",
+    "filter": "flatten the effect (expand the appearance) in the design tool",
+    "stroke-dasharray": "expand the dashed stroke into shapes (outline stroke)",
+}
+
+
+def advice(tag: str) -> str:
+    """``": what to do"`` for an element DeepMorph cannot model, or ``""``."""
+    return f": {ADVICE[tag]}" if tag in ADVICE else ""
+
+
 _SCRIPT_URL = re.compile(r"^\s*(javascript|vbscript|data)\s*:", re.IGNORECASE)
 
 
@@ -193,7 +218,10 @@ def property_verdict(name: str, value: str) -> str:
 
 
 def sanitized(
-    root: etree._Element, shapes: dict[etree._Element, Iterable[str]], style_of: dict[etree._Element, str]
+    root: etree._Element,
+    shapes: dict[etree._Element, Iterable[str]],
+    style_of: dict[etree._Element, str],
+    gradients: Iterable[etree._Element] = (),
 ) -> etree._ElementTree:
     """A fresh document holding only what DeepMorph models of ``root``.
 
@@ -203,17 +231,25 @@ def sanitized(
             its tag in :data:`GEOMETRY`, or declared by its primitive kind).
         style_of: for every kept element, its ``style=""`` reduced to the modelled properties
             (empty: none written).
+        gradients: the gradients the shapes' paints use, written first in a ``<defs>`` with
+            their geometry, stops and ``#id`` links only.
 
     Returns:
         The new tree: ``<svg>`` (its frame, namespaces for SVG and ``dm:``), ``<g>`` for every
         container, the shapes, ``<title>``/``<desc>`` text and comments; every other element
         and attribute left out.
     """
-    out_root = etree.Element(f"{{{SVG_NS}}}svg", nsmap={None: SVG_NS, "dm": DM_NS})
+    gradients = list(gradients)
+    nsmap = {None: SVG_NS, "dm": DM_NS, **({"xlink": XLINK_NS} if gradients else {})}
+    out_root = etree.Element(f"{{{SVG_NS}}}svg", nsmap=nsmap)
     for name in ROOT_ATTRIBUTES:
         if root.get(name) is not None:
             out_root.set(name, root.get(name))
     _copy_modelled_attributes(root, out_root, (), style_of.get(root, ""))
+    if gradients:
+        defs = etree.SubElement(out_root, f"{{{SVG_NS}}}defs")
+        for gradient in gradients:
+            _copy_gradient(gradient, defs, style_of)
     _copy_children(root, out_root, shapes, style_of)
     return etree.ElementTree(out_root)
 
@@ -259,6 +295,29 @@ def _copy_children(
                 last.tail = _layout(child.tail)
             continue
         node.tail, last = _layout(child.tail), node
+
+
+def _copy_gradient(gradient: etree._Element, defs: etree._Element, style_of: dict[etree._Element, str]) -> None:
+    """A gradient with its geometry attributes, its ``#id`` link and its stops' colours only
+    (a stop's ``style=""`` as ``style_of`` gives it: its stylesheet rules written in)."""
+    from deepmorph_core.svg.gradients import GRADIENT_ATTRIBUTES, STOP_ATTRIBUTES, href_of
+
+    node = etree.SubElement(defs, f"{{{SVG_NS}}}{etree.QName(gradient).localname}")
+    for key, value in gradient.attrib.items():
+        if etree.QName(key).namespace is None and key in GRADIENT_ATTRIBUTES:
+            node.set(key, value)
+    target = href_of(gradient)
+    if target is not None:
+        node.set(f"{{{XLINK_NS}}}href", f"#{target}")
+    for stop in gradient:
+        if not isinstance(stop.tag, str) or etree.QName(stop).localname != "stop":
+            continue
+        out = etree.SubElement(node, f"{{{SVG_NS}}}stop")
+        for key, value in stop.attrib.items():
+            if etree.QName(key).namespace is None and key in STOP_ATTRIBUTES:
+                out.set(key, value)
+        if style_of.get(stop):
+            out.set("style", style_of[stop])
 
 
 def _copy_modelled_attributes(src: etree._Element, dst: etree._Element, geometry: Iterable[str], style: str) -> None:

@@ -76,7 +76,11 @@ HOSTILE_SVGS = {
         "entity declarations are not allowed",
     ),
     "utf8-entity": (svg(LINE, '<!DOCTYPE svg [<!ENTITY a "aaaa">]>').encode(), "entity declarations are not allowed"),
-    "style-element": (svg("<style>line { stroke: url(#p) }</style>" + LINE).encode(), "unsupported: CSS <style>"),
+    "style-import": (svg("<style>@import url(SECRET_PATH);</style>" + LINE).encode(), "unsupported: CSS @import"),
+    "style-url": (
+        svg("<style>line { stroke: url(SECRET_PATH#p) }</style>" + LINE).encode(),
+        "only url(#id) of a gradient in the same file is read; nothing is fetched",
+    ),
     "pattern-image": (
         svg(
             '<defs><pattern id="p"><image href="SECRET_PATH" width="24" height="24"/></pattern></defs>' + LINE
@@ -197,13 +201,13 @@ def test_hostile_bundles_are_one_clear_error(tmp_path: Path) -> None:
         key = next(k for k in t if k.startswith("decoder.") and k.endswith("weight"))
         t[key] = t[key].to(torch.int8)
 
-    css = '<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 24 24"><style>*{fill:red}</style></svg>'
+    css = '<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 24 24"><style>@import url(x.css);</style></svg>'
     cases = {
         "deep": (lambda m: '{"format": "deepmorph-model/1", "x": ' + "[" * 50000 + "]" * 50000 + "}", "nested"),
         "huge-channels": (_set(("decoder", "channels"), [100000, 100000]), "less than or equal to 512"),
         "negative-channels": (_set(("decoder", "channels"), [-4, 8]), "greater than or equal to 1"),
         "wide-detector": (_set(("detector", "config", "width"), 1 << 20), None),
-        "css-drawing": (_set(("drawing_svg",), css), "unsupported: CSS <style>"),
+        "css-drawing": (_set(("drawing_svg",), css), "unsupported: CSS @import"),
     }
     for name, (edit, message) in cases.items():
         path = _bundle_with(tmp_path, name, meta_edit=edit)

@@ -39,7 +39,7 @@ def naive_render(space: MorphSpace, values: torch.Tensor, settings: RasterSettin
             hw = stroke_half_width(frame, p.style.stroke_width, mode)
             sdf = p.primitive.sdf(frame, grid, mode, hw)
             keep = keep * (1 - torch.sigmoid(settings.sharpness * sdf))
-        cover = colour * (1 - keep).reshape(B, h, w)
+        cover = colour.ink_sign * (1 - keep).reshape(B, h, w)
         acc = cover if acc is None else normalised_squash(acc, settings.squash) + cover
     return normalised_squash(acc, settings.squash)[:, None]
 

@@ -1,0 +1,33 @@
+"""Luminance: what the networks read of a colour print.
+
+A colour image becomes one channel with the BT.601 weights :data:`LUMA_WEIGHTS`, the
+conversion OpenCV's ``COLOR_RGB2GRAY`` and Pillow's ``convert("L")`` make, so that training
+reads renders the way the photo chain reads photos.
+"""
+
+from __future__ import annotations
+
+from torch import Tensor
+
+#: BT.601 luma weights of red, green and blue (JPEG's Y, OpenCV's and Pillow's gray).
+LUMA_WEIGHTS = (0.299, 0.587, 0.114)
+
+
+def to_luminance(images: Tensor) -> Tensor:
+    """The BT.601 luminance of RGB images; gray images are returned as they are.
+
+    Linear (differentiable) and not clamped: RGB in ``[0, 1]`` gives luminance in ``[0, 1]``.
+
+    Shape:
+        images: ``(B, 3, H, W)`` RGB or ``(B, 1, H, W)`` gray; returns ``(B, 1, H, W)``.
+
+    Raises:
+        ValueError: not a ``(B, C, H, W)`` batch with 1 or 3 channels.
+    """
+    if images.dim() != 4 or images.shape[1] not in (1, 3):
+        raise ValueError(f"to_luminance: expected (B, 3, H, W) or (B, 1, H, W) images, got {tuple(images.shape)}")
+    if images.shape[1] == 1:
+        return images
+    r, g, b = images.unbind(1)
+    wr, wg, wb = LUMA_WEIGHTS
+    return (wr * r + wg * g + wb * b).unsqueeze(1)
