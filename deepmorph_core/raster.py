@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from deepmorph_core.flat import flat_stroke_sdf
+from deepmorph_core.flat import flat_fill_sdf, flat_stroke_sdf
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.outline import Frame, Outline, pixel_bbox, pixel_grid
 from deepmorph_core.primitive import outline_paint_sdf
@@ -62,6 +62,10 @@ class RasterSettings:
         squash: ``t``, the squash sharpness.
         cull: evaluate each paint only inside its padded bounding box.
         blend: ``"union"`` (soft union of same-coloured paints) or ``"sum"`` (the paper's).
+        flat_fills: evaluate fills only near their outlines (:func:`~deepmorph_core.flat.flat_fill_sdf`)
+            instead of over their whole box: the same picture to within the sigmoid's reach, and
+            a large fill as cheap as its outline. ``None``: for colour drawings (whose large
+            fills it is for), so black-and-white models render exactly as they were trained.
     """
 
     width: int = 96
@@ -69,6 +73,7 @@ class RasterSettings:
     squash: float = 12.0
     cull: bool = True
     blend: str = "union"
+    flat_fills: bool | None = None
 
 
 def normalised_squash(x: Tensor, t: float) -> Tensor:
@@ -98,6 +103,8 @@ class SoftRasterizer(nn.Module):
         self.height, self.width = space.drawing.pixel_size(self.settings.width)
         self._runs = _paint_runs(space)
         self.black_and_white = space.drawing.black_and_white
+        flat = self.settings.flat_fills
+        self._flat_fills = (not self.black_and_white) if flat is None else flat
 
     def forward(self, values: Tensor) -> Tensor:
         """Render morph values.
@@ -167,6 +174,7 @@ class SoftRasterizer(nn.Module):
             positions: list[Tensor] = []
             sdfs: list[Tensor] = []
             strokes: list[tuple[Outline, Tensor]] = []
+            fills: list[tuple[Outline, bool]] = []
             for index, mode in paints:
                 prim = self.space.drawing.primitives[index]
                 frame = frames[index]
@@ -176,6 +184,9 @@ class SoftRasterizer(nn.Module):
                 half_width = stroke_half_width(frame, prim.style.stroke_width, mode)
                 if st.cull and mode == "stroke":
                     strokes.append((outline, half_width))  # evaluated together below
+                    continue
+                if st.cull and self._flat_fills:
+                    fills.append((outline, prim.primitive.evenodd))
                     continue
                 if st.cull:
                     box = pixel_bbox(outline, float(half_width.detach().max()) + reach)
@@ -191,8 +202,8 @@ class SoftRasterizer(nn.Module):
                 sdfs.append(outline_paint_sdf(outline, grid, mode, half_width, prim.primitive.evenodd).t())
                 rows = torch.arange(y0, y1, device=device)[:, None] * W
                 positions.append((rows + torch.arange(x0, x1, device=device)[None]).reshape(-1))
-            if strokes:
-                flat = flat_stroke_sdf(strokes, H, W, reach)
+            for flat in (flat_stroke_sdf(strokes, H, W, reach) if strokes else None,
+                         flat_fill_sdf(fills, H, W, reach) if fills else None):  # fmt: skip
                 if flat is not None:
                     positions.append(flat[0])
                     sdfs.append(flat[1])

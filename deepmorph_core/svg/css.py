@@ -96,8 +96,9 @@ class Stylesheet:
             prelude = tinycss2.serialize(rule.prelude).strip()
             try:
                 selectors = cssselect2.compile_selector_list(rule.prelude)
-            except cssselect2.SelectorError as exc:
-                raise StylesheetError(f"unsupported: CSS selector {prelude!r} ({exc})", line) from None
+            except Exception as exc:  # SelectorError, and what cssselect2's nth parser raises on nonsense
+                why = str(exc) if isinstance(exc, cssselect2.SelectorError) else "cannot read it"
+                raise StylesheetError(f"unsupported: CSS selector {prelude[:60]!r} ({why})", line) from None
             decls = self._declarations(rule.content, line)
             for selector in selectors:
                 if selector.pseudo_element is not None:
