@@ -6,6 +6,9 @@ The decoder reads code bits from the variables a renderer shows. What limits a d
   line, or under other ink): :meth:`MorphableDrawing.visibility
   <deepmorph_core.morphable.MorphableDrawing.visibility>` at or below
   :data:`~deepmorph_core.morphable.INVISIBLE` of the median variable;
+* **faint shapes**: a shape whose edges differ little in luminance from what lies around them
+  (a colour close to its neighbour's, :data:`FAINT`) moves just as faintly; its variables are not
+  counted;
 * **look-alikes**: variables whose effects on the picture are the same
   (:func:`~deepmorph_core.networks.twin_groups`, the two ends of a half circle) carry what one
   variable does.
@@ -42,6 +45,9 @@ LARGEST_CODE_MEASURED = 58
 ECC_CHOICES = (2, 1)
 #: A variable this visible or less is weak: it reads, but a wider bound would help most.
 WEAK = 0.3
+#: A shape whose removal changes the render's luminance by less than this is faint: its edges
+#: barely differ from what lies around them (a colour close to its neighbour's, or to paper).
+FAINT = 0.2
 
 
 @dataclass(frozen=True)
@@ -55,6 +61,8 @@ class ElementCapacity:
         variables: its morph variables.
         visible: how many of them a renderer shows.
         weak: how many of those show only a little (a wider ``dm:move`` helps most here).
+        contrast: the largest luminance change the shape makes to the render
+            (:meth:`~deepmorph_core.morphable.MorphableDrawing.contrast`): 1 for black on white.
     """
 
     index: int
@@ -63,6 +71,7 @@ class ElementCapacity:
     variables: int
     visible: int
     weak: int
+    contrast: float = 1.0
 
     @property
     def where(self) -> str:
@@ -112,7 +121,7 @@ class CapacityReport:
         if hidden:
             lines.append(
                 f"{hidden} of {self.n_variables} variables change nothing a renderer shows (points moving along "
-                "their own straight lines, or under other ink)"
+                "their own straight lines, under other ink, or on faint shapes)"
             )
         twins = self.visible - self.readable_groups
         if twins > 0:
@@ -125,6 +134,13 @@ class CapacityReport:
         for e in hiding[:5]:
             lines.append(
                 f"{e.where}: {e.variables - e.visible} of its {e.variables} variables change nothing a renderer shows"
+                + (" clearly (a faint shape)" if e.contrast < FAINT else "")
+            )
+        faint = sorted((e for e in self.elements if e.contrast < FAINT), key=lambda e: e.contrast)
+        for e in faint[:5]:
+            lines.append(
+                f"{e.where}: its edges differ from what lies around them by only {e.contrast:.2f} in luminance"
+                " (black on white: 1); a colour further from its neighbours' carries more"
             )
         weakest = sorted((e for e in self.elements if e.weak), key=lambda e: -e.weak)[:5]
         for e in weakest:
@@ -181,7 +197,10 @@ def predict(
     if n == 0:
         return CapacityReport(0, 0, 0, 0, 0, None, [], [p.line for p in drawing.drawing.primitives])
     visibility = drawing.visibility(width)
-    shown = visibility > INVISIBLE
+    contrast = drawing.contrast(width)
+    # a faint shape's moves are as faint as its edges: its variables are not counted as readable
+    faint = np.array([v.owner == "primitive" and contrast[v.index] < FAINT for v in drawing.variables], dtype=bool)
+    shown = (visibility > INVISIBLE) & ~faint
     groups = twin_groups(drawing.effects(drawing.rasterizer(width)))
     readable = sum(1 for members, _ in groups if shown[members].any())
     code_bits = code_bits_for(readable)
@@ -196,7 +215,7 @@ def predict(
         if not ks:
             static.append(prim.line)
             continue
-        vis = visibility[np.array(ks)]
+        vis = np.where(faint[np.array(ks)], 0.0, visibility[np.array(ks)])
         elements.append(
             ElementCapacity(
                 prim.index,
@@ -205,6 +224,7 @@ def predict(
                 len(ks),
                 int((vis > INVISIBLE).sum()),
                 int(((vis > INVISIBLE) & (vis < WEAK)).sum()),
+                round(float(contrast[prim.index]), 3),
             )
         )
     return CapacityReport(

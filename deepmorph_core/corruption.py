@@ -164,6 +164,21 @@ class AugmentPipeline(nn.Module):
             else:
                 self._runs.append(step)
 
+    def colour_only(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """Only the colour stage, then luminance: how a colour print and the camera's colour
+        handling reach the gray photo chain, for photo simulators that do their own geometry,
+        optics and noise.
+
+        Shape:
+            images: ``(B, 3, H, W)`` RGB (or ``(B, 1, H, W)``, returned as it is); returns
+            ``(B, 1, H, W)`` in ``[0, 1]``.
+        """
+        out = images
+        if images.shape[1] == 3:
+            for step in self._colour:
+                out = step(out, generator)
+        return to_luminance(out).clamp(0.0, 1.0)
+
     def forward(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
         """Corrupt ``images`` (gray or RGB in ``[0, 1]``, white paper = 1).
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from lxml import etree
 from pydantic import ValidationError
 from torch import Tensor
 
@@ -30,6 +31,7 @@ from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.render import render_svg, render_svg_ink, render_svg_rgb
+from deepmorph_core.svg.policy import GEOMETRY
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 # a variable changing the picture by at most this share of the median variable is invisible: it
@@ -199,6 +201,35 @@ class MorphableDrawing:
         median = float(np.median(energy)) if self.n_variables else 0.0
         return energy / median if median > 0 else energy
 
+    def contrast(self, width: int = 96) -> np.ndarray:
+        """``(n_primitives,)`` how strongly each shape shows: the largest change of luminance
+        (``[0, 1]``) that leaving the shape out makes to the unmorphed drawing's render at
+        ``width``. Black on white is 1; a shape in a colour close to what lies under it is near
+        0, and its moves are as faint as its edges."""
+        base = self.to_svg(self.neutral_values()[0])
+        full = render_svg(base, width)
+        root = etree.fromstring(base.encode("utf-8"))
+        shapes = [el for el in root.iter() if isinstance(el.tag, str) and etree.QName(el).localname in GEOMETRY]
+        out = np.zeros(len(self.drawing.primitives))
+        for k, element in enumerate(shapes[: len(out)]):
+            element.set("display", "none")
+            without = render_svg(etree.tostring(root, encoding="unicode"), width)
+            element.attrib.pop("display")
+            out[k] = float(np.abs(full - without).max())
+        return out
+
+    def palette(self) -> list[dict[str, Any]]:
+        """The paints the drawing lays down: ``paint`` (``#rrggbb``, with alpha as ``#rrggbbaa``,
+        or ``url(#id) ~ mean``), its ``luminance`` and the ``shapes`` (indices) that use it."""
+        rows: dict[Any, dict[str, Any]] = {}
+        for prim in self.drawing.primitives:
+            for paint in prim.style.palette:
+                row = rows.setdefault(paint, {"paint": paint.describe(), "luminance": round(paint.luminance, 3),
+                                              "alpha": round(paint.alpha, 3), "shapes": []})  # fmt: skip
+                if prim.index not in row["shapes"]:
+                    row["shapes"].append(prim.index)
+        return list(rows.values())
+
     def describe(self) -> dict[str, Any]:
         """A JSON-ready summary: primitives, variables, bounds, what is fixed or skipped."""
         per_prim: dict[int, list[Variable]] = {}
@@ -249,4 +280,5 @@ class MorphableDrawing:
                 for v in self.space.variables
             ],
             "skipped": [{"line": line, "reason": why} for line, why in self.drawing.skipped],
+            "palette": self.palette(),
         }

@@ -33,7 +33,7 @@ ENTRY_POINT_GROUP = "deepmorph"
 #: What each category's implementations must define (checked when the class is first used);
 #: the protocols themselves are in :mod:`deepmorph_core.protocols`.
 _REQUIRED: dict[str, tuple[str, ...]] = {
-    "primitive": ("kind", "tags", "priority", "morphable", "from_element", "control_points", "outline", "sdf", "write"),
+    "primitive": ("kind", "tags", "priority", "morphable", "from_element", "control_points", "outline", "write"),
     "path-segment": ("kind", "commands", "svgpath_types", "morphable", "from_svgpath", "add_pieces", "flatten", "to_d"),
     "augmentation": ("name", "__call__"),
     "detector": ("name", "from_model", "detect"),

@@ -1,5 +1,6 @@
-"""Helpers for primitive authors: a base class giving ``sdf`` from ``outline``, and small
-numeric helpers shared by built-in and third-party kinds.
+"""Helpers for primitive authors: a base class holding what the parser sets, the signed
+distance of an outline's paint, and small numeric helpers shared by built-in and third-party
+kinds.
 
 A plugin's primitive only has to read its element, name its control points, build an
 :class:`~deepmorph_core.outline.Outline` and write itself back; distances, caps, fills and
@@ -16,7 +17,7 @@ from torch import Tensor
 
 from deepmorph_core.geometry import CAP_CODES, CAP_ROUND
 from deepmorph_core.outline import Frame, Outline, OutlineBuilder, fill_sdf, stroke_sdf
-from deepmorph_core.protocols import ElementMorph
+from deepmorph_core.protocols import ElementMorph, Primitive
 from deepmorph_core.svg.reader import ElementReader
 from deepmorph_core.svg.values import format_number
 
@@ -41,10 +42,12 @@ class BasePrimitive:
     def outline(self, frame: Frame) -> Outline:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def sdf(self, frame: Frame, grid: Tensor, paint: str, half_width: Tensor) -> Tensor:
-        """Signed distance ``(B, P)`` of the stroke or the fill (see the protocol)."""
-        outline = self.outline(frame)
-        return outline_paint_sdf(outline, grid, paint, half_width, self.evenodd)
+
+def paint_sdf(primitive: Primitive, frame: Frame, grid: Tensor, paint: str, half_width: Tensor) -> Tensor:
+    """Differentiable signed distance ``(B, P)`` (positive inside, zero on the border) of a
+    primitive's ``"stroke"`` or ``"fill"`` over ``grid`` ``(P, 2)`` pixel centres, from its
+    outline: what the rasterizer evaluates (culled), in full, for tests and plugin authors."""
+    return outline_paint_sdf(primitive.outline(frame), grid, paint, half_width, primitive.evenodd)
 
 
 def outline_paint_sdf(outline: Outline, grid: Tensor, paint: str, half_width: Tensor, evenodd: bool) -> Tensor:

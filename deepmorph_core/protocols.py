@@ -56,12 +56,18 @@ class Primitive(Protocol):
         priority: when several kinds read one tag, higher priority is asked first; a kind
             declines an element by returning ``None`` from :meth:`from_element`.
         morphable: one line for ``list-primitives`` saying what may move.
+
+    Instance attributes, set by the drawing parser from the element's style:
+        evenodd: the fill rule is ``evenodd`` (the rasterizer's inside test).
+        filled: the element paints a fill (an outline may then leave out its rings).
     """
 
     kind: ClassVar[str]
     tags: ClassVar[tuple[str, ...]]
     priority: ClassVar[int]
     morphable: ClassVar[str]
+    evenodd: bool
+    filled: bool
 
     @classmethod
     def from_element(cls, element: etree._Element, reader: ElementReader) -> Primitive | None:
@@ -76,13 +82,9 @@ class Primitive(Protocol):
         ...
 
     def outline(self, frame: Frame) -> Outline:
-        """What the element draws, in pixels, for a batch of morphed control points."""
-        ...
-
-    def sdf(self, frame: Frame, grid: Tensor, paint: str, half_width: Tensor) -> Tensor:
-        """Differentiable signed distance ``(B, P)`` (positive inside, zero on the border) of
-        the ``"stroke"`` or ``"fill"`` paint over ``grid`` ``(P, 2)`` pixel centres.
-        """
+        """What the element draws, in pixels, for a batch of morphed control points: the only
+        geometry the rasterizer asks a primitive for. Distances, caps, fills, culling,
+        paints and compositing are the core's, from this outline."""
         ...
 
     def write(self, element: etree._Element, points: np.ndarray, morph: ElementMorph) -> None:

@@ -1,8 +1,8 @@
 """The photo chain's validation of a trained model: close-up photos of its codes.
 
 Each fresh payload's code is rendered at :data:`PRINT_PX`, printed and photographed close
-(:func:`~deepmorph_detect.scenes.close_up_photo`: a scan, or a phone held close, at ``medium``)
-and decoded by the whole photo chain (:class:`~deepmorph_detect.locate.Locator`). A model
+(:func:`~deepmorph_detect.scenes.close_up_photo`: a scan, or a phone held close, at ``medium``;
+a colour code is printed in colour, through the colour plugins, :func:`printed`) and decoded by the whole photo chain (:class:`~deepmorph_detect.locate.Locator`). A model
 without a trained detector is read from whole frames, as such photos need no detector.
 """
 
@@ -16,12 +16,28 @@ import torch
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
-from deepmorph_core.render import render_svg
+from deepmorph_core.corruption import AugmentPipeline, build_pipeline
+from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.validation import SEVERITY
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.scenes import close_up_photo
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
+
+
+def printed(
+    model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator
+) -> np.ndarray:
+    """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white: a colour
+    drawing rendered in colour and put through the colour corruptions of the capture (ink,
+    paper, white balance, chroma: the registered ``colour`` plugins) before it becomes the
+    luminance the camera simulation works on; a black-and-white one rendered as it is."""
+    if colours is None:
+        return render_svg(svg, PRINT_PX)
+    rgb = torch.from_numpy(render_svg_rgb(svg, PRINT_PX).transpose(2, 0, 1).copy())[None]
+    generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
+    with torch.no_grad():
+        return colours.colour_only(rgb, generator)[0, 0].numpy()
 
 
 def validate_close_ups(
@@ -35,10 +51,11 @@ def validate_close_ups(
     payloads = random_payloads(samples, codec.spec.payload_bits, rng)
     codes = codec.encode(payloads)
     locator = Locator(model)
+    colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
     read = wrong = right_bits = missed = 0
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-        photo = close_up_photo(render_svg(model.drawing.to_svg(values), PRINT_PX), severity, rng)
+        photo = close_up_photo(printed(model, model.drawing.to_svg(values), colours, rng), severity, rng)
         found = locator.locate(photo)
         if not found:
             missed += 1
@@ -62,4 +79,4 @@ def validate_close_ups(
     )
 
 
-__all__ = ["PRINT_PX", "validate_close_ups"]
+__all__ = ["PRINT_PX", "printed", "validate_close_ups"]

@@ -133,6 +133,12 @@ def inspect(
         out.print(f"... and {len(info['primitives']) - TABLE_ROWS} more primitives (--json lists every one)")
     for g in info["groups"]:
         out.print(f"group at line {g['line']}: {g['variables']} variables, bounds {g['bounds']}")
+    palette = info["palette"]
+    if palette:
+        out.print(f"palette ({len(palette)} paints, luminance 0 = black, 1 = white):")
+        for row in palette[:TABLE_ROWS]:
+            shapes = ", ".join(str(i) for i in row["shapes"][:12]) + (" ..." if len(row["shapes"]) > 12 else "")
+            out.print(f"  {row['paint']}  luminance {row['luminance']:.2f}  shapes {shapes}")
     for s in info["skipped"]:
         out.print(f"skipped line {s['line']}: {s['reason']}")
     if info["n_variables"] == 0:

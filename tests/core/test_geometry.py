@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.drawing import load_drawing
 from deepmorph_core.morph import MorphSpace
 from tests.conftest import make_svg
@@ -58,7 +59,7 @@ def test_sdf_gradcheck(case: str, builtin_registry) -> None:
         values = space.values_from_unit(u)
         frame = space.frames(values, width)[0]
         hw = frame.scale * prim.style.stroke_width / 2
-        return prim.primitive.sdf(frame, grid, paint, hw)
+        return paint_sdf(prim.primitive, frame, grid, paint, hw)
 
     unit.requires_grad_(True)
     assert torch.autograd.gradcheck(sdf, (unit,), eps=1e-6, atol=1e-5, rtol=1e-4)
@@ -72,18 +73,18 @@ def test_sdf_sign_convention(case: str, builtin_registry) -> None:
     frame = space.frames(values, 24)[0]  # 1 px per user unit
     hw = frame.scale * prim.style.stroke_width / 2
     far = torch.tensor([[0.2, 23.8]], dtype=torch.float64)
-    assert prim.primitive.sdf(frame, far, paint, hw).item() < -1
+    assert paint_sdf(prim.primitive, frame, far, paint, hw).item() < -1
     inside = {
         "circle": [12.0, 5.0],  # on the stroke's centre line
         "rect-rounded-fill": [11.0, 10.0],
         "polygon-fill": [11.0, 9.0],
         "line-round": [11.0, 10.0],
     }[case]
-    assert prim.primitive.sdf(frame, torch.tensor([inside], dtype=torch.float64), paint, hw).item() > 0.5
+    assert paint_sdf(prim.primitive, frame, torch.tensor([inside], dtype=torch.float64), paint, hw).item() > 0.5
     if case == "circle":
         border = torch.tensor([[12.0, 4.0], [12.0, 6.0], [20.0, 12.0]], dtype=torch.float64)
         torch.testing.assert_close(
-            prim.primitive.sdf(frame, border, paint, hw), torch.zeros(1, 3, dtype=torch.float64), atol=1e-6, rtol=0
+            paint_sdf(prim.primitive, frame, border, paint, hw), torch.zeros(1, 3, dtype=torch.float64), atol=1e-6, rtol=0
         )
 
 

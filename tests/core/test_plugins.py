@@ -164,3 +164,29 @@ def test_bad_declarations_are_clear_errors(declared: dict, message: str) -> None
     with pytest.raises(PluginError, match=message):
         for reg in registry.primitives.values():
             _ = reg.obj
+
+
+def test_a_primitive_needs_an_outline_and_no_sdf_of_its_own() -> None:
+    """The registry asks of a primitive what the rasterizer consumes: its outline."""
+    from deepmorph_primitives.line import Line
+
+    members = {k: getattr(Line, k) for k in ("from_element", "control_points", "outline", "write")}
+    Outlined = type("Outlined", (), {"kind": "outlined", "tags": ("outlined",), "priority": 0, "morphable": "x", **members})
+    NoOutline = type("NoOutline", (), {"kind": "no-outline", "tags": ("no-outline",), "priority": 0, "morphable": "x",
+                                       **{k: v for k, v in members.items() if k != "outline"}})  # fmt: skip
+    assert not hasattr(Outlined, "sdf")
+
+    @hookimpl
+    def deepmorph_register_primitives(register):
+        register.primitive(Outlined)
+
+    good = plugin_module("outlined_plugin", deepmorph_register_primitives=deepmorph_register_primitives)
+    assert "outlined" in load_registry([good], entry_points=False).primitives
+
+    @hookimpl
+    def deepmorph_register_primitives(register):  # noqa: F811
+        register.primitive(NoOutline)
+
+    bad = plugin_module("no_outline_plugin", deepmorph_register_primitives=deepmorph_register_primitives)
+    with pytest.raises(PluginError, match="NoOutline lacks.*outline"):
+        _ = load_registry([bad], entry_points=False).primitives

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.raster import RasterSettings, SoftRasterizer, normalised_squash, stroke_half_width
@@ -37,7 +38,7 @@ def naive_render(space: MorphSpace, values: torch.Tensor, settings: RasterSettin
         for p, mode in members:
             frame = frames[p.index]
             hw = stroke_half_width(frame, p.style.stroke_width, mode)
-            sdf = p.primitive.sdf(frame, grid, mode, hw)
+            sdf = paint_sdf(p.primitive, frame, grid, mode, hw)
             keep = keep * (1 - torch.sigmoid(settings.sharpness * sdf))
         cover = colour.ink_sign * (1 - keep).reshape(B, h, w)
         acc = cover if acc is None else normalised_squash(acc, settings.squash) + cover

@@ -24,6 +24,7 @@ from deepmorph_bezier.segments import (
 from svg.path import CubicBezier, Move, QuadraticBezier, parse_path
 
 import deepmorph_primitives.plugin as builtin
+from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.bounds import BoundSpec
 from deepmorph_core.drawing import Drawing, PlacedPrimitive, load_drawing
 from deepmorph_core.errors import UnsupportedFeatureError
@@ -354,7 +355,7 @@ def test_stroke_sdf_gradcheck(reg: Registry, d: str, linecap: str) -> None:
     local = torch.as_tensor(control, dtype=torch.float64)[None].clone().requires_grad_(True)
 
     def sdf(points: torch.Tensor) -> torch.Tensor:
-        return prim.sdf(Frame(points, affine), grid, "stroke", half_width)
+        return paint_sdf(prim, Frame(points, affine), grid, "stroke", half_width)
 
     value = sdf(local)
     assert value.shape == (1, grid.shape[0])
