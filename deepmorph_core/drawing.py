@@ -23,9 +23,9 @@ from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Primitive
 from deepmorph_core.render import raster_size
 from deepmorph_core.svg import policy
-from deepmorph_core.svg.policy import DM_NS
 from deepmorph_core.svg.css import Stylesheet, StylesheetError
 from deepmorph_core.svg.gradients import GRADIENT_TAGS, STOP_ATTRIBUTES, GradientError, Gradients
+from deepmorph_core.svg.policy import DM_NS
 from deepmorph_core.svg.reader import GEOMETRY_VERSION, GEOMETRY_VERSIONS, ElementReader
 from deepmorph_core.svg.secure import SVG_NS, parse_svg_bytes, read_svg_bytes
 from deepmorph_core.svg.style import Paint, Style, compute_style, style_declarations
@@ -379,7 +379,8 @@ class _Walker:
                         if inner in policy.HOSTILE_ELEMENTS:
                             raise self.error(child, f"unsupported: element <{inner}> (scripts are never kept)")
                         if inner not in GRADIENT_TAGS and inner != "style":
-                            self.unsupported(drawing, child, f"<{inner}> in <defs>{policy.advice(inner)}")
+                            why = policy.advice(inner) or ": drawn only through <use>; expand the references"
+                            self.unsupported(drawing, child, f"<{inner}> in <defs>{why}")
                 continue
             if name == "style" or name in GRADIENT_TAGS:  # read before the walk (css.py, gradients.py)
                 continue

@@ -183,9 +183,7 @@ def flat_stroke_sdf(
     return positions_t, out
 
 
-def flat_fill_sdf(
-    fills: list[tuple[Outline, bool]], H: int, W: int, reach: float
-) -> tuple[Tensor, Tensor] | None:
+def flat_fill_sdf(fills: list[tuple[Outline, bool]], H: int, W: int, reach: float) -> tuple[Tensor, Tensor] | None:
     """Signed distances of many fills (positive inside), evaluated only where they can change.
 
     Near its outline (within ``reach`` of every batch item's edge) a fill gets its exact signed
@@ -221,14 +219,15 @@ def flat_fill_sdf(
         with torch.no_grad():
             # the sign, per batch item, where the edge is near
             grid = torch.stack([(near_pixels % W).to(dtype) + 0.5, (near_pixels // W).to(dtype) + 0.5], -1)
-            inside = _signs(grid, outline.rings, evenodd, -near[1] if near is not None else None)  # (B, S)
+            inside = _inside(grid, outline.rings, evenodd)  # (B, S)
             # deep inside: pixels of the outline's box that no edge reaches, tested on the mean outline
             ext = outline.extent.reshape(-1, 2)
             x0, y0 = (max(0, int(np.floor(float(v)))) for v in ext.amin(0))
             x1, y1 = (min(n, int(np.ceil(float(v))) + 1) for v, n in zip(ext.amax(0), (W, H)))
             deep = torch.zeros(0, dtype=torch.long, device=device)
             if x1 > x0 and y1 > y0:
-                box = (torch.arange(y0, y1, device=device)[:, None] * W + torch.arange(x0, x1, device=device)[None]).reshape(-1)
+                rows = torch.arange(y0, y1, device=device)[:, None] * W
+                box = (rows + torch.arange(x0, x1, device=device)[None]).reshape(-1)
                 far = ~torch.isin(box, near_pixels)
                 box = box[far]
                 centre = torch.stack([(box % W).to(dtype) + 0.5, (box // W).to(dtype) + 0.5], -1)
@@ -245,28 +244,9 @@ def flat_fill_sdf(
     return torch.cat(positions), torch.cat(sdfs, 0)
 
 
-def _signs(grid: Tensor, rings: list[Tensor], evenodd: bool, distance: Tensor | None) -> Tensor:
-    """``(B, S)`` inside tests of pixels near a fill's outline, ``distance`` ``(S, B)`` from it.
-
-    Winding numbers cost every pixel times every ring vertex times the batch. A pixel farther
-    from a batch item's outline than the largest move of any ring vertex from the batch's mean
-    ring lies on the same side of that item's outline as of the mean outline (the edges sweep no
-    farther between the two), so only the pixels within that band get per-item tests."""
-    mean_rings = [ring.mean(0, keepdim=True) for ring in rings]
-    B = rings[0].shape[0]
-    inside = _inside(grid, mean_rings, evenodd).expand(B, -1).clone()
-    if distance is None or not len(grid):
-        return inside
-    shift = max(float((ring - mean).norm(dim=-1).amax()) for ring, mean in zip(rings, mean_rings))
-    unsure = distance.amin(1) <= shift + 1.0  # a pixel of margin for the rings' flattened arcs
-    if bool(unsure.any()):
-        inside[:, unsure] = _inside(grid[unsure], rings, evenodd)
-    return inside
-
-
 def _inside(grid: Tensor, rings: list[Tensor], evenodd: bool) -> Tensor:
     """``(B, P)`` whether each point is inside the rings (``nonzero`` or ``evenodd`` rule)."""
-    winding = sum(G.ring_winding(grid, ring) for ring in rings)
+    winding = G.winding_numbers(grid, rings)
     return (winding % 2 == 1) if evenodd else (winding != 0)
 
 

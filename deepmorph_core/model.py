@@ -66,6 +66,24 @@ class Detection:
         return out
 
 
+def check_trainable(md: MorphableDrawing, name: str) -> None:
+    """Refuse a drawing no model can be trained on: no variables, or more shapes or variables
+    than training handles.
+
+    Raises:
+        DeepMorphError: naming the drawing and what to do.
+    """
+    if md.n_variables == 0:
+        raise DeepMorphError(f"{name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move")
+    shapes = len(md.drawing.primitives)
+    if shapes > MAX_TRAIN_PRIMITIVES or md.n_variables > MAX_TRAIN_VARIABLES:
+        raise DeepMorphError(
+            f"{name}: {shapes} shapes and {md.n_variables} variables; a drawing to train on may have at "
+            f"most {MAX_TRAIN_PRIMITIVES} shapes and {MAX_TRAIN_VARIABLES} variables (mark the elements that "
+            'need not morph dm:fixed="true", or simplify the drawing)'
+        )
+
+
 @dataclass
 class DeepMorphModel:
     """Everything needed to hide payloads in one drawing and read them back.
@@ -115,17 +133,7 @@ class DeepMorphModel:
             geometry=GEOMETRY_VERSION,
             **_bound_kwargs(bounds_defaults),
         )
-        if md.n_variables == 0:
-            raise DeepMorphError(
-                f"{drawing_name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
-            )
-        shapes = len(md.drawing.primitives)
-        if shapes > MAX_TRAIN_PRIMITIVES or md.n_variables > MAX_TRAIN_VARIABLES:
-            raise DeepMorphError(
-                f"{drawing_name}: {shapes} shapes and {md.n_variables} variables; a drawing to train on may have at "
-                f"most {MAX_TRAIN_PRIMITIVES} shapes and {MAX_TRAIN_VARIABLES} variables (mark the elements that "
-                'need not morph dm:fixed="true", or simplify the drawing)'
-            )
+        check_trainable(md, drawing_name)
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()
         meta = BundleMeta(

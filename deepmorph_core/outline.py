@@ -184,7 +184,7 @@ def fill_sdf(outline: Outline, grid: Tensor, evenodd: bool = False) -> Tensor:
     if not dists or not outline.rings:
         return torch.full((B, grid.shape[0]), -1e3, dtype=grid.dtype, device=grid.device)
     d = torch.cat(dists, 1).amin(1)
-    winding = sum(G.ring_winding(grid, ring) for ring in outline.rings)
+    winding = G.winding_numbers(grid, outline.rings)
     inside = (winding % 2 == 1) if evenodd else (winding != 0)
     return torch.where(inside, d, -d)
 

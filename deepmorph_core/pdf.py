@@ -126,7 +126,8 @@ def render_pdf(data: bytes, width: int, page: int = 0) -> np.ndarray:
             raise DeepMorphError(f"the PDF has {len(pdf)} pages; no page {page + 1}")
         sheet = pdf[page]
         bitmap = sheet.render(scale=width / sheet.get_width(), fill_color=(255, 255, 255, 255))
-        gray = np.asarray(bitmap.to_pil().convert("RGB").convert("L"), dtype=np.float32) / 255.0  # BT.601, as render_svg
+        # luminance with BT.601's weights, as render_svg makes it
+        gray = np.asarray(bitmap.to_pil().convert("RGB").convert("L"), dtype=np.float32) / 255.0
     finally:
         pdf.close()
     return gray[:, :width]  # PDFium rounds a fractional size up

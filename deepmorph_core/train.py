@@ -42,7 +42,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
-from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
 from deepmorph_core.plugins import default_registry
@@ -537,6 +537,7 @@ def _payload_code(
     """The code of a new model: the requested payload's (with a warning when the drawing is
     predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry."""
     drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds)
+    check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
     report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
     if payload_bits == "auto":
         if report.codec is None:

@@ -2,8 +2,9 @@
 
 Each fresh payload's code is rendered at :data:`PRINT_PX`, printed and photographed close
 (:func:`~deepmorph_detect.scenes.close_up_photo`: a scan, or a phone held close, at ``medium``;
-a colour code is printed in colour, through the colour plugins, :func:`printed`) and decoded by the whole photo chain (:class:`~deepmorph_detect.locate.Locator`). A model
-without a trained detector is read from whole frames, as such photos need no detector.
+a colour code is printed in colour, through the colour plugins, :func:`printed`) and decoded
+by the whole photo chain (:class:`~deepmorph_detect.locate.Locator`). A model without a
+trained detector is read from whole frames, as such photos need no detector.
 """
 
 from __future__ import annotations
@@ -14,9 +15,9 @@ import numpy as np
 import torch
 
 from deepmorph_core.bundle import ValidationRecord
+from deepmorph_core.corruption import AugmentPipeline, build_pipeline
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
-from deepmorph_core.corruption import AugmentPipeline, build_pipeline
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.validation import SEVERITY
 from deepmorph_detect.locate import Locator
@@ -25,9 +26,7 @@ from deepmorph_detect.scenes import close_up_photo
 PRINT_PX = 400  # the code's render, before it is printed and photographed
 
 
-def printed(
-    model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator
-) -> np.ndarray:
+def printed(model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator) -> np.ndarray:
     """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white: a colour
     drawing rendered in colour and put through the colour corruptions of the capture (ink,
     paper, white balance, chroma: the registered ``colour`` plugins) before it becomes the

@@ -131,7 +131,7 @@ class Stylesheet:
         matches = self.matcher.match(self._wrappers[element])
         normal: dict[str, str] = {}
         important: dict[str, str] = {}
-        for _, _, _, (specificity, order, index, decls) in sorted(matches, key=lambda m: m[3][:3]):
+        for _, _, _, (*_rank, decls) in sorted(matches, key=lambda m: m[3][:3]):
             for name, value, is_important in decls:
                 (important if is_important else normal)[name] = value
         return normal, important

@@ -126,7 +126,8 @@ class Gradients:
             chain = self.chain(gradient_id)
             stops: list[etree._Element] = []
             for link in chain:  # stops come from the first gradient in the chain that has any
-                stops = [s for s in self.elements[link] if isinstance(s.tag, str) and etree.QName(s).localname == "stop"]
+                element = self.elements[link]
+                stops = [s for s in element if isinstance(s.tag, str) and etree.QName(s).localname == "stop"]
                 if stops:
                     break
             self._means[gradient_id] = self._mean(gradient_id, stops)

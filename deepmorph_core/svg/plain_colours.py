@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 
+import tinycss2.color3
 from lxml import etree
 
 from deepmorph_core.svg.secure import parse_svg_bytes
@@ -19,17 +20,30 @@ from deepmorph_core.svg.style import parse_colour, style_declarations
 
 #: Colour properties, with the opacity property their alpha multiplies into.
 _COLOUR_PROPERTIES = {"fill": "fill-opacity", "stroke": "stroke-opacity", "stop-color": "stop-opacity", "color": None}
-#: Colour text every renderer reads: ``#rgb``, ``#rrggbb``, keywords that need no colour.
+#: Colour text every renderer reads: ``#rgb``, ``#rrggbb``, keywords that need no colour, and
+#: (checked in :func:`_is_plain`) SVG 1.1's colour names and its comma ``rgb()``.
 _PLAIN = re.compile(r"^(#[0-9a-fA-F]{3}|#[0-9a-fA-F]{6}|none|currentcolor|inherit|url\(.*)$", re.IGNORECASE)
-#: A quick look for anything that might need a rewrite (most drawings hold only hex colours).
-_MAYBE = re.compile(r"(fill|stroke|stop-color|color)\s*[=:]\s*[\"']?\s*(?!#[0-9a-fA-F]{6}\b|#[0-9a-fA-F]{3}\b|none\b|url)",
-                    re.IGNORECASE)  # fmt: skip
+#: Every colour value in a document, as attribute or declaration: a quick look before any parse.
+_VALUES = re.compile(r"(?<![\w-])(?:fill|stroke|stop-color|color)\s*(?:=\s*[\"']|:)\s*([^\"';]*)", re.IGNORECASE)
+
+
+def _is_plain(value: str) -> bool:
+    """Whether every renderer reads ``value`` as DeepMorph does: hex without alpha, keywords,
+    ``url()``, and the CSS 2 / SVG 1.1 colours (names and comma ``rgb()``, tinycss2's CSS 3
+    parser, which knows no CSS 4 name and no ``rgb()`` with spaces)."""
+    text = value.strip()
+    if _PLAIN.match(text):
+        return True
+    if not (text.isalpha() or text.lower().startswith("rgb(")):
+        return False
+    colour = tinycss2.color3.parse_color(text)
+    return colour is not None and not isinstance(colour, str) and colour.alpha == 1.0
 
 
 def plain_colours(svg_text: str) -> str:
     """``svg_text`` with every colour written as ``#rrggbb`` (alpha in the ``*-opacity``
     property); the text unchanged when it holds only such colours already."""
-    if not _MAYBE.search(svg_text):
+    if all(_is_plain(v) for v in _VALUES.findall(svg_text)):
         return svg_text
     root = parse_svg_bytes(svg_text.encode("utf-8"), "<svg>")
     changed = False
@@ -38,7 +52,7 @@ def plain_colours(svg_text: str) -> str:
             continue
         for prop, opacity in _COLOUR_PROPERTIES.items():
             value = element.get(prop)
-            if value is not None and not _PLAIN.match(value.strip()):
+            if value is not None and not _is_plain(value):
                 hexa, alpha = _plain(value, prop)
                 element.set(prop, hexa)
                 if opacity is not None and alpha < 1.0:
@@ -49,7 +63,7 @@ def plain_colours(svg_text: str) -> str:
             rewritten = dict(decls)
             for prop, opacity in _COLOUR_PROPERTIES.items():
                 value = decls.get(prop)
-                if value is not None and not _PLAIN.match(value.strip()):
+                if value is not None and not _is_plain(value):
                     hexa, alpha = _plain(value, prop)
                     rewritten[prop] = hexa
                     if opacity is not None and alpha < 1.0:

@@ -181,7 +181,6 @@ ADVICE = {
     "marker": "expand the markers into shapes",
     "clip-path": "flatten the effect (release the clipping path, then expand) in the design tool",
     "mask": "flatten the effect (release the mask, then expand) in the design tool",
-    "filter": "flatten the effect (expand the appearance) in the design tool",
     "stroke-dasharray": "expand the dashed stroke into shapes (outline stroke)",
 }
 

@@ -23,7 +23,6 @@ import tinycss2.color4
 from deepmorph_core.luminance import LUMA_WEIGHTS
 from deepmorph_core.svg.values import parse_length, parse_number
 
-
 #: Colour spaces tinycss2 converts to sRGB; others (lab, oklch, display-p3 ...) are refused.
 _SRGB_SPACES = ("srgb", "hsl", "hwb")
 

@@ -161,7 +161,9 @@ def test_ink_fade_moves_colour_toward_luminance_and_lifts_black() -> None:
     half = fade_ink(images, torch.full((2,), 0.5, dtype=torch.float64), torch.zeros(2, dtype=torch.float64))
     torch.testing.assert_close(half, (images + lum) / 2)
     torch.testing.assert_close(to_luminance(half), lum)  # desaturation keeps luminance
-    ends = fade_ink(torch.tensor([0.0, 1.0]).reshape(2, 1, 1, 1).expand(-1, 3, 1, 1), torch.zeros(2), torch.full((2,), 0.2))
+    ends = fade_ink(
+        torch.tensor([0.0, 1.0]).reshape(2, 1, 1, 1).expand(-1, 3, 1, 1), torch.zeros(2), torch.full((2,), 0.2)
+    )
     assert ends[0].flatten().tolist() == pytest.approx([0.2] * 3)  # black lifted
     assert ends[1].flatten().tolist() == pytest.approx([1.0] * 3)  # paper stays white
 
@@ -224,7 +226,9 @@ def test_chroma_subsampling_matches_pillow_420() -> None:
     h, w = 45, 47
     yy, xx = np.mgrid[0:h, 0:w]
     rng = np.random.default_rng(0)
-    rgb = np.stack([0.5 + 0.4 * np.sin(xx / 3 + yy / 5), 0.5 + 0.4 * np.cos(yy / 2.5), 0.5 + 0.4 * np.sin((xx - yy) / 4)], -1)
+    rgb = np.stack(
+        [0.5 + 0.4 * np.sin(xx / 3 + yy / 5), 0.5 + 0.4 * np.cos(yy / 2.5), 0.5 + 0.4 * np.sin((xx - yy) / 4)], -1
+    )
     pixels = (np.clip(rgb + rng.normal(0, 0.05, rgb.shape), 0, 1) * 255).round().astype(np.uint8)
 
     def pillow(subsampling: int) -> np.ndarray:
@@ -262,7 +266,9 @@ def test_pipeline_without_steps_reads_luminance(registry: Registry) -> None:
 
 
 def test_pipeline_runs_colour_steps_first_then_gray_ones(registry: Registry) -> None:
-    config = {"steps": [{"name": "blur", "params": {"sigma": [1.0, 1.0]}}, {"name": "ink_fade", "params": STRONG["ink_fade"]}]}
+    config = {
+        "steps": [{"name": "blur", "params": {"sigma": [1.0, 1.0]}}, {"name": "ink_fade", "params": STRONG["ink_fade"]}]
+    }
     pipe = AugmentPipeline(config, registry)
     assert [s.name for s in pipe.steps] == ["ink_fade", "blur"]
     images = colour_drawing()

@@ -9,12 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-import deepmorph
 import torch
 from lxml import etree
 from PIL import Image
 
+import deepmorph
 from deepmorph_core.drawing import load_drawing
 from deepmorph_core.errors import SvgError
 from deepmorph_core.model import DeepMorphModel
@@ -54,7 +53,7 @@ def rgb_mad(md: MorphableDrawing, width: int = 96) -> float:
 )
 def test_every_css_colour_syntax_reads_and_is_written_back_as_drawn(text: str, rgb: tuple, alpha: float) -> None:
     md = MorphableDrawing.load(make_svg(f'<rect x="2" y="2" width="20" height="20" fill="{text}" dm:move="1"/>'))
-    (mode, paint), = md.drawing.primitives[0].style.paints
+    ((mode, paint),) = md.drawing.primitives[0].style.paints
     assert mode == "fill"
     assert tuple(round(c * 255) for c in paint.rgb) == rgb and paint.alpha == pytest.approx(alpha, abs=1e-6)
     written = etree.fromstring(md.to_svg(md.values_from_unit(md.random_unit(1, seed=2))[0]).encode())
@@ -77,7 +76,11 @@ def test_current_colour_opacity_inheritance_and_paint_order() -> None:
     assert (first, second) == ("stroke", "fill")  # paint-order: the stroke under the fill
     assert under.rgb == (1.0, 0.0, 0.0) and under.alpha == pytest.approx(0.4)
     assert over.alpha == pytest.approx(0.5)
-    assert not drawing.black_and_white and [p.describe() for p in drawing.palette] == ["#0000ff40", "#ff000066", "#0000ff80"]
+    assert not drawing.black_and_white and [p.describe() for p in drawing.palette] == [
+        "#0000ff40",
+        "#ff000066",
+        "#0000ff80",
+    ]
 
 
 STYLED = """<style>
@@ -168,7 +171,9 @@ def test_gradients_are_written_back_whole_and_drawn_with_their_mean(with_bezier)
 
 
 def test_what_cannot_be_drawn_is_one_line_that_says_what_to_do(with_bezier) -> None:
-    with pytest.raises(SvgError, match=r"airplane-arrival.svg:1: unsupported: clip-path='url\(#.*\)': flatten the effect"):
+    with pytest.raises(
+        SvgError, match=r"airplane-arrival.svg:1: unsupported: clip-path='url\(#.*\)': flatten the effect"
+    ):
         MorphableDrawing.load(DATA / "fluent-emoji-flat" / "airplane-arrival.svg")
 
 
@@ -192,7 +197,10 @@ def test_drop_unsupported_says_what_it_dropped_and_keeps_strokes_strokes() -> No
             '<linearGradient id="a" href="#a"/><rect width="4" height="4" fill="url(#a)"/>',
             r"gradient #a references itself \(#a -> #a\)",
         ),
-        ('<linearGradient id="a"><stop offset="x"/></linearGradient><rect width="4" height="4" fill="url(#a)"/>', "not a number"),
+        (
+            '<linearGradient id="a"><stop offset="x"/></linearGradient><rect width="4" height="4" fill="url(#a)"/>',
+            "not a number",
+        ),
     ],
 )
 def test_bad_colour_input_is_one_clear_error_and_quick(body: str, message: str) -> None:
@@ -213,7 +221,9 @@ def test_a_huge_path_is_refused_while_reading_within_a_second() -> None:
 
 
 def test_renderers_are_given_colours_they_all_read() -> None:
-    text = make_svg('<rect width="4" height="4" fill="hsl(14, 100%, 40%)" fill-opacity="0.5" style="stroke: #0f08"/>').decode()
+    text = make_svg(
+        '<rect width="4" height="4" fill="hsl(14, 100%, 40%)" fill-opacity="0.5" style="stroke: #0f08"/>'
+    ).decode()
     plain = etree.fromstring(plain_colours(text).encode()).find("{http://www.w3.org/2000/svg}rect")
     assert plain.get("fill") == "#cc3000" and plain.get("fill-opacity") == "0.5"
     assert plain.get("style") == "stroke: #00ff00; stroke-opacity: 0.533333"

@@ -6,9 +6,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from deepmorph_core.primitive import paint_sdf
+from deepmorph_core import geometry as G
 from deepmorph_core.drawing import load_drawing
 from deepmorph_core.morph import MorphSpace
+from deepmorph_core.primitive import paint_sdf
 from tests.conftest import make_svg
 
 AFFINE = 'dm:move="0.6" dm:shift="0.5" dm:scale="0.9 1.1" dm:rotate="-10 10"'
@@ -84,7 +85,10 @@ def test_sdf_sign_convention(case: str, builtin_registry) -> None:
     if case == "circle":
         border = torch.tensor([[12.0, 4.0], [12.0, 6.0], [20.0, 12.0]], dtype=torch.float64)
         torch.testing.assert_close(
-            paint_sdf(prim.primitive, frame, border, paint, hw), torch.zeros(1, 3, dtype=torch.float64), atol=1e-6, rtol=0
+            paint_sdf(prim.primitive, frame, border, paint, hw),
+            torch.zeros(1, 3, dtype=torch.float64),
+            atol=1e-6,
+            rtol=0,
         )
 
 
@@ -102,3 +106,15 @@ def test_fused_segment_distance_matches_autograd() -> None:
     g2 = torch.autograd.grad((segment_distance_xy(px, py, *params) * w).sum(), params)
     for a, b in zip(g1, g2):
         torch.testing.assert_close(a, b)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_winding_numbers_by_rows_equal_the_dense_count(seed: int) -> None:
+    """The rasterizer's inside test by rows gives exactly the per-point crossing count."""
+    gen = torch.Generator().manual_seed(seed)
+    rings = [torch.rand(3, int(torch.randint(3, 60, (1,), generator=gen)), 2, generator=gen, dtype=torch.float64) * 24
+             for _ in range(1 + seed % 3)]  # fmt: skip
+    ys, xs = torch.meshgrid(torch.arange(24.0) + 0.5, torch.arange(24.0) + 0.5, indexing="ij")
+    grid = torch.stack([xs.reshape(-1), ys.reshape(-1)], -1).to(torch.float64)
+    dense = sum(G.ring_winding(grid, ring) for ring in rings)
+    assert torch.equal(G.winding_numbers(grid, rings), dense.to(torch.int64))

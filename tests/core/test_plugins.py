@@ -171,7 +171,9 @@ def test_a_primitive_needs_an_outline_and_no_sdf_of_its_own() -> None:
     from deepmorph_primitives.line import Line
 
     members = {k: getattr(Line, k) for k in ("from_element", "control_points", "outline", "write")}
-    Outlined = type("Outlined", (), {"kind": "outlined", "tags": ("outlined",), "priority": 0, "morphable": "x", **members})
+    Outlined = type(
+        "Outlined", (), {"kind": "outlined", "tags": ("outlined",), "priority": 0, "morphable": "x", **members}
+    )
     NoOutline = type("NoOutline", (), {"kind": "no-outline", "tags": ("no-outline",), "priority": 0, "morphable": "x",
                                        **{k: v for k, v in members.items() if k != "outline"}})  # fmt: skip
     assert not hasattr(Outlined, "sdf")

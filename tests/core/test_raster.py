@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.raster import RasterSettings, SoftRasterizer, normalised_squash, stroke_half_width
 from deepmorph_core.render import render_svg_ink
 from tests.conftest import FEATHER, make_svg

@@ -55,12 +55,24 @@ def error_of(data: bytes, registry) -> SvgError:
         (make_svg('<line x1="1" y1="1" x2="2" y2="2" stroke="lab(50% 20 30)"/>'), "colour space lab", 2),
         (make_svg('<rect width="2" height="2" fill="url(http://example.com/p.svg#a)"/>'), "nothing is fetched", 2),
         (make_svg('<rect width="2" height="2" fill="url(#nowhere)"/>'), "no gradient with id 'nowhere'", 2),
-        (make_svg('<style>\n.a { fill: red }\n@import url(x.css);\n</style>'), "CSS @import in <style> (nothing is fetched)", 4),
-        (make_svg('<style>.a { fill: url(https://example.com/x.svg) }</style>'), "nothing is fetched", 2),
-        (make_svg('<style>.a::before { fill: red }</style>'), "pseudo-element", 2),
-        (make_svg('<style>.a { fill: red; </style><rect class="a" width="2" height="2" fill="red" filter="url(#f)"/>'), "filter", 2),
         (
-            make_svg('<linearGradient id="g" href="#h"/>\n<linearGradient id="h" href="#g"/>\n<rect width="2" height="2" fill="url(#g)"/>'),
+            make_svg("<style>\n.a { fill: red }\n@import url(x.css);\n</style>"),
+            "CSS @import in <style> (nothing is fetched)",
+            4,
+        ),
+        (make_svg("<style>.a { fill: url(https://example.com/x.svg) }</style>"), "nothing is fetched", 2),
+        (make_svg("<style>.a::before { fill: red }</style>"), "pseudo-element", 2),
+        (
+            make_svg(
+                '<style>.a { fill: red; </style><rect class="a" width="2" height="2" fill="red" filter="url(#f)"/>'
+            ),
+            "filter",
+            2,
+        ),
+        (
+            make_svg(
+                '<linearGradient id="g" href="#h"/>\n<linearGradient id="h" href="#g"/>\n<rect width="2" height="2" fill="url(#g)"/>'
+            ),
             "gradient #g references itself (#g -> #h -> #g)",
             3,
         ),

@@ -24,7 +24,6 @@ from deepmorph_bezier.segments import (
 from svg.path import CubicBezier, Move, QuadraticBezier, parse_path
 
 import deepmorph_primitives.plugin as builtin
-from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.bounds import BoundSpec
 from deepmorph_core.drawing import Drawing, PlacedPrimitive, load_drawing
 from deepmorph_core.errors import UnsupportedFeatureError
@@ -32,6 +31,7 @@ from deepmorph_core.geometry import CAP_BUTT, CAP_ROUND, CAP_SQUARE
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.outline import Frame, OutlineBuilder
 from deepmorph_core.plugins import Registry, load_registry
+from deepmorph_core.primitive import paint_sdf
 from deepmorph_core.protocols import ElementMorph, PathSegment
 
 DATA = Path(__file__).parent.parent / "data" / "feather_bezier"
