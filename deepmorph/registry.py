@@ -38,11 +38,12 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.payload import Payload
 
 if TYPE_CHECKING:
+    from torch import Tensor
+
     from deepmorph.model import Model
     from deepmorph_core.bundle import BundleMeta
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.payload import PayloadLike
-    from torch import Tensor
 
 Kind = Literal["url", "text"]
 ExportFormat = Literal["csv", "json"]

@@ -74,7 +74,9 @@ def check_trainable(md: MorphableDrawing, name: str) -> None:
         DeepMorphError: naming the drawing and what to do.
     """
     if md.n_variables == 0:
-        raise DeepMorphError(f"{name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move")
+        raise DeepMorphError(
+            f"{name}: the drawing has 0 variables, so nothing can carry bits; add dm: bounds or pass --move"
+        )
     shapes = len(md.drawing.primitives)
     if shapes > MAX_TRAIN_PRIMITIVES or md.n_variables > MAX_TRAIN_VARIABLES:
         raise DeepMorphError(
