@@ -75,6 +75,10 @@ CREATE TABLE entries (
     UNIQUE (model, payload)
 );
 """
+_HEADER = (
+    "SELECT (SELECT application_id FROM pragma_application_id), (SELECT user_version FROM pragma_user_version), "
+    "(SELECT count(*) FROM sqlite_master)"
+)
 _SELECT = (
     "SELECT e.model, m.drawing, m.payload_bits, e.payload, e.kind, e.target, e.note, e.created, e.updated "
     "FROM entries e JOIN models m ON m.id = e.model"
@@ -156,7 +160,9 @@ def model_key(model: ModelLike) -> ModelKey:
     bundle = getattr(model, "bundle", model)  # deepmorph.Model wraps a DeepMorphModel
     meta, tensors = getattr(bundle, "meta", None), getattr(bundle, "tensors", None)
     if meta is None or not callable(tensors):
-        raise DeepMorphError(f"a model for the registry is a bundle's path or a loaded model, not {type(model).__name__}")
+        raise DeepMorphError(
+            f"a model for the registry is a bundle's path or a loaded model, not {type(model).__name__}"
+        )
     return ModelKey(_fingerprint(meta, tensors()), meta.drawing_name, meta.codec.payload_bits)
 
 
@@ -231,8 +237,10 @@ def check_target(target: str, kind: str) -> str:
     except ValueError as exc:
         raise DeepMorphError(f"{shown}: not a URL ({exc})") from None
     if parts.scheme.lower() not in ("http", "https"):
-        what = f"a {parts.scheme.lower()}: URL" if parts.scheme else "no scheme"
-        raise DeepMorphError(f"{shown}: a registry URL starts with http:// or https:// ({what}); store text with --text")
+        what = f"not {parts.scheme.lower()}:" if parts.scheme else "and this has no scheme"
+        raise DeepMorphError(
+            f"{shown}: a registry URL starts with http:// or https://, {what} (store text with --text)"
+        )
     if not parts.hostname:
         raise DeepMorphError(f"{shown}: the URL names no host")
     if "@" in parts.netloc:
@@ -395,7 +403,8 @@ class PayloadRegistry:
             DeepMorphError: an unknown format, a file that cannot be written or that is the
                 registry itself.
         """
-        from deepmorph_core.fileio import atomic_write, check_target, same_file
+        from deepmorph_core.fileio import atomic_write, same_file
+        from deepmorph_core.fileio import check_target as check_writable
 
         is_path = isinstance(destination, (str, Path))
         if format is None:
@@ -407,7 +416,7 @@ class PayloadRegistry:
         if is_path:
             if same_file(destination, self.path):  # type: ignore[arg-type]
                 raise DeepMorphError(f"{destination}: refusing to overwrite the registry itself")
-            check_target(destination)  # type: ignore[arg-type]
+            check_writable(destination)  # type: ignore[arg-type]
         entries = self.list(model)
         text = _as_json(entries) if format == "json" else _as_csv(entries)
         if is_path:
@@ -428,16 +437,13 @@ class PayloadRegistry:
         has to be upgraded under contention): committed, or rolled back on any failure."""
         with self._connection(write=True) as conn:
             assert conn is not None
-            self._execute_begin(conn)
+            conn.execute("BEGIN IMMEDIATE")  # waits up to the busy timeout for the other writers
             try:
                 yield conn
             except BaseException:
                 conn.rollback()
                 raise
             conn.commit()
-
-    def _execute_begin(self, conn: sqlite3.Connection) -> None:
-        conn.execute("BEGIN IMMEDIATE")  # waits up to the busy timeout for the other writers
 
     @contextlib.contextmanager
     def _connection(self, write: bool) -> Iterator[sqlite3.Connection | None]:
@@ -457,11 +463,11 @@ class PayloadRegistry:
             raise self._error(exc) from None
         try:
             try:
-                self._check(conn, write)
+                ready = self._check(conn, write)
             except sqlite3.Error as exc:
                 raise self._error(exc) from None
             try:
-                yield conn
+                yield conn if ready else None
             except sqlite3.Error as exc:
                 raise self._error(exc) from None
         finally:
@@ -476,31 +482,32 @@ class PayloadRegistry:
         if not self.path.exists() and not os.access(folder, os.W_OK | os.X_OK):
             raise DeepMorphError(f"{self.path}: cannot create the registry: permission denied in {folder}")
 
-    def _check(self, conn: sqlite3.Connection, write: bool) -> None:
+    def _check(self, conn: sqlite3.Connection, write: bool) -> bool:
         """Refuse a file that is not a registry; make an empty one into a registry (when
         writing), in WAL mode. Several processes may do this at once: the first one's
-        transaction makes the tables, the others find them made."""
+        transaction makes the tables, the others find them made. Returns whether the file is a
+        registry (an empty file read is not one yet)."""
         deadline = time.monotonic() + self.timeout
         while True:
             try:
-                app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+                app_id, version, tables = conn.execute(_HEADER).fetchone()  # one statement: one snapshot
                 if app_id == APPLICATION_ID:
-                    version = conn.execute("PRAGMA user_version").fetchone()[0]
                     if version > SCHEMA_VERSION:
                         raise DeepMorphError(
                             f"{self.path}: a registry of a newer DeepMorph (schema {version}; this one reads "
                             f"{SCHEMA_VERSION})"
                         )
-                    return
-                if app_id != 0 or conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]:
+                    return True
+                if app_id != 0 or tables:
                     raise self._foreign("an SQLite database of something else")
                 if not write:
-                    return  # an empty file: no entries yet
+                    return False  # an empty file: no entries yet
                 conn.execute("PRAGMA journal_mode = WAL")
                 conn.execute("BEGIN IMMEDIATE")
                 try:
-                    if conn.execute("PRAGMA application_id").fetchone()[0] != APPLICATION_ID:
-                        if conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]:
+                    app_id, _, tables = conn.execute(_HEADER).fetchone()
+                    if app_id != APPLICATION_ID:  # else another process made it meanwhile
+                        if app_id != 0 or tables:
                             raise self._foreign("an SQLite database of something else")
                         for statement in filter(str.strip, _SCHEMA.split(";")):
                             conn.execute(statement)
@@ -510,7 +517,7 @@ class PayloadRegistry:
                     conn.rollback()
                     raise
                 conn.commit()
-                return
+                return True
             except sqlite3.OperationalError as exc:
                 # switching to WAL takes the file alone; another process may be doing the same
                 if not _busy(exc) or time.monotonic() > deadline:
@@ -522,13 +529,13 @@ class PayloadRegistry:
 
     def _error(self, exc: sqlite3.Error) -> DeepMorphError:
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if isinstance(exc, sqlite3.OperationalError):
-            if _busy(exc):
-                return DeepMorphError(
-                    f"{self.path}: the registry is busy: another program held it for over {self.timeout:g} s"
-                )
-            return DeepMorphError(f"{self.path}: cannot use the registry ({text})")
-        return self._foreign(text)
+        if isinstance(exc, sqlite3.OperationalError) and _busy(exc):
+            return DeepMorphError(
+                f"{self.path}: the registry is busy: another program held it for over {self.timeout:g} s"
+            )
+        if type(exc) is sqlite3.DatabaseError:  # "file is not a database", "database disk image is malformed"
+            return self._foreign(text)
+        return DeepMorphError(f"{self.path}: cannot use the registry ({text})")
 
 
 def _entry(row: tuple[Any, ...]) -> Entry:

@@ -6,7 +6,7 @@ arguments and calls the library."""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -49,6 +49,12 @@ DetectorOpt = Annotated[
     typer.Option("--detector", help="The detector plugin to propose drawings (default: the one the model names)."),
 ]
 HardOpt = Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")]
+
+#: ``decode --registry``: ``payload_registry(db, model)`` checks the payload registry before any
+#: work and returns what looks a detection up (its entry as JSON, or None). Set by the facade's
+#: registry commands (:mod:`deepmorph.commands`) when they are registered: this layer cannot
+#: import the facade.
+payload_registry: Callable[[Optional[Path], Any], Callable[[dict[str, Any]], Any]] | None = None
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -126,6 +132,10 @@ def decode(
     hard_only: HardOpt = False,
     detector: DetectorOpt = None,
     threads: ThreadsOpt = None,
+    registry: Annotated[
+        bool, typer.Option("--registry", help="Show each verified payload's entry in the payload registry.")
+    ] = False,
+    db: Annotated[Optional[Path], typer.Option("--db", help="The payload registry file (implies --registry).")] = None,
 ) -> None:
     """Find every drawing in photos, read its payload, and give its keypoints and camera pose.
 
@@ -145,6 +155,11 @@ def decode(
 
     use_threads(threads)
     m = DeepMorphModel.load(model)
+    look_up = None
+    if registry or db is not None:
+        if payload_registry is None:
+            raise DeepMorphError("--registry: the payload registry's commands are not installed")
+        look_up = payload_registry(db, m)  # a missing or foreign registry is refused before any work
     locator = Locator(m, detector=detector)
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []
@@ -206,6 +221,8 @@ def decode(
                 entry["skipped_frames"] = skipped
             results.append(entry)
             save_overlay(path, *last)
+    for d in (d for r in results for d in r["detections"] if look_up is not None):
+        d["registry"] = look_up(d)
     _print_decoded(results, as_json)
     if not all(any(d["ok"] for d in r["detections"]) for r in results):
         raise typer.Exit(EXIT_NOTHING_READ)
@@ -239,6 +256,10 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
                 f"{name}: {d['payload']['hex']} {status}, corrected {d['corrected_bits']} bits, "
                 f"confidence {d['confidence']:.3f}{where}{frames}"
             )
+            if d["ok"] and "registry" in d:
+                entry = d["registry"]
+                shown = f"{entry['kind']}: {entry['target']}".replace("\n", "\n  ") if entry else "not in the registry"
+                out.print(f"  {shown}")
 
 
 def synth(
