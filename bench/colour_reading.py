@@ -11,9 +11,11 @@ thread with the other core idle, then point this script at the bundles:
     .venv/bin/python bench/colour_reading.py bench/results/colour_models/*.dmm
 
 For every bundle: the validation its training ended with (renders under ``medium`` colour
-corruption, close-ups printed through the colour plugins), the minutes and threads of its
-training, the capacity ``deepmorph capacity`` predicts for it, and for the drawing flattened to
-black and white (each paint black where its luminance is under 0.5, else white, opaque) the
+corruption, close-ups printed through the colour plugins), ``--hard`` close-ups at ``hard``,
+false accepts on ``--unrelated`` images that show none of the bundles' drawings (other icons of
+``--icons``, rendered and photographed, noise and clutter: ``bench/capacity.py``'s set), the
+minutes and threads of its training, the capacity ``deepmorph capacity`` predicts for it, and
+for the drawing flattened to black and white (each paint black where its luminance is under 0.5, else white, opaque) the
 predicted capacity and the soft rasterizer's time per training batch beside the colour one's.
 """
 
@@ -85,26 +87,40 @@ def raster_seconds(drawing, width: int, repeats: int = 3) -> float:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bundles", type=Path, nargs="+", help="trained colour bundles (.dmm)")
+    p.add_argument("--hard", type=int, default=200, help="close-ups at hard severity per bundle (0: none)")
+    p.add_argument("--unrelated", type=int, default=1000, help="unrelated images for false accepts (0: none)")
+    p.add_argument("--icons", type=Path, default=None, help="a folder of other drawings for the unrelated images")
+    p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--out", default=str(RESULTS / "colour_reading.json"))
     args = p.parse_args(argv)
     threads = set_threads(args.threads)
 
+    from capacity import unrelated_images
+
     from deepmorph_core.capacity import predict
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.morphable import MorphableDrawing
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.photo_validation import validate_close_ups
 
     started = time.perf_counter()
+    models = [(path, DeepMorphModel.load(path)) for path in args.bundles]
+    exclude = {Path(m.meta.drawing_name).stem for _, m in models}
+    unrelated = unrelated_images(args.unrelated, args.icons, exclude, args.seed) if args.unrelated else []
     rows = []
-    for path in args.bundles:
-        model = DeepMorphModel.load(path)
+    for path, model in models:
         meta = model.meta
         svg = meta.drawing_svg
-        colour = MorphableDrawing.load(svg.encode("utf-8"), label=path.name)
-        flat = MorphableDrawing.load(flattened(svg).encode("utf-8"), label=path.name)
+        colour = model.drawing
+        bounds = {k: tuple(v) if isinstance(v, list) else v for k, v in meta.bounds_defaults.items()}
+        flat = MorphableDrawing.load(flattened(svg).encode("utf-8"), label=path.name, **bounds)
         records = {r.name: r for r in meta.validation}
         renders, close = records.get("renders"), records.get("close-ups")
         rec = meta.record
+        hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard") if args.hard else None
+        locator = Locator(model)
+        accepts = sum(bool(found.result.ok) for _, image in unrelated for found in locator.locate(image))
         rows.append(
             {
                 "drawing": meta.drawing_name,
@@ -116,6 +132,10 @@ def main(argv: list[str] | None = None) -> int:
                 "renders_wrong": None if renders is None else renders.wrong,
                 "close_ups": None if close is None else close.read / close.samples,
                 "close_ups_wrong": None if close is None else close.wrong,
+                "hard": None if hard is None else hard.read / hard.samples,
+                "hard_wrong": None if hard is None else hard.wrong,
+                "false_accepts": accepts,
+                "unrelated": len(unrelated),
                 "train_minutes": round(rec.elapsed_s / 60, 1),
                 "train_threads": rec.threads,
                 "steps": rec.step,
@@ -136,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
                 "wrong",
                 "close-ups",
                 "wrong",
+                "hard",
+                "wrong",
+                "false acc.",
                 "min",
                 "thr",
                 "raster s",
@@ -152,6 +175,9 @@ def main(argv: list[str] | None = None) -> int:
                     r["renders_wrong"],
                     r["close_ups"],
                     r["close_ups_wrong"],
+                    r["hard"],
+                    r["hard_wrong"],
+                    f"{r['false_accepts']}/{r['unrelated']}",
                     r["train_minutes"],
                     r["train_threads"],
                     r["raster_s_colour"],
