@@ -21,7 +21,7 @@ from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.validation import SEVERITY
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.scenes import close_up_photo
+from deepmorph_detect.scenes import close_up_photo, colour_print
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
 
@@ -33,10 +33,7 @@ def printed(model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rn
     luminance the camera simulation works on; a black-and-white one rendered as it is."""
     if colours is None:
         return render_svg(svg, PRINT_PX)
-    rgb = torch.from_numpy(render_svg_rgb(svg, PRINT_PX).transpose(2, 0, 1).copy())[None]
-    generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
-    with torch.no_grad():
-        return colours.colour_only(rgb, generator)[0, 0].numpy()
+    return colour_print(render_svg_rgb(svg, PRINT_PX), colours, rng)
 
 
 def validate_close_ups(

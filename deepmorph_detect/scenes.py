@@ -26,10 +26,12 @@ from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
+import torch
 
+from deepmorph_core.corruption import AugmentPipeline, build_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.kernels import area_resize
-from deepmorph_core.render import render_svg
+from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.severity import PhotoRanges, photo_ranges
 from deepmorph_detect.backgrounds import random_background
 from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners, viewbox_to_frame
@@ -153,6 +155,8 @@ class SceneMaker:
             self._pool = [self.rng.integers(0, 2, bits).astype(np.uint8) for _ in range(payload_pool)]
         self._svg_cache: dict[int, str] = {}
         self._render_cache: dict[tuple[str, int], np.ndarray] = {}
+        # a colour drawing is printed in colour through the colour plugins of the capture
+        self._colours = build_pipeline(severity, 64, colour=True) if model.drawing.colour else None
 
     # -- sampling ------------------------------------------------------------------------
 
@@ -176,13 +180,17 @@ class SceneMaker:
         bits = self.model.codec.spec.payload_bits
         return -1, self.rng.integers(0, 2, bits).astype(np.uint8)
 
-    def _render(self, key: str, svg: str, width: int, cache: bool) -> np.ndarray:
+    def _render(self, key: str, svg: str, width: int, cache: bool, colour: bool = False) -> np.ndarray:
+        """The print's luminance ``(H, W)``; a colour code (``colour``, for a colour model) put
+        through the colour plugins afresh each time it is printed."""
+        in_colour = colour and self._colours is not None
         if cache and (key, width) in self._render_cache:
-            return self._render_cache[(key, width)]
-        img = render_svg(svg, width)
-        if cache:
-            self._render_cache[(key, width)] = img
-        return img
+            img = self._render_cache[(key, width)]
+        else:
+            img = render_svg_rgb(svg, width) if in_colour else render_svg(svg, width)
+            if cache:
+                self._render_cache[(key, width)] = img
+        return colour_print(img, self._colours, self.rng) if in_colour else img
 
     # -- making ---------------------------------------------------------------------------
 
@@ -234,7 +242,7 @@ class SceneMaker:
                 if idx >= 0 and idx not in self._svg_cache:
                     self._svg_cache[idx] = self.model.encode(payload)
                 svg = self._svg_cache[idx] if idx >= 0 else self.model.encode(payload)
-                art = self._render(f"p{idx}", svg, rw, idx >= 0)
+                art = self._render(f"p{idx}", svg, rw, idx >= 0, colour=True)
             elif kind == "distractor":
                 icons = distractor_svgs()
                 label, svg = icons[int(rng.integers(len(icons)))]
@@ -325,6 +333,16 @@ def _pose(
 #: a third as much as a scene's prints, turned at most the severity's ``spin_deg``.
 CLOSE_UP_SIZE = (0.6, 0.8)
 CLOSE_UP_TILT_SHARE = 1 / 3
+
+
+def colour_print(rgb: np.ndarray, colours: AugmentPipeline, rng: np.random.Generator) -> np.ndarray:
+    """A colour render ``(H, W, 3)`` as the camera simulation takes it: through the colour
+    stage of ``colours`` (the registered ``colour`` plugins: ink, paper, white balance, chroma),
+    then luminance ``(H, W)``, 1 = white. The draws come from ``rng``."""
+    image = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1), dtype=np.float32))[None]
+    generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
+    with torch.no_grad():
+        return colours.colour_only(image, generator)[0, 0].numpy()
 
 
 def close_up_photo(
