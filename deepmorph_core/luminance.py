@@ -7,10 +7,23 @@ reads renders the way the photo chain reads photos.
 
 from __future__ import annotations
 
+import numpy as np
 from torch import Tensor
 
 #: BT.601 luma weights of red, green and blue (JPEG's Y, OpenCV's and Pillow's gray).
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)
+
+
+def stretch_ink(images: Tensor | np.ndarray, level: float) -> Tensor | np.ndarray:
+    """Renders with contrast stretched as a photo's is (``normalise_contrast``): ``level``, the
+    luminance of the drawing's darkest paint, to 0; white paper stays 1. A drawing whose
+    darkest paint is light (cyan on white: 0.53) then has ink darker than 0.5 in its renders,
+    as in its photos, where framing, templates and the decoder look for it. Identity at
+    ``level`` 0 (black ink)."""
+    if level <= 0:
+        return images
+    scaled = (images - level) * (1.0 / (1.0 - level))
+    return scaled.clamp(0.0, 1.0) if isinstance(images, Tensor) else np.clip(scaled, 0.0, 1.0)
 
 
 def to_luminance(images: Tensor) -> Tensor:

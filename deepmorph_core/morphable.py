@@ -27,6 +27,7 @@ from deepmorph_core.bounds import BoundSpec, format_validation_error
 from deepmorph_core.drawing import Drawing, load_drawing
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.framing import render_moments
+from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
@@ -122,7 +123,7 @@ class MorphableDrawing:
     def neutral_moments(self, width: int) -> Tensor:
         """Ink moments ``(4,)`` (cx, cy, sx, sy) of the unmorphed drawing's resvg render at
         ``width`` pixels: where framing puts every morph's ink."""
-        return render_moments(self.render_real(self.neutral_values(), width))[0]
+        return render_moments(stretch_ink(self.render_real(self.neutral_values(), width), self.ink_level))[0]
 
     def rasterizer(self, width: int, **settings: Any) -> SoftRasterizer:
         """A soft rasterizer module for this drawing (see :class:`RasterSettings`)."""
@@ -135,6 +136,15 @@ class MorphableDrawing:
     def to_svg(self, values: Tensor) -> str:
         """One morph ``(N_v,)`` written back as an SVG document."""
         return self.space.write_svg(values)
+
+    @property
+    def ink_level(self) -> float:
+        """The luminance of the darkest paint as printed on white (0 for black ink): what a
+        photo's contrast stretch maps to black (:func:`~deepmorph_core.luminance.stretch_ink`)."""
+        paints = self.drawing.palette
+        if not paints or self.drawing.black_and_white:
+            return 0.0
+        return max(0.0, min(1.0 - p.alpha * (1.0 - p.luminance) for p in paints))
 
     @property
     def colour(self) -> bool:

@@ -42,6 +42,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders
 from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
+from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
@@ -222,6 +223,7 @@ class CodecRun:
         self.raster = model.rasterizer()
         self.target = model.canonical_moments()
         self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
+        self.ink_level = model.drawing.ink_level  # and contrast stretched as photos are
         self._augments = {
             sev: build_pipeline(sev, model.width, colour=self.colour).to(self.device)
             for sev in LADDER[: LADDER.index(config.severity)]
@@ -304,7 +306,7 @@ class CodecRun:
                 images = self.raster.render_rgb(soft) if self.colour else 1.0 - self.raster(soft)
         if k:
             images = torch.cat([self.model.real_renders(values[:k], rgb=self.colour), images], 0)
-        images = frame_renders(images, self.target, self.model.image_size)
+        images = frame_renders(stretch_ink(images, self.ink_level), self.target, self.model.image_size)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
             return self.augment_now()(images, generator=self.gen)

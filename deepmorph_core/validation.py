@@ -25,6 +25,7 @@ import torch
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.framing import frame_renders
+from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.payload import random_payloads
 
 if TYPE_CHECKING:
@@ -95,7 +96,9 @@ def read_renders(
         values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)))
         real = model.real_renders(values, rgb=colour)
         with torch.no_grad():
-            framed = augment(frame_renders(real, target, size), generator=generator)
+            framed = augment(
+                frame_renders(stretch_ink(real, model.drawing.ink_level), target, size), generator=generator
+            )
         probs.append(model.probabilities(framed).numpy().astype(np.float64))
     return np.concatenate(probs)
 

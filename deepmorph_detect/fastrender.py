@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.render import render_svg
 from deepmorph_core.svg.plain_colours import plain_colours
 
@@ -118,6 +119,18 @@ def renders_alike(svg_text: str, viewbox: tuple[float, float, float, float], wid
     return worst
 
 
+def stretched_renderer(renderer: Renderer, level: float) -> Renderer:
+    """``renderer`` with its renders' contrast stretched (:func:`~deepmorph_core.luminance.stretch_ink`):
+    ``level``, the drawing's darkest paint, to black; ``renderer`` itself at level 0."""
+    if level <= 0:
+        return renderer
+
+    def render(svg_text: str, width: int, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+        return stretch_ink(renderer(svg_text, width, viewbox), level)
+
+    return render
+
+
 def template_renderer(
     svg_text: str, viewbox: tuple[float, float, float, float], widths: tuple[int, ...]
 ) -> tuple[str, Renderer]:
@@ -137,5 +150,6 @@ __all__ = [
     "render_svg_resvg",
     "render_svg_skia",
     "renders_alike",
+    "stretched_renderer",
     "template_renderer",
 ]

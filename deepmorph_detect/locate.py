@@ -33,7 +33,7 @@ from deepmorph_core.protocols import Detector
 from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
 from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker
-from deepmorph_detect.fastrender import template_renderer
+from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.pose import Placer
 from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
@@ -91,7 +91,9 @@ class Locator:
         unmorphed = md.to_svg(md.neutral_values()[0])
         # Skia when it draws this drawing as resvg does: the morph check renders a morph per
         # payload read, and resvg's PNG round trip makes that render slow
-        self.renderer_name, self.renderer = template_renderer(unmorphed, self.viewbox, LEVELS)
+        self.renderer_name, renderer = template_renderer(unmorphed, self.viewbox, LEVELS)
+        # renders contrast-stretched as photos are (a drawing whose darkest paint is light)
+        self.renderer = stretched_renderer(renderer, md.ink_level)
         self.template = Template.from_svg(unmorphed, self.viewbox, LEVELS, self.renderer)
         self.ink = InkFrame.of(self.template)
         self.morphs = MorphTemplates(model, self.viewbox, self.renderer)

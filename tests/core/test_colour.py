@@ -266,3 +266,26 @@ def test_a_short_training_run_on_a_two_colour_drawing_reads_its_bits_from_a_colo
     gray = render_svg(code.svg, 64)
     rgb = render_svg_rgb(code.svg, 64)
     np.testing.assert_allclose(gray, rgb @ np.array([0.299, 0.587, 0.114]), atol=1 / 255)
+
+
+CYAN_BARS = make_svg('<path fill="#00BCD4" d="M9.5 11h5v10h-5zM3 6h5v15H3zm13-3h5v18h-5z" dm:move="0.25"/>')
+
+
+def test_a_drawing_in_light_colours_is_framed_by_its_own_darkest_paint() -> None:
+    """Cyan on white (luminance 0.53) has no pixel darker than 0.5 until its contrast is
+    stretched as a photo's is: then framing and the photo chain's templates find its ink."""
+    from deepmorph_core.luminance import stretch_ink
+    from deepmorph_detect.fastrender import render_svg_resvg, stretched_renderer
+
+    md = MorphableDrawing.load(CYAN_BARS)
+    assert md.ink_level == pytest.approx(0.5275, abs=1e-3)
+    raw = md.render_real(md.neutral_values(), 96)
+    assert raw.min() > 0.5  # no ink at all by the black-and-white rule
+    stretched = stretch_ink(raw, md.ink_level)
+    assert stretched.min() < 0.02 and stretched.max() == 1.0
+    cx, cy, sx, sy = md.neutral_moments(96).tolist()
+    assert 40 < cx < 56 and 40 < cy < 60 and 20 < sx < 40  # the bars' ink, not the frame's fallback
+    render = stretched_renderer(render_svg_resvg, md.ink_level)
+    svg = md.to_svg(md.neutral_values()[0])
+    assert (render(svg, 64, md.drawing.viewbox) < 0.5).mean() > 0.2
+    assert stretched_renderer(render_svg_resvg, 0.0) is render_svg_resvg  # black ink: untouched
