@@ -35,7 +35,7 @@ from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.pose import Placer
-from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light
+from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light, whole_frame_on_paper
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
@@ -137,6 +137,7 @@ class Locator:
         # Also where the detector's outline aligned but did not read: on a close-up of a drawing
         # whose every point may move, the alignment from that outline can absorb part of the
         # morph into the homography, and the morph check then cannot confirm a right payload.
+        photo = gray
         whole = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
         if not whole:  # a sharp shadow across a print that fills the frame: in flat light
             flat, framed = whole_frame_in_flat_light(gray, self.ink, self.template, self.frame_corners, self.ink_share)
@@ -144,6 +145,12 @@ class Locator:
                 whole = self.aligner.verify(ImagePyramid(flat), framed)
                 gray = flat
         whole_results = self.decode_each(gray, whole, cam, soft)
+        if not any(located.result.ok for located in whole_results):
+            # a print in light colours on a desk about as dark as its ink: on the sheet alone
+            sheet = whole_frame_on_paper(photo, self.ink, self.template, self.frame_corners)
+            on_sheet = self.decode_each(photo, self.aligner.verify(pyramid, sheet), cam, soft)
+            if any(located.result.ok for located in on_sheet) or not whole_results:
+                whole_results = on_sheet
         if not found:
             return whole_results
         read = [located for located in whole_results if located.result.ok]

@@ -74,6 +74,37 @@ def whole_frame(gray: np.ndarray, ink: InkFrame, template: Template, frame_corne
     return [Candidate(project(H, frame_corners), 0.0, box, homography=H, source="whole-frame")]
 
 
+#: The paper sheet of a close-up fills at least this share of the photo.
+MIN_SHEET_SHARE = 0.1
+
+
+def whole_frame_on_paper(
+    gray: np.ndarray, ink: InkFrame, template: Template, frame_corners: np.ndarray
+) -> list[Candidate]:
+    """:func:`whole_frame` within the paper sheet: the photo's largest bright region (Otsu),
+    its holes (the drawing) filled, everything around it painted paper-white.
+
+    A desk as dark as the drawing's ink (a print in light colours on a dark table) sets the
+    photo's black point and takes the ink's place in the whole image's ink mask; on the sheet
+    alone the drawing's own ink is the darkest. ``[]`` when no sheet fills
+    :data:`MIN_SHEET_SHARE` of the photo, or it shows no ink.
+    """
+    u8 = np.clip(gray * 255 if gray.dtype != np.uint8 else gray, 0, 255).astype(np.uint8)
+    _, bright = cv2.threshold(cv2.GaussianBlur(u8, (5, 5), 0), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=8)
+    if n <= 1:
+        return []
+    sheet = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[sheet, cv2.CC_STAT_AREA] < MIN_SHEET_SHARE * gray.size:
+        return []
+    contours, _ = cv2.findContours((labels == sheet).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    filled = np.zeros(u8.shape, np.uint8)
+    cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
+    paper = float(np.median(gray[labels == sheet]))
+    on_paper = np.where(filled > 0, gray, np.asarray(paper, dtype=gray.dtype))
+    return whole_frame(on_paper, ink, template, frame_corners)
+
+
 def whole_frame_in_flat_light(
     gray: np.ndarray, ink: InkFrame, template: Template, frame_corners: np.ndarray, ink_share: float
 ) -> tuple[np.ndarray, list[Candidate]]:
@@ -118,4 +149,12 @@ def whole_frame_in_flat_light(
     return divided_by_paper(gray, paper), candidates
 
 
-__all__ = ["FLAT_LIGHT_SIDE", "InkFrame", "quad_bbox", "whole_frame", "whole_frame_in_flat_light"]
+__all__ = [
+    "FLAT_LIGHT_SIDE",
+    "MIN_SHEET_SHARE",
+    "InkFrame",
+    "quad_bbox",
+    "whole_frame",
+    "whole_frame_in_flat_light",
+    "whole_frame_on_paper",
+]

@@ -289,3 +289,27 @@ def test_a_drawing_in_light_colours_is_framed_by_its_own_darkest_paint() -> None
     svg = md.to_svg(md.neutral_values()[0])
     assert (render(svg, 64, md.drawing.viewbox) < 0.5).mean() > 0.2
     assert stretched_renderer(render_svg_resvg, 0.0) is render_svg_resvg  # black ink: untouched
+
+
+def test_a_light_print_on_a_dark_desk_is_framed_on_its_sheet() -> None:
+    """A desk as dark as cyan ink is the darkest thing in the photo: the whole image's ink mask
+    takes the desk; on the paper sheet alone the drawing's ink is found."""
+    from deepmorph_detect.fastrender import render_svg_resvg, stretched_renderer
+    from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_on_paper
+    from deepmorph_detect.refine import LEVELS, Template
+
+    md = MorphableDrawing.load(CYAN_BARS)
+    svg = md.to_svg(md.neutral_values()[0])
+    viewbox = md.drawing.viewbox
+    template = Template.from_svg(svg, viewbox, LEVELS, stretched_renderer(render_svg_resvg, md.ink_level))
+    ink = InkFrame.of(template)
+    corners = np.array([[0, 0], [24, 0], [24, 24], [0, 24]], dtype=np.float64)
+    photo = np.full((300, 300), 0.45, np.float32)  # a desk darker than the cyan (0.53 x paper)
+    photo[40:260, 50:250] = 0.92  # the sheet
+    photo[70:230, 70:230] = 0.92 * render_svg(svg, 160)
+    sheet = whole_frame_on_paper(photo, ink, template, corners)
+    assert len(sheet) == 1
+    x0, y0, x1, y1 = sheet[0].bbox
+    assert 60 <= x0 and 60 <= y0 and x1 <= 240 and y1 <= 240  # the bars, inside the sheet
+    whole = whole_frame(photo, ink, template, corners)
+    assert not whole or whole[0].bbox[0] < 50  # the whole image's ink reaches out to the desk
