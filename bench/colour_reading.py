@@ -10,8 +10,9 @@ thread with the other core idle, then point this script at the bundles:
     done
     .venv/bin/python bench/colour_reading.py bench/results/colour_models/*.dmm
 
-For every bundle: the validation its training ended with (renders under ``medium`` colour
-corruption, close-ups printed through the colour plugins), ``--hard`` close-ups at ``hard``,
+For every bundle: the render validation its training ended with (``medium`` colour corruption),
+``--close-ups`` fresh close-ups at ``medium`` and ``--hard`` at ``hard`` (printed through the
+colour plugins, read by today's photo chain without a detector),
 false accepts on ``--unrelated`` images that show none of the bundles' drawings (other icons of
 ``--icons``, rendered and photographed, noise and clutter: ``bench/capacity.py``'s set), the
 minutes and threads of its training, the capacity ``deepmorph capacity`` predicts for it, and
@@ -87,6 +88,7 @@ def raster_seconds(drawing, width: int, repeats: int = 3) -> float:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bundles", type=Path, nargs="+", help="trained colour bundles (.dmm)")
+    p.add_argument("--close-ups", type=int, default=200, help="close-ups at medium severity per bundle (0: none)")
     p.add_argument("--hard", type=int, default=200, help="close-ups at hard severity per bundle (0: none)")
     p.add_argument("--unrelated", type=int, default=1000, help="unrelated images for false accepts (0: none)")
     p.add_argument("--icons", type=Path, default=None, help="a folder of other drawings for the unrelated images")
@@ -116,8 +118,9 @@ def main(argv: list[str] | None = None) -> int:
         bounds = {k: tuple(v) if isinstance(v, list) else v for k, v in meta.bounds_defaults.items()}
         flat = MorphableDrawing.load(flattened(svg).encode("utf-8"), label=path.name, **bounds)
         records = {r.name: r for r in meta.validation}
-        renders, close = records.get("renders"), records.get("close-ups")
+        renders = records.get("renders")
         rec = meta.record
+        close = validate_close_ups(model.eval(), args.close_ups, args.seed, "medium") if args.close_ups else None
         hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard") if args.hard else None
         locator = Locator(model)
         accepts = sum(bool(found.result.ok) for _, image in unrelated for found in locator.locate(image))
