@@ -53,7 +53,8 @@ def panel(loaded: list[tuple[str, int, int]]) -> list[str]:
 
 
 def raster_seconds(drawing, width: int, repeats: int = 3) -> float:
-    """Median seconds of one forward and backward pass of 32 morphs, in colour."""
+    """Median seconds of one soft-raster forward and backward pass over a batch of 32 morphs
+    (in colour for a colour drawing)."""
     import statistics
 
     raster = drawing.rasterizer(width)
@@ -61,7 +62,7 @@ def raster_seconds(drawing, width: int, repeats: int = 3) -> float:
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        raster.render_rgb(values).sum().backward()
+        (raster.render_rgb(values) if drawing.colour else raster(values)).sum().backward()
         times.append(time.perf_counter() - start)
     return statistics.median(times)
 

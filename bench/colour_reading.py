@@ -71,20 +71,6 @@ def flattened(svg_text: str) -> str:
     return etree.tostring(root, encoding="unicode")
 
 
-def raster_seconds(drawing, width: int, repeats: int = 3) -> float:
-    """Median seconds of one soft-raster forward and backward pass over a batch of 32 morphs."""
-    import statistics
-
-    raster = drawing.rasterizer(width)
-    values = drawing.values_from_unit(drawing.random_unit(32, seed=1)).requires_grad_(True)
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        (raster.render_rgb(values) if drawing.colour else raster(values)).sum().backward()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bundles", type=Path, nargs="+", help="trained colour bundles (.dmm)")
@@ -99,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     threads = set_threads(args.threads)
 
     from capacity import unrelated_images
+    from colour import raster_seconds
 
     from deepmorph_core.capacity import predict
     from deepmorph_core.model import DeepMorphModel

@@ -240,28 +240,9 @@ def arc_distance(
     )
 
 
-def ring_winding(grid: Tensor, ring: Tensor) -> Tensor:
-    """Winding number of a closed polygon around each grid point (no gradient).
-
-    Shape:
-        grid ``(P, 2)``, ring ``(B, M, 2)`` (closed implicitly) -> ``(B, P)`` integers.
-    """
-    with torch.no_grad():
-        x0 = ring[..., 0][:, :, None]
-        y0 = ring[..., 1][:, :, None]
-        x1 = torch.roll(ring[..., 0], -1, dims=1)[:, :, None]
-        y1 = torch.roll(ring[..., 1], -1, dims=1)[:, :, None]
-        px = grid[:, 0][None, None]
-        py = grid[:, 1][None, None]
-        cross = (x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)
-        up = (y0 <= py) & (y1 > py) & (cross > 0)
-        down = (y0 > py) & (y1 <= py) & (cross < 0)
-        return (up.to(torch.int32) - down.to(torch.int32)).sum(1)
-
-
 def winding_numbers(grid: Tensor, rings: list[Tensor]) -> Tensor:
-    """Winding numbers of closed polygons around grid points by rows (no gradient): what
-    :func:`ring_winding` summed over ``rings`` gives, in far less work where points share rows.
+    """Winding numbers of closed polygons around grid points by rows (no gradient): the count
+    of signed edge crossings, in far less work than every point against every edge.
 
     A point's winding number counts the edges crossing the horizontal ray to its right (up
     +1, down -1). The crossings are found once per pixel row (``B x edges x rows``, not

@@ -142,7 +142,7 @@ class MorphableDrawing:
         """The luminance of the darkest paint as printed on white (0 for black ink): what a
         photo's contrast stretch maps to black (:func:`~deepmorph_core.luminance.stretch_ink`)."""
         paints = self.drawing.palette
-        if not paints or self.drawing.black_and_white:
+        if all(p.black_or_white for p in paints):
             return 0.0
         return max(0.0, min(1.0 - p.alpha * (1.0 - p.luminance) for p in paints))
 
@@ -231,14 +231,15 @@ class MorphableDrawing:
     def palette(self) -> list[dict[str, Any]]:
         """The paints the drawing lays down: ``paint`` (``#rrggbb``, with alpha as ``#rrggbbaa``,
         or ``url(#id) ~ mean``), its ``luminance`` and the ``shapes`` (indices) that use it."""
-        rows: dict[Any, dict[str, Any]] = {}
-        for prim in self.drawing.primitives:
-            for paint in prim.style.palette:
-                row = rows.setdefault(paint, {"paint": paint.describe(), "luminance": round(paint.luminance, 3),
-                                              "alpha": round(paint.alpha, 3), "shapes": []})  # fmt: skip
-                if prim.index not in row["shapes"]:
-                    row["shapes"].append(prim.index)
-        return list(rows.values())
+        return [
+            {
+                "paint": paint.describe(),
+                "luminance": round(paint.luminance, 3),
+                "alpha": round(paint.alpha, 3),
+                "shapes": [prim.index for prim in self.drawing.primitives if paint in prim.style.palette],
+            }
+            for paint in self.drawing.palette
+        ]
 
     def describe(self) -> dict[str, Any]:
         """A JSON-ready summary: primitives, variables, bounds, what is fixed or skipped."""

@@ -9,13 +9,12 @@ another is followed; a chain that comes back to itself is an error.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from lxml import etree
 
-from deepmorph_core.svg.style import Paint, parse_colour, style_declarations
+from deepmorph_core.svg.style import PAINT_URL, Paint, parse_colour, style_declarations
 
 GRADIENT_TAGS = frozenset({"linearGradient", "radialGradient"})
 XLINK_NS = "http://www.w3.org/1999/xlink"
@@ -25,7 +24,6 @@ GRADIENT_ATTRIBUTES = frozenset(
      "spreadMethod"}
 )  # fmt: skip
 STOP_ATTRIBUTES = frozenset({"offset", "stop-color", "stop-opacity"})
-_PAINT_URL = re.compile(r"^url\(\s*['\"]?#([^'\")\s]+)['\"]?\s*\)(.*)$", re.IGNORECASE)
 #: The most links followed from one gradient to the one it inherits stops from.
 MAX_CHAIN = 32
 
@@ -84,13 +82,13 @@ class Gradients:
     def missing_paint(self, value: str) -> str | None:
         """Why a paint ``url(#id)`` without a fallback cannot be read (a ``<pattern>`` or no
         element of that id), or ``None`` when it can (a gradient, a fallback, or no ``url``)."""
-        match = _PAINT_URL.match(value.strip())
-        if match is None or match.group(2).strip() or match.group(1) in self.elements:
+        match = PAINT_URL.match(value.strip())
+        if match is None or match.group(3).strip() or match.group(2) in self.elements:
             return None
-        what = self.others.get(match.group(1))
+        what = self.others.get(match.group(2))
         if what is not None:
             return f"a <{what}> paint is not read: fill with a colour or a gradient"
-        return f"no gradient with id {match.group(1)!r} in the file"
+        return f"no gradient with id {match.group(2)!r} in the file"
 
     def chain(self, gradient_id: str) -> list[str]:
         """``gradient_id`` and the ids it inherits from, in order.

@@ -160,7 +160,9 @@ def style_declarations(style_attr: str | None) -> dict[str, str]:
     return props
 
 
-_URL = re.compile(r"^url\(\s*(['\"]?)#([^'\")\s]+)\1\s*\)\s*(.*)$", re.IGNORECASE)
+#: A paint naming a paint server in the file: ``url(#id)``, then an optional fallback colour
+#: (groups: the quote, the id, the fallback).
+PAINT_URL = re.compile(r"^url\(\s*(['\"]?)#([^'\")\s]+)\1\s*\)\s*(.*)$", re.IGNORECASE)
 
 
 def parse_colour(value: str, prop: str) -> Paint | None:
@@ -187,7 +189,7 @@ def _paint(value: str, current: Paint, prop: str, urls: UrlResolver | None) -> P
     text = value.strip()
     if text.lower() == "currentcolor":
         return current
-    match = _URL.match(text)
+    match = PAINT_URL.match(text)
     if match:
         paint = urls(match.group(2)) if urls is not None else None
         if paint is not None:
