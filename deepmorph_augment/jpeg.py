@@ -1,11 +1,13 @@
-"""JPEG-like compression for one-channel images, differentiable: 8x8 block DCT as a matrix
-product, quantisation by the IJG luminance table scaled for a quality, a differentiable
-rounding, and the inverse DCT.
+"""JPEG-like compression, differentiable: 8x8 block DCT as a matrix product, quantisation by
+the IJG tables scaled for a quality, a differentiable rounding, and the inverse DCT.
 
-It follows baseline JPEG for a grey image (level shift by 128, orthonormal 8x8 DCT-II, the
-Annex K luminance table scaled as libjpeg's ``jpeg_quality_scaling``), but keeps values
-continuous outside the rounding (no 8-bit input or output rounding, no clamping: the pipeline
-clamps at the end). Rounding follows Shin & Song, "JPEG-resistant Adversarial Images" (2017):
+It follows baseline JPEG (level shift by 128, orthonormal 8x8 DCT-II, the Annex K tables
+scaled as libjpeg's ``jpeg_quality_scaling``): a grey image is one luminance plane; an RGB
+image (three channels: the photo simulator's whole photos) is converted to YCbCr, its Y
+compressed with the luminance table and its Cb and Cr subsampled 4:2:0 and compressed with
+the chrominance table, as a phone's encoder does. Values stay continuous outside the rounding
+(no 8-bit input or output rounding, no clamping: the pipeline clamps at the end).
+Rounding follows Shin & Song, "JPEG-resistant Adversarial Images" (2017):
 ``"cubic"`` is ``round(x) + (x - round(x))^3``; ``"ste"`` (straight-through) rounds forward
 and passes gradients unchanged.
 """
@@ -18,6 +20,7 @@ from typing import Any
 
 import torch
 import torch.nn.functional as F
+from kornia.color import rgb_to_ycbcr, ycbcr_to_rgb
 from torch import Tensor
 
 from deepmorph_augment.base import Params, RandomAugmentation
@@ -37,6 +40,15 @@ LUMINANCE_TABLE = (
     (72, 92, 95, 98, 112, 100, 103, 99),
 )
 
+#: JPEG Annex K chrominance quantisation table.
+CHROMINANCE_TABLE = (
+    (17, 18, 24, 47, 99, 99, 99, 99),
+    (18, 21, 26, 66, 99, 99, 99, 99),
+    (24, 26, 56, 99, 99, 99, 99, 99),
+    (47, 66, 99, 99, 99, 99, 99, 99),
+    *((99,) * 8,) * 4,
+)
+
 
 def dct_matrix(like: Tensor) -> Tensor:
     """The orthonormal 8-point DCT-II matrix ``D`` (``D @ x`` transforms a column), on
@@ -51,16 +63,16 @@ def dct_matrix(like: Tensor) -> Tensor:
     return d.to(like.dtype)
 
 
-def quality_tables(quality: Tensor) -> Tensor:
-    """Luminance quantisation tables for integer-rounded qualities in ``[1, 100]`` (libjpeg's
-    scaling: ``5000 / q`` below 50, ``200 - 2 q`` above, entries in ``[1, 255]``).
+def quality_tables(quality: Tensor, base_table: tuple[tuple[int, ...], ...] = LUMINANCE_TABLE) -> Tensor:
+    """Quantisation tables (luminance by default) for integer-rounded qualities in ``[1, 100]``
+    (libjpeg's scaling: ``5000 / q`` below 50, ``200 - 2 q`` above, entries in ``[1, 255]``).
 
     Shape:
         quality: ``(B,)``; returns ``(B, 8, 8)`` on its device and dtype.
     """
     q = quality.detach().round().clamp(1.0, 100.0)[:, None, None]
     scale = torch.where(q < 50, 5000.0 / q, 200.0 - 2.0 * q)
-    base = torch.tensor(LUMINANCE_TABLE, device=quality.device, dtype=quality.dtype)
+    base = torch.tensor(base_table, device=quality.device, dtype=quality.dtype)
     return torch.floor((base * scale + 50.0) / 100.0).clamp(1.0, 255.0)
 
 
@@ -90,13 +102,10 @@ def round_differentiable(x: Tensor, rounding: str = "ste") -> Tensor:
 def jpeg_compress(images: Tensor, quality: Tensor, rounding: str = "ste") -> Tensor:
     """Compress and decompress each sample at its quality.
 
-    Every 8x8 block, flattened to 64 values, is transformed by ``kron(D, D)`` (the 2-D DCT as
-    one 64x64 matrix). The level shift, the 0-255 scaling and each sample's quantisation
-    table are folded into that matrix and a bias, so a whole batch is two ``baddbmm`` calls
-    around the rounding, plus two block permutations.
-
-    Sizes that are not multiples of 8 are padded by replicating the edge, then cropped back.
-    Every channel is treated as a luminance plane.
+    One channel is a luminance plane. Three channels are RGB: Y is compressed with the
+    luminance table, Cb and Cr averaged over 2x2 blocks (4:2:0), compressed with the
+    chrominance table and upsampled back bilinearly (as libjpeg decodes), then the result is converted back to RGB
+    (kornia's conversions: Y has JPEG's weights exactly). Other channel counts are refused.
 
     Args:
         images: intensities in ``[0, 1]``.
@@ -104,20 +113,48 @@ def jpeg_compress(images: Tensor, quality: Tensor, rounding: str = "ste") -> Ten
         rounding: ``"ste"`` or ``"cubic"`` (see :func:`round_differentiable`).
 
     Shape:
-        images: ``(B, C, H, W)``; quality: ``(B,)``; returns ``(B, C, H, W)``.
+        images: ``(B, 1, H, W)`` or ``(B, 3, H, W)``; quality: ``(B,)``; returns the same shape.
     """
-    if images.dim() != 4 or quality.shape != (images.shape[0],):
+    if images.dim() != 4 or quality.shape != (images.shape[0],) or images.shape[1] not in (1, 3):
         raise ValueError(
-            f"jpeg_compress: expected images (B, C, H, W) and quality (B,), got {tuple(images.shape)} and "
+            f"jpeg_compress: expected images (B, 1 or 3, H, W) and quality (B,), got {tuple(images.shape)} and "
             f"{tuple(quality.shape)}"
         )
+    luma = quality_tables(quality.to(images.dtype))
+    if images.shape[1] == 1:
+        return compress_planes(images, luma, rounding)
+    h, w = images.shape[-2:]
+    ycc = rgb_to_ycbcr(images)
+    y = compress_planes(ycc[:, :1], luma, rounding)
+    chroma = ycc[:, 1:]
+    if h % 2 or w % 2:
+        chroma = F.pad(chroma, (0, w % 2, 0, h % 2), mode="replicate")
+    chroma_tables = quality_tables(quality.to(images.dtype), CHROMINANCE_TABLE)
+    chroma = compress_planes(F.avg_pool2d(chroma, 2), chroma_tables, rounding)
+    size = (2 * chroma.shape[-2], 2 * chroma.shape[-1])  # libjpeg's "fancy" (bilinear) upsampling
+    chroma = F.interpolate(chroma, size=size, mode="bilinear", align_corners=False)[..., :h, :w]
+    return ycbcr_to_rgb(torch.cat([y, chroma], 1))
+
+
+def compress_planes(images: Tensor, tables: Tensor, rounding: str = "ste") -> Tensor:
+    """Every channel compressed and decompressed as one JPEG plane with its sample's table.
+
+    Every 8x8 block, flattened to 64 values, is transformed by ``kron(D, D)`` (the 2-D DCT as
+    one 64x64 matrix). The level shift, the 0-255 scaling and each sample's quantisation
+    table are folded into that matrix and a bias, so a whole batch is two ``baddbmm`` calls
+    around the rounding, plus two block permutations. Sizes that are not multiples of 8 are
+    padded by replicating the edge, then cropped back.
+
+    Shape:
+        images: ``(B, C, H, W)`` in ``[0, 1]``; tables: ``(B, 8, 8)``; returns ``(B, C, H, W)``.
+    """
     b, c, h, w = images.shape
     ph, pw = -h % 8, -w % 8
     x = F.pad(images, (0, pw, 0, ph), mode="replicate") if ph or pw else images
     hb, wb = (h + ph) // 8, (w + pw) // 8
     d = dct_matrix(images)
     k = torch.kron(d, d)  # row-major block vectors: vec(D X D^T) = k @ vec(X)
-    table = quality_tables(quality.to(images.dtype)).reshape(b, 64)
+    table = tables.reshape(b, 64)
     # Quantised coefficients: (255 x - 128) @ k^T / table. The level shift only reaches the DC
     # coefficient (8 * -128 for an orthonormal DCT).
     forward = 255.0 * k.T[None] / table[:, None, :]

@@ -26,8 +26,9 @@ def deepmorph_register_augmentations(register: Register) -> None:
     from deepmorph_augment.rotation import Rotation
     from deepmorph_augment.salt_pepper import SaltPepper
     from deepmorph_augment.scale import Scale
+    from deepmorph_augment.shadow import Shadow
     from deepmorph_augment.translation import Translation
 
     for cls in (InkFade, PaperTint, WhiteBalance, ChromaSubsampling, Perspective, Scale, Rotation, Translation,
-                Blur, Defocus, MotionBlur, Lighting, Intensity, GaussianNoise, SaltPepper, Jpeg):  # fmt: skip
+                Blur, Defocus, MotionBlur, Lighting, Shadow, Intensity, GaussianNoise, SaltPepper, Jpeg):  # fmt: skip
         register.augmentation(cls)

@@ -26,7 +26,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.luminance import to_luminance
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import STAGES
-from deepmorph_core.severity import residual_steps
+from deepmorph_core.severity import capture_steps, residual_steps
 
 ParamValue = Union[float, list[float], str]
 
@@ -179,6 +179,23 @@ class AugmentPipeline(nn.Module):
                 out = step(out, generator)
         return to_luminance(out).clamp(0.0, 1.0)
 
+    def capture(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """The steps after the colour and geometric stages on every channel as it is (no
+        conversion to luminance), clamped to ``[0, 1]``: what a camera does to a whole photo
+        whose prints a simulator has already coloured and placed in 3-D
+        (:mod:`deepmorph_detect.scenes`). Geometric steps are skipped: the simulator's pose
+        is the geometry.
+
+        Shape:
+            images: ``(B, C, H, W)`` (RGB photos: ``C = 3``); returns the same.
+        """
+        check_images(images, "capture")
+        out = images
+        for run in self._runs:
+            if not isinstance(run, list):
+                out = run(out, generator)
+        return out.clamp(0.0, 1.0)
+
     def forward(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
         """Corrupt ``images`` (gray or RGB in ``[0, 1]``, white paper = 1).
 
@@ -282,6 +299,28 @@ def warp_chosen(images: Tensor, chosen: Tensor, matrix: Tensor) -> Tensor:
         images: ``(B, C, H, W)``; chosen: ``(B,)`` bool; matrix: ``(B, 3, 3)``.
     """
     return apply_to(images, chosen, lambda x, idx: warp_white(x, matrix[idx]))
+
+
+def added_steps(severity: str, config: Mapping[str, Any] | None, width: int) -> list[AugmentationSpec]:
+    """The steps of a stored training ``config`` that its severity's preset lacks (by name):
+    the corruptions a user or a plugin added to training, which photo simulators add to their
+    capture so that what a model was trained against also reaches its validation and benchmarks."""
+    if not config:
+        return []
+    preset = {spec.name for spec in AugmentConfig.preset(severity, size=width, colour=True).steps}
+    return [spec for spec in AugmentConfig.parse(config).steps if spec.name not in preset]
+
+
+def capture_pipeline(severity: str, width: int, extra: list[AugmentationSpec] | None = None) -> AugmentPipeline:
+    """The camera's steps of a photo severity on photos ``width`` pixels wide
+    (:func:`deepmorph_core.severity.capture_steps`), plus ``extra`` steps, through the
+    registered plugins; applied with :meth:`AugmentPipeline.capture`.
+
+    Raises:
+        DeepMorphError: an unknown severity or ``none``; AugmentConfigError: a bad extra step.
+    """
+    steps = [AugmentationSpec(name=n, p=p, params=params) for n, p, params in capture_steps(severity, width)]
+    return AugmentPipeline(AugmentConfig(steps=steps + list(extra or [])))
 
 
 def build_pipeline(

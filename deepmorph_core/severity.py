@@ -10,9 +10,11 @@ A severity names how rough a capture is. Two things read it:
   :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width. Colour prints add the
   severity's colour steps (:attr:`Severity.colour`: faded ink, tinted paper, white balance,
   chroma subsampling), asked for with ``residual_steps(name, size, colour=True)``.
-* **the photo simulator** (:mod:`deepmorph_detect.scenes`), through :attr:`Severity.photo`:
-  tilt, print size, blur, noise, light, shadows, contrast, motion and JPEG of a whole photo,
-  and how far a close-up (a print filling the frame) may turn.
+* **the photo simulator** (:mod:`deepmorph_detect.scenes`): :attr:`Severity.photo` places the
+  print (tilt, size in the frame, how far a close-up may turn) and :attr:`Severity.capture` is
+  what the camera then does to the whole photo (light, shadow, contrast, blur, motion, noise,
+  JPEG), as steps of the same registered augmentation plugins training uses, their
+  pixel-valued parameters given for a :data:`PHOTO_SIZE`-pixel-wide photo.
 
 ``none`` corrupts nothing and has no photo settings.
 """
@@ -26,39 +28,27 @@ from deepmorph_core.errors import DeepMorphError
 
 #: Reference image width of the residual steps' pixel-valued parameters.
 PRESET_SIZE = 96
-#: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``).
-PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length")}
+#: Reference photo width of the capture steps' pixel-valued parameters.
+PHOTO_SIZE = 640
+#: Parameters measured in pixels (scaled by ``size / PRESET_SIZE`` or ``width / PHOTO_SIZE``).
+PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length"), ("shadow", "softness")}
 
 Step = tuple[str, float, dict[str, Any]]  # (augmentation name, probability, parameters)
 
 
 @dataclass(frozen=True)
 class PhotoRanges:
-    """What a simulated photo of a print may be (angles in degrees, sizes as shares of the
+    """Where a print lies in a simulated photo (angles in degrees, sizes as shares of the
     frame width; each pair is a range drawn uniformly).
 
     Attributes:
         tilt_deg: the print's tilt away from the camera, at most.
         size: the drawing's printed width in a scene.
-        blur: Gaussian blur sigma, pixels of a 640-pixel-wide photo.
-        noise: sensor noise sigma (intensity).
-        light: strength of the light gradient and fall-off.
-        shadow_p: chance of a soft shadow across the scene.
-        contrast: contrast factor.
-        jpeg: JPEG quality.
-        motion_p: chance of motion blur.
         spin_deg: a close-up's in-plane turn, at most (scenes turn prints any way).
     """
 
     tilt_deg: float
     size: tuple[float, float]
-    blur: tuple[float, float]
-    noise: tuple[float, float]
-    light: float
-    shadow_p: float
-    contrast: tuple[float, float]
-    jpeg: tuple[int, int]
-    motion_p: float
     spin_deg: float
 
 
@@ -69,14 +59,41 @@ class Severity:
     Attributes:
         name: ``none``, ``easy``, ``medium`` or ``hard``.
         residual: the decoder-frame corruption steps ``(name, p, params)``.
-        photo: the photo simulator's ranges (``None`` for ``none``).
+        photo: where the photo simulator puts prints (``None`` for ``none``).
+        capture: the camera's steps on a whole photo, pixel parameters for a
+            :data:`PHOTO_SIZE`-pixel-wide one.
         colour: the colour steps of a colour print (the pipeline's ``"colour"`` stage, on RGB).
     """
 
     name: str
     residual: tuple[Step, ...] = field(default=())
     photo: PhotoRanges | None = None
+    capture: tuple[Step, ...] = field(default=())
     colour: tuple[Step, ...] = field(default=())
+
+
+def _camera(
+    light: float,
+    shadow_p: float,
+    contrast: tuple[float, float],
+    blur: tuple[float, float],
+    motion_p: float,
+    noise: tuple[float, float],
+    jpeg: tuple[float, float],
+) -> tuple[Step, ...]:
+    """A camera's capture steps: a light gradient and fall-off of strength ``light`` (the gain
+    moves by up to ``light / 2`` at the edges and corners), a soft shadow with chance
+    ``shadow_p``, a contrast factor, Gaussian blur (sigma), motion blur (3-9 px) with chance
+    ``motion_p``, sensor noise (sigma) and JPEG quality."""
+    return (
+        ("lighting", 1.0, {"gradient": light / 2, "vignette": [0.0, light / 2]}),
+        ("shadow", shadow_p, {"strength": [0.2, 0.5], "softness": [2.0, 12.0]}),
+        ("intensity", 1.0, {"contrast": list(contrast), "brightness": 0.06}),
+        ("blur", 1.0, {"sigma": list(blur)}),
+        ("motion_blur", motion_p, {"length": [3.0, 9.0]}),
+        ("gaussian_noise", 1.0, {"sigma": list(noise)}),
+        ("jpeg", 1.0, {"quality": list(jpeg)}),
+    )
 
 
 SEVERITIES: dict[str, Severity] = {
@@ -96,7 +113,8 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.3, {"amount": [0.0, 0.003]}),
             ("jpeg", 0.5, {"quality": [70.0, 95.0]}),
         ),
-        photo=PhotoRanges(30, (0.25, 0.7), (0.2, 0.7), (0.003, 0.012), 0.15, 0.15, (0.8, 1.0), (80, 95), 0.0, 2),
+        photo=PhotoRanges(30, (0.25, 0.7), 2),
+        capture=_camera(0.15, 0.15, (0.8, 1.0), (0.2, 0.7), 0.0, (0.003, 0.012), (80, 95)),
         colour=(
             ("ink_fade", 1.0, {"desaturation": [0.0, 0.1], "black_lift": [0.0, 0.03]}),
             ("paper_tint", 1.0, {"grey": [0.0, 0.015], "warmth": 0.02}),
@@ -119,7 +137,8 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.5, {"amount": [0.0, 0.01]}),
             ("jpeg", 0.8, {"quality": [40.0, 90.0]}),
         ),
-        photo=PhotoRanges(45, (0.15, 0.7), (0.3, 1.1), (0.008, 0.025), 0.3, 0.35, (0.6, 0.95), (55, 90), 0.15, 5),
+        photo=PhotoRanges(45, (0.15, 0.7), 5),
+        capture=_camera(0.3, 0.35, (0.6, 0.95), (0.3, 1.1), 0.15, (0.008, 0.025), (55, 90)),
         colour=(
             ("ink_fade", 1.0, {"desaturation": [0.0, 0.25], "black_lift": [0.0, 0.08]}),
             ("paper_tint", 1.0, {"grey": [0.0, 0.03], "warmth": 0.04}),
@@ -143,7 +162,8 @@ SEVERITIES: dict[str, Severity] = {
             ("salt_pepper", 0.6, {"amount": [0.0, 0.02]}),
             ("jpeg", 0.9, {"quality": [20.0, 80.0]}),
         ),
-        photo=PhotoRanges(60, (0.10, 0.7), (0.4, 1.6), (0.015, 0.045), 0.45, 0.5, (0.45, 0.9), (35, 75), 0.35, 10),
+        photo=PhotoRanges(60, (0.10, 0.7), 10),
+        capture=_camera(0.45, 0.5, (0.45, 0.9), (0.4, 1.6), 0.35, (0.015, 0.045), (35, 75)),
         colour=(
             ("ink_fade", 1.0, {"desaturation": [0.0, 0.45], "black_lift": [0.0, 0.15]}),
             ("paper_tint", 1.0, {"grey": [0.0, 0.08], "warmth": 0.08}),
@@ -188,15 +208,30 @@ def residual_steps(name: str, size: int | None = None, *, colour: bool = False) 
     """The residual corruption steps of a severity, pixel parameters scaled to ``size``-pixel
     images (:data:`PRESET_SIZE` when ``None``), followed by its colour steps when ``colour``
     (for RGB renders; the pipeline skips them on gray ones)."""
-    factor = (size or PRESET_SIZE) / PRESET_SIZE
     level = severity(name)
-    steps = []
-    for step_name, p, params in level.residual + (level.colour if colour else ()):
+    return scaled_steps(level.residual + (level.colour if colour else ()), (size or PRESET_SIZE) / PRESET_SIZE)
+
+
+def capture_steps(name: str, width: int) -> list[Step]:
+    """The camera's steps of a photo severity on a photo ``width`` pixels wide (pixel
+    parameters scaled from :data:`PHOTO_SIZE`).
+
+    Raises:
+        DeepMorphError: an unknown severity, or ``none`` (a photo is never clean).
+    """
+    photo_ranges(name)
+    return scaled_steps(severity(name).capture, width / PHOTO_SIZE)
+
+
+def scaled_steps(steps: tuple[Step, ...], factor: float) -> list[Step]:
+    """``steps`` with their pixel-valued parameters (:data:`PIXEL_PARAMS`) times ``factor``."""
+    out = []
+    for step_name, p, params in steps:
         scaled = {
             key: ([v * factor for v in value] if isinstance(value, list) else value * factor)
             if (step_name, key) in PIXEL_PARAMS
             else value
             for key, value in params.items()
         }
-        steps.append((step_name, p, scaled))
-    return steps
+        out.append((step_name, p, scaled))
+    return out

@@ -21,7 +21,7 @@ from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.validation import SEVERITY
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.scenes import close_up_photo, colour_print
+from deepmorph_detect.scenes import close_up_photo, colour_print, model_added_steps
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
 
@@ -48,10 +48,11 @@ def validate_close_ups(
     codes = codec.encode(payloads)
     locator = Locator(model)
     colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
+    added = model_added_steps(model)
     read = wrong = right_bits = missed = 0
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-        photo = close_up_photo(printed(model, model.drawing.to_svg(values), colours, rng), severity, rng)
+        photo = close_up_photo(printed(model, model.drawing.to_svg(values), colours, rng), severity, rng, extra=added)
         found = locator.locate(photo)
         if not found:
             missed += 1

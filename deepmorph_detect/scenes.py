@@ -3,9 +3,12 @@
 A scene is a photo of one or more printed drawings. Each drawing is a payload morph rendered by
 the real renderer (resvg), printed on paper with a margin, placed in 3-D in front of a pinhole
 camera (tilt up to 60 degrees, any in-plane rotation, 10-70 % of the frame width) that averages
-the print over each of its pixels, composited over a real photo or procedural clutter, then lit,
-shadowed, blurred, noised and JPEG-compressed. Because the pose is sampled in 3-D, the truth
-holds the homography, the corners and the camera pose of every drawing exactly.
+the print over each of its pixels, composited over a real photo or procedural clutter, then
+captured: lit, shadowed, blurred, noised and JPEG-compressed by the severity's capture steps
+(:attr:`deepmorph_core.severity.Severity.capture`), which are the registered augmentation
+plugins that training uses, applied to the whole RGB photo. Steps a model's training added to
+its preset (a third-party plugin) join them. Because the pose is sampled in 3-D, the truth holds
+the homography, the corners and the camera pose of every drawing exactly.
 
 Scenes can also hold other drawings (bundled Feather icons, printed the same way), an ArUco
 marker and a QR code at the same printed size: the negatives and baselines of
@@ -28,11 +31,11 @@ import cv2
 import numpy as np
 import torch
 
-from deepmorph_core.corruption import AugmentPipeline, build_pipeline
+from deepmorph_core.corruption import AugmentationSpec, AugmentPipeline, added_steps, build_pipeline, capture_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.kernels import area_resize
 from deepmorph_core.render import render_svg, render_svg_rgb
-from deepmorph_core.severity import PhotoRanges, photo_ranges
+from deepmorph_core.severity import photo_ranges
 from deepmorph_detect.backgrounds import random_background
 from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners, viewbox_to_frame
 
@@ -146,6 +149,7 @@ class SceneMaker:
     ) -> None:
         self.severity = photo_ranges(severity)
         self.model = model
+        self._capture = capture_pipeline(severity, size[0], model_added_steps(model))
         self.size = size
         self.rng = np.random.default_rng(seed)
         self.viewbox = model.drawing.drawing.viewbox
@@ -213,7 +217,6 @@ class SceneMaker:
         ``shake_px`` pixels (``Scene.frame_warps`` holds the motion, for the truth).
         """
         W, H = self.size
-        sv = self.severity
         rng = self.rng
         cam = self.camera()
         img = random_background(rng, self.size)
@@ -264,8 +267,15 @@ class SceneMaker:
         warps = [np.eye(3)]
         for _ in range(1, max(1, frames)):
             warps.append(_shake(rng, self.size, shake_px) @ warps[-1] if shake_px > 0 else warps[-1])
-        shots = [_photograph(_moved(img, M), sv, rng) for M in warps]
+        shots = [_photograph(_moved(img, M), self._capture, rng) for M in warps]
         return Scene(shots[0], cam, placements, shots, warps)
+
+
+def model_added_steps(model: DeepMorphModel) -> list[AugmentationSpec]:
+    """The corruptions ``model``'s training added to its severity's preset
+    (:func:`~deepmorph_core.corruption.added_steps`), for its photos' capture."""
+    meta = model.meta
+    return added_steps(str(meta.train.get("severity", "medium")), meta.augment, meta.image_width)
 
 
 def _camera(size: tuple[int, int], rng: np.random.Generator) -> Camera:
@@ -346,13 +356,19 @@ def colour_print(rgb: np.ndarray, colours: AugmentPipeline, rng: np.random.Gener
 
 
 def close_up_photo(
-    art: np.ndarray, severity: str, rng: np.random.Generator, size: int = 240, desk: float | None = None
+    art: np.ndarray,
+    severity: str,
+    rng: np.random.Generator,
+    size: int = 240,
+    desk: float | None = None,
+    extra: list[AugmentationSpec] | None = None,
 ) -> np.ndarray:
     """A photo in which one print fills most of the frame: a scan or a close phone photo.
 
     ``art`` (``(H, W)`` float, 1 = white; a render of a code, or anything else) is printed on a
     sheet with a margin and photographed as scenes are (:class:`SceneMaker`), but near-frontal,
-    filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk.
+    filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk. ``extra``
+    capture steps (:func:`model_added_steps`) join the severity's.
 
     Returns:
         ``(size, size, 3)`` uint8 BGR photo.
@@ -372,7 +388,19 @@ def close_up_photo(
     img = np.full((size, size, 3), tone, np.float32)
     art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
     _print_and_place(img, np.asarray(art, np.float32), plane @ art_to_frame, margin, aw, rng)
-    return _photograph(img, sv, rng)
+    return _photograph(img, _capture(severity, size, extra), rng)
+
+
+def _capture(severity: str, width: int, extra: list[AugmentationSpec] | None) -> AugmentPipeline:
+    if extra:
+        return capture_pipeline(severity, width, extra)
+    return _plain_capture(severity, width)
+
+
+@functools.lru_cache(maxsize=16)
+def _plain_capture(severity: str, width: int) -> AugmentPipeline:
+    """The severity's own capture at a photo width (built once: close-ups come in thousands)."""
+    return capture_pipeline(severity, width)
 
 
 def _shake(rng: np.random.Generator, size: tuple[int, int], px: float) -> np.ndarray:
@@ -481,37 +509,22 @@ def _captured_scale(sheet: np.ndarray, sheet_to_image: np.ndarray) -> tuple[np.n
     return small, sheet_to_image @ small_to_sheet
 
 
-def _photograph(img: np.ndarray, sv: PhotoRanges, rng: np.random.Generator) -> np.ndarray:
-    """Light, shadow, contrast, blur, motion, noise and JPEG: float BGR -> uint8 BGR."""
-    H, W = img.shape[:2]
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    xx, yy = xx / W - 0.5, yy / H - 0.5
-    gx, gy = rng.uniform(-1, 1, 2)
-    light = 1.0 + sv.light * (gx * xx + gy * yy) - rng.uniform(0, sv.light) * (xx**2 + yy**2)
-    img = img * light[..., None]
-    if rng.random() < sv.shadow_p:  # a soft shadow: a dark polygon, blurred
-        poly = (rng.uniform(-0.2, 1.2, (int(rng.integers(3, 6)), 2)) * [W, H]).astype(np.int32)
-        shade = np.zeros((H, W), np.float32)
-        cv2.fillPoly(shade, [poly], 1.0)
-        shade = cv2.GaussianBlur(shade, (0, 0), rng.uniform(2, 12) * W / 640)
-        img = img * (1 - rng.uniform(0.2, 0.5) * shade)[..., None]
-    k = rng.uniform(*sv.contrast)
-    img = 0.5 + (img - 0.5) * k + rng.uniform(-0.06, 0.06)
-    sigma = rng.uniform(*sv.blur) * W / 640
-    img = cv2.GaussianBlur(img, (0, 0), max(sigma, 0.1))
-    if rng.random() < sv.motion_p:
-        length = int(rng.integers(3, 9) * W / 640) | 1
-        kernel = np.zeros((length, length), np.float32)
-        kernel[length // 2, :] = 1.0 / length
-        rot = cv2.getRotationMatrix2D((length / 2 - 0.5, length / 2 - 0.5), rng.uniform(0, 180), 1.0)
-        kernel = cv2.warpAffine(kernel, rot, (length, length))
-        img = cv2.filter2D(img, -1, kernel / max(kernel.sum(), 1e-6))
-    img = img + rng.normal(0, rng.uniform(*sv.noise), img.shape).astype(np.float32)
-    u8 = np.clip(img * 255, 0, 255).astype(np.uint8)
-    ok, buf = cv2.imencode(".jpg", u8, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(sv.jpeg[0], sv.jpeg[1] + 1))])
-    if not ok:  # pragma: no cover - OpenCV always encodes a valid uint8 image
-        raise DeepMorphError("JPEG encoding failed")
-    return cv2.imdecode(buf, cv2.IMREAD_COLOR)
+def _photograph(img: np.ndarray, capture: AugmentPipeline, rng: np.random.Generator) -> np.ndarray:
+    """The camera's capture steps (:meth:`AugmentPipeline.capture`: light, shadow, contrast,
+    blur, motion, noise, JPEG) on a float BGR photo, drawn from ``rng``; uint8 BGR out."""
+    rgb = torch.from_numpy(np.ascontiguousarray(img[..., ::-1].transpose(2, 0, 1), dtype=np.float32))[None]
+    generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
+    with torch.no_grad():
+        out = capture.capture(rgb, generator)[0].numpy()
+    return np.ascontiguousarray(np.rint(out[::-1].transpose(1, 2, 0) * 255.0)).astype(np.uint8)
 
 
-__all__ = ["CLOSE_UP_SIZE", "Placement", "Scene", "SceneMaker", "close_up_photo", "distractor_svgs"]
+__all__ = [
+    "CLOSE_UP_SIZE",
+    "Placement",
+    "Scene",
+    "SceneMaker",
+    "close_up_photo",
+    "distractor_svgs",
+    "model_added_steps",
+]

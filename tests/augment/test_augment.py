@@ -30,6 +30,7 @@ STRONG: dict[str, dict] = {
     "defocus": {"radius": [1.0, 2.0]},
     "motion_blur": {"length": [2.0, 4.0]},
     "lighting": {"gradient": 0.3, "vignette": 0.2},
+    "shadow": {"strength": [0.4, 0.6], "softness": [0.5, 1.0]},
     "intensity": {"contrast": [0.5, 0.7], "brightness": 0.1},
     "gaussian_noise": {"sigma": [0.05, 0.1]},
     "salt_pepper": {"amount": [0.05, 0.1]},
@@ -178,6 +179,47 @@ def test_jpeg_matches_pillow(quality: int) -> None:
     )
     diff = (ours[0, 0].clamp(0, 1) - reference).abs() * 255
     assert diff.mean() < 0.5 and diff.max() <= 3.0
+
+
+@pytest.mark.parametrize("quality", [30, 90])
+def test_colour_jpeg_matches_pillow_at_4_2_0(quality: int) -> None:
+    """RGB through Y with the luminance table and 4:2:0 Cb/Cr with the chrominance table, against
+    libjpeg through Pillow: within libjpeg's integer DCT, colour conversion and 8-bit rounding."""
+    rng = np.random.default_rng(3)
+    gray = drawing(batch=1, size=40)[0, 0].numpy()
+    tint = rng.uniform(0.3, 1.0, (3, 1, 1))
+    rgb = (np.clip(gray[None] * tint + (1 - gray[None]) * rng.uniform(0, 0.6, (3, 1, 1)), 0, 1) * 255).round()
+    pixels = rgb.astype(np.uint8).transpose(1, 2, 0)
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format="JPEG", quality=quality, subsampling=2)
+    reference = np.asarray(Image.open(buffer)).astype(np.float64) / 255.0
+    ours = jpeg_compress(torch.from_numpy(rgb / 255.0)[None], torch.tensor([float(quality)], dtype=torch.float64))
+    ours = ours[0].clamp(0, 1).numpy().transpose(1, 2, 0)
+    luma = np.array([0.299, 0.587, 0.114])
+    # measured: 0.42 / 0.61 levels of luminance, 1.25 / 1.30 per channel at quality 30 / 90
+    assert np.abs(ours @ luma - reference @ luma).mean() * 255 < 0.8
+    assert np.abs(ours - reference).mean() * 255 < 1.6
+    assert np.abs(ours - rgb.transpose(1, 2, 0) / 255).mean() > 0  # it did compress
+
+
+def test_jpeg_refuses_two_channels() -> None:
+    with pytest.raises(ValueError, match="1 or 3"):
+        jpeg_compress(torch.ones(1, 2, 8, 8), torch.tensor([50.0]))
+
+
+def test_shadow_darkens_inside_its_polygon_only() -> None:
+    from deepmorph_augment.shadow import Shadow, polygon_masks
+
+    square = torch.tensor([[[0.25, 0.25], [0.75, 0.25], [0.75, 0.75], [0.25, 0.75], [0.25, 0.75]]])
+    mask = polygon_masks(square, 40, 40)
+    assert mask[0, 0, 20, 20] == 1 and mask[0, 0, 2, 2] == 0 and mask[0, 0, 20, 35] == 0
+    assert mask.sum() == 20 * 20
+    shadow = Shadow(strength=[0.5, 0.5], softness=[0.0, 0.0])
+    out = shadow(torch.ones(64, 1, 32, 32), seeded(2))
+    assert set(torch.unique(out.round(decimals=4)).tolist()) <= {0.5, 1.0}
+    share = (out < 0.75).float().mean((1, 2, 3))
+    assert (share > 0).float().mean() > 0.8  # most shadows fall on the page
+    assert (share < 1).all()
 
 
 def test_jpeg_pads_sizes_that_are_not_multiples_of_8() -> None:

@@ -419,7 +419,7 @@ def test_a_shadow_across_the_print_is_read_at_the_second_look(
     assert sum(d.result.ok for dets in first_looks for d in dets) <= 1
 
 
-@pytest.mark.parametrize("seed", [21, 5])
+@pytest.mark.parametrize("seed", [20, 5])
 def test_a_print_cut_by_a_sharp_shadow_is_aligned_in_flat_light(
     model: DeepMorphModel, locator: Locator, seed: int
 ) -> None:

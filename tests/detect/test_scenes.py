@@ -59,3 +59,21 @@ def test_a_print_finer_than_the_photo_is_averaged_by_the_camera_not_sampled() ->
     patch = img[100:140, 100:140, 1]
     assert patch.std() < 0.08
     assert 0.55 < patch.mean() < 0.7  # the stripes' mean (2/3) in the paper and ink tones
+
+
+def test_the_camera_is_the_registered_plugins_scaled_to_the_photo() -> None:
+    """One simulator: a photo's capture is built from the augmentation registry, the severity
+    table's steps with their pixel parameters scaled from a 640-pixel-wide photo."""
+    from deepmorph_core.corruption import capture_pipeline
+    from deepmorph_core.severity import capture_steps
+
+    pipeline = capture_pipeline("hard", 320)
+    names = [step.name for step in pipeline.steps]
+    assert names == ["blur", "motion_blur", "lighting", "shadow", "intensity", "gaussian_noise", "jpeg"]
+    steps = {name: params for name, _, params in capture_steps("hard", 320)}
+    wide = {name: params for name, _, params in capture_steps("hard", 640)}
+    assert steps["blur"]["sigma"] == [s / 2 for s in wide["blur"]["sigma"]]
+    assert steps["shadow"]["softness"] == [s / 2 for s in wide["shadow"]["softness"]]
+    assert steps["jpeg"] == wide["jpeg"] and steps["gaussian_noise"] == wide["gaussian_noise"]
+    with pytest.raises(DeepMorphError, match="'none' has no photo settings"):
+        capture_steps("none", 640)
