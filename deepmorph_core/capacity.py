@@ -92,6 +92,7 @@ class CapacityReport:
         codec: its code (``None`` when no payload fits).
         elements: per element, what it contributes (in document order).
         static: lines of elements that do not morph at all (fixed, or no bounds).
+        visible_mask: per variable, whether it is counted as visible (not in the JSON).
     """
 
     n_variables: int
@@ -102,6 +103,7 @@ class CapacityReport:
     codec: CodecSpec | None
     elements: list[ElementCapacity] = field(default_factory=list)
     static: list[int | None] = field(default_factory=list)
+    visible_mask: list[bool] = field(default_factory=list)
 
     def fits(self, spec: CodecSpec) -> bool:
         """Whether a code is within the prediction."""
@@ -152,6 +154,7 @@ class CapacityReport:
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
+        del data["visible_mask"]
         data["codec"] = None if self.codec is None else {**self.codec.model_dump(), "code_bits": self.codec.code_bits}
         data["limits"] = self.limits()
         return data
@@ -236,6 +239,7 @@ def predict(
         spec,
         elements,
         static,
+        [bool(v) for v in shown],
     )
 
 

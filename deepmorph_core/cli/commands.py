@@ -159,17 +159,46 @@ def capacity(
         Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: the codec's choice).")
     ] = None,
     drop: DropOpt = False,
+    pixels: Annotated[
+        Optional[float],
+        typer.Option("--pixels", min=8, max=10000, help="The print's smallest width in the photo, in pixels."),
+    ] = None,
+    print_mm: Annotated[
+        Optional[float], typer.Option("--print-mm", help="The printed width in mm (with --distance-cm).")
+    ] = None,
+    distance_cm: Annotated[
+        Optional[float], typer.Option("--distance-cm", help="The camera's distance from the print in cm.")
+    ] = None,
+    frame_px: Annotated[
+        int, typer.Option("--frame-px", min=16, help="The photo's long side in pixels (1080p phone: 1920).")
+    ] = 1920,
+    fov_deg: Annotated[
+        float, typer.Option("--fov-deg", help="The camera's field of view across that side, in degrees.")
+    ] = 65.0,
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the payload a drawing carries before training: its readable variables, the
-    largest payload that reads from 99 % of captures, and what limits it."""
+    largest payload that reads from 99 % of captures, and what limits it; with how far its
+    variables move in a photo at 96, 150, 200 and 300 px across (and at --pixels, or at the
+    width a --print-mm print has at --distance-cm)."""
     from deepmorph_core.capacity import predict
+    from deepmorph_core.print_size import pixels_across, plan, plan_sizes, rows_to_json
 
     if crc not in (None, 8, 16):
         raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
-    report = predict(_load(svg, move, shift, scale, rotate, drop), crc_bits=crc)
+    if (print_mm is None) != (distance_cm is None):
+        raise typer.BadParameter("give both --print-mm and --distance-cm, or neither", param_hint="--print-mm")
+    if print_mm is not None and pixels is not None:
+        raise typer.BadParameter("give --pixels or --print-mm/--distance-cm, not both", param_hint="--pixels")
+    if print_mm is not None and distance_cm is not None:
+        pixels = pixels_across(print_mm, distance_cm, frame_px, fov_deg)
+    drawing = _load(svg, move, shift, scale, rotate, drop)
+    report = predict(drawing, crc_bits=crc)
+    sizes = plan(drawing, report.visible_mask, plan_sizes(pixels))
+    camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
     if as_json:
-        print_json({"svg": str(svg), **report.to_json()})
+        plan_json = {"pixels": pixels, "camera": camera if print_mm is not None else None, "sizes": rows_to_json(sizes)}
+        print_json({"svg": str(svg), **report.to_json(), "print_size": plan_json})
         return
     spec = report.codec
     hidden = report.n_variables - report.visible
@@ -193,6 +222,29 @@ def capacity(
     out.print(table)
     for line in report.limits():
         out.print(f"limit: {safe(line)}")
+    _print_sizes(sizes, pixels, print_mm, distance_cm, frame_px, fov_deg)
+
+
+def _print_sizes(
+    sizes: list[Any], pixels: float | None, print_mm: float | None, distance_cm: float | None, frame_px: int, fov: float
+) -> None:
+    """The travel table of ``capacity``: how far the visible variables move at each print width."""
+    if print_mm is not None:
+        out.print(
+            f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {frame_px}-px, {fov:g}° frame"
+        )
+    table = Table(title="moves in the photo (control points across each variable's range)")
+    for column in ("print width", "median move", "smallest move", "under 1 px"):
+        table.add_column(column, justify="right")
+    for row in sizes:
+        mark = " ←" if pixels is not None and abs(row.pixels - pixels) < 0.5 else ""
+        table.add_row(f"{row.pixels:.0f} px{mark}", f"{row.median_move:.1f} px", f"{row.smallest_move:.1f} px",
+                      str(row.sub_pixel))  # fmt: skip
+    out.print(table)
+    out.print(
+        "note: models read every print in their decoder's frame (96 px unless trained with --image-width), so "
+        "the payload above is the same for every print at least that wide"
+    )
 
 
 def morph(

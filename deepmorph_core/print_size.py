@@ -1,0 +1,123 @@
+"""How large a print is in a photo, and how far its variables move there: the pixels a user
+plans a print with.
+
+A camera sees a print ``print_mm`` wide, held square to it at ``distance_cm``, across
+``frame_px * print_mm / (2 * distance * tan(fov / 2))`` pixels (a pinhole camera). The
+defaults are a phone filming 1080p: the frame's long side, :data:`PHONE_FRAME_PX` pixels, spans
+:data:`PHONE_FOV_DEG` degrees, so a 50 mm print at 30 cm spans about 250 px and at 20 cm about
+375 px. A variable carries its bit by moving the drawing's outline; how far its control points
+travel across its range, in the photo's pixels, is what blur, noise and the decoder's frame
+have to resolve (:func:`movement`, :func:`plan`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.morphable import MorphableDrawing
+
+#: The long side of a 1080p phone frame, in pixels.
+PHONE_FRAME_PX = 1920
+#: A phone's main camera across that side, in degrees (65-75 is common; 65 is the narrower).
+PHONE_FOV_DEG = 65.0
+#: The print widths in photo pixels a plan always shows.
+PLAN_PIXELS = (96, 150, 200, 300)
+#: A move shorter than this many photo pixels is under the capture's blur at every severity.
+SUB_PIXEL = 1.0
+
+
+def pixels_across(
+    print_mm: float, distance_cm: float, frame_px: int = PHONE_FRAME_PX, fov_deg: float = PHONE_FOV_DEG
+) -> float:
+    """A print's width in photo pixels, held square to a pinhole camera at ``distance_cm``.
+
+    Raises:
+        DeepMorphError: a size or distance that is not positive, or a field of view outside
+            1-179 degrees.
+    """
+    if not (print_mm > 0 and distance_cm > 0 and frame_px > 0):
+        raise DeepMorphError(
+            f"print size, distance and frame width must be positive (got {print_mm} mm, {distance_cm} cm, "
+            f"{frame_px} px)"
+        )
+    if not 1.0 <= fov_deg <= 179.0:
+        raise DeepMorphError(f"field of view must be 1-179 degrees, got {fov_deg}")
+    seen_mm = 2.0 * distance_cm * 10.0 * math.tan(math.radians(fov_deg) / 2.0)
+    return frame_px * print_mm / seen_mm
+
+
+def movement(drawing: MorphableDrawing) -> np.ndarray:
+    """``(N_v,)`` how far each variable moves the drawing: the largest distance any control
+    point travels as the variable sweeps its whole range (every other one neutral), as a share
+    of the drawing's width. Times a print's width in pixels, its travel in those pixels."""
+    space = drawing.space
+    n = space.n_variables
+    if n == 0:
+        return np.zeros(0)
+    width = 1000
+    neutral = space.neutral_unit(1)[0]
+    unit = neutral.repeat(2 * n, 1).double()
+    rows = torch.arange(n)
+    unit[2 * rows, rows] = 0.0
+    unit[2 * rows + 1, rows] = 1.0
+    with torch.no_grad():
+        frames = space.frames(space.values_from_unit(unit), width)
+        travel = torch.zeros(n, dtype=torch.float64)
+        for frame in frames:
+            points = frame.to_pixels(frame.local)  # (2n, k, 2)
+            step = (points[1::2] - points[0::2]).norm(dim=-1).amax(-1)
+            travel = torch.maximum(travel, step)
+    return travel.numpy() / width
+
+
+@dataclass(frozen=True)
+class SizeRow:
+    """What one print width gives the variables a reader sees.
+
+    Attributes:
+        pixels: the print's width in the photo.
+        median_move: the median visible variable's travel across its range, in those pixels.
+        smallest_move: the least-moving visible variable's travel.
+        sub_pixel: visible variables that travel less than :data:`SUB_PIXEL` pixel.
+    """
+
+    pixels: float
+    median_move: float
+    smallest_move: float
+    sub_pixel: int
+
+
+def plan(drawing: MorphableDrawing, visible: np.ndarray, sizes: list[float]) -> list[SizeRow]:
+    """Each print width of ``sizes`` (photo pixels) with the travel of the ``visible``
+    variables (a ``(N_v,)`` bool) there."""
+    share = movement(drawing)[np.asarray(visible, dtype=bool)]
+    rows = []
+    for px in sizes:
+        moves = share * px
+        rows.append(
+            SizeRow(
+                float(px),
+                round(float(np.median(moves)), 2) if moves.size else 0.0,
+                round(float(moves.min()), 2) if moves.size else 0.0,
+                int((moves < SUB_PIXEL).sum()),
+            )
+        )
+    return rows
+
+
+def plan_sizes(pixels: float | None) -> list[float]:
+    """:data:`PLAN_PIXELS`, with ``pixels`` among them in order when given."""
+    sizes = [float(p) for p in PLAN_PIXELS]
+    if pixels is not None and all(abs(pixels - s) > 0.5 for s in sizes):
+        sizes.append(float(pixels))
+    return sorted(sizes)
+
+
+def rows_to_json(rows: list[SizeRow]) -> list[dict[str, Any]]:
+    return [asdict(row) for row in rows]
