@@ -136,7 +136,8 @@ def train(
     encoder_init: Literal["spread", "random"] = "spread",
     spatial_transformer: bool = True,
     readout: bool = True,
-    device: Literal["cpu", "cuda"] = "cpu",
+    device: Literal["auto", "cpu", "cuda"] = "auto",
+    shards: int | None = None,
     threads: int | None = None,
     resume: bool = False,
     checkpoint_every: int = 250,
@@ -163,7 +164,9 @@ def train(
         severity: the capture corruption reached at the end of the curriculum.
         real_render_share: share of each batch drawn by resvg.
         small_prints: share of each batch captured as a small print.
-        seed, encoder_init, spatial_transformer, readout, device, threads: the run and its networks.
+        seed, encoder_init, spatial_transformer, readout, device, threads: the run and its networks
+            (``device="auto"``: CUDA where present).
+        shards: random streams the batch is drawn from (default: one per torchrun process).
         resume: continue the checkpoint at ``out``.
         checkpoint_every: steps between checkpoints.
         move, shift, scale, rotate: default bounds for elements the SVG gives none
@@ -209,6 +212,7 @@ def train(
             "spatial_transformer": spatial_transformer,
             "readout": readout,
             "device": device,
+            "shards": shards,
             "threads": threads,
             "checkpoint_every": checkpoint_every,
         },

@@ -43,7 +43,14 @@ _SHAPE = Annotated[list[Annotated[int, Field(ge=1, le=1 << 20)]], Field(min_leng
 
 
 class TrainingRecord(BaseModel):
-    """What training did: steps, stages, time, and the last measured accuracies."""
+    """What training did: steps, stages, time, and the last measured accuracies.
+
+    Attributes:
+        device, threads: where it ran last (``cpu`` or ``cuda``) and torch's CPU threads there.
+        world_size: processes that trained it together (torchrun), when last run; ``None`` in
+            bundles written before it was recorded.
+        global_batch: perturbations per step over all processes; ``None`` where not recorded.
+    """
 
     model_config = ConfigDict(extra="forbid")
 
@@ -55,6 +62,8 @@ class TrainingRecord(BaseModel):
     finished: bool = False
     device: str = "cpu"
     threads: int = 1
+    world_size: int | None = Field(default=None, ge=1)
+    global_batch: int | None = Field(default=None, ge=1)
     metrics: dict[str, float] = Field(default_factory=dict)
 
 

@@ -12,6 +12,10 @@ their state is written (a :class:`Run`); this loop does the rest the same way fo
   :class:`Interrupted`, whose message says how to go on;
 * resuming continues from the record's step: log lines written after that checkpoint (and a
   line cut by a crash) are dropped, so the log and the plot hold each step once;
+* in a data-parallel run (torchrun) every process steps and calls :meth:`Run.checkpoint`
+  (which gathers state from all of them), but only the main process writes the log and the
+  plot; an interrupt there writes no checkpoint (the processes would wait on each other), the
+  last periodic one stands;
 * at the end the run writes its final state and a PNG plot of the log goes beside the log
   (matplotlib is optional, the ``plot`` extra: without it one
   :class:`~deepmorph_core.errors.DeepMorphWarning` says how to get the plot).
@@ -99,13 +103,27 @@ class TrainingLoop:
         log_every, checkpoint_every: in steps.
         resume_hint: what the interrupt message says after the step: where the checkpoint is
             and how to go on.
+        main: whether this process writes the log and the plot (rank 0 of a torchrun).
+        checkpoint_on_interrupt: write a checkpoint on Ctrl-C or SIGTERM (not in a run of
+            several processes: the last periodic checkpoint stands).
     """
 
-    def __init__(self, log_path: Path, log_every: int, checkpoint_every: int, resume_hint: str) -> None:
+    def __init__(
+        self,
+        log_path: Path,
+        log_every: int,
+        checkpoint_every: int,
+        resume_hint: str,
+        main: bool = True,
+        checkpoint_on_interrupt: bool = True,
+    ) -> None:
         self.log_path = Path(log_path)
         self.log_every = log_every
         self.checkpoint_every = checkpoint_every
         self.resume_hint = resume_hint
+        self.main = main
+        self.checkpoint_on_interrupt = checkpoint_on_interrupt
+        self._last_checkpoint = 0
 
     def run(self, run: Run, on_log: Callable[[dict[str, Any]], None] | None = None) -> LoopSummary:
         """Train until ``run.record.total_steps``.
@@ -133,27 +151,36 @@ class TrainingLoop:
                         line["elapsed_s"] = round(rec.elapsed_s, 2)
                         sums, count = {}, 0
                         history.append(line)
-                        append_line(self.log_path, json.dumps(line))
+                        if self.main:
+                            append_line(self.log_path, json.dumps(line))
                         rec.metrics = {k: line[k] for k in line if k not in ("step", "stage", "elapsed_s")}
                         if on_log:
                             on_log(line)
                     if rec.step % self.checkpoint_every == 0 and rec.step < rec.total_steps:
                         run.checkpoint()
+                        self._last_checkpoint = rec.step
         except KeyboardInterrupt:
             rec.elapsed_s = time.perf_counter() - started
+            if not self.checkpoint_on_interrupt:
+                raise Interrupted(
+                    f"interrupted at step {rec.step}/{rec.total_steps}; the last checkpoint is from step "
+                    f"{self._last_checkpoint}: {self.resume_hint}"
+                ) from None
             run.checkpoint()
             raise Interrupted(f"interrupted at step {rec.step}/{rec.total_steps}; {self.resume_hint}") from None
         rec.finished = True
         run.checkpoint()
-        plot = plot_history(history, run.panels, self.log_path.with_suffix(".png"))
+        plot = plot_history(history, run.panels, self.log_path.with_suffix(".png")) if self.main else None
         return LoopSummary(self.log_path, plot, rec.step, rec.elapsed_s, history)
 
     def _start_log(self, step: int) -> list[dict[str, Any]]:
         """The log's lines up to ``step`` (a fresh, empty log at step 0), written back so that
         the lines a resumed run logs again follow them exactly once."""
         history = [line for line in read_log(self.log_path) if line.get("step", 0) <= step] if step else []
-        text = "".join(json.dumps(line) + "\n" for line in history)
-        atomic_write(self.log_path, text.encode())
+        if self.main:
+            text = "".join(json.dumps(line) + "\n" for line in history)
+            atomic_write(self.log_path, text.encode())
+        self._last_checkpoint = step
         return history
 
 

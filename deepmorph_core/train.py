@@ -38,6 +38,21 @@ from deepmorph_core.bundle import TrainingRecord, ValidationRecord
 from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
+from deepmorph_core.distributed import (
+    BatchNormShards,
+    World,
+    all_reduce_sum,
+    broadcast_module,
+    gather_objects,
+    join,
+    leave,
+    rank_shards,
+    resolve_device,
+    shard_seed,
+    shard_sizes,
+    sum_gradients,
+    world_from_env,
+)
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders
@@ -91,7 +106,11 @@ class TrainConfig(BaseModel):
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
             :func:`tune_decoder` runs on a trained bundle.
         seed: makes a run reproducible (same seed, same threads: same model).
-        device: ``cpu`` or ``cuda``.
+        device: ``cpu``, ``cuda`` or ``auto`` (CUDA where present); a bundle stores the device
+            it resolved to.
+        shards: random streams the batch is drawn from (:mod:`deepmorph_core.distributed`):
+            the processes of a torchrun share them, so a run's numbers depend on its seed and
+            shards, not on how many processes train it. ``None``: one per process.
         threads: torch CPU threads (``None``: torch's default).
         checkpoint_every, log_every: in steps.
     """
@@ -115,7 +134,8 @@ class TrainConfig(BaseModel):
     readout: bool = True
     freeze_encoder: bool = False
     seed: int = 0
-    device: Literal["cpu", "cuda"] = "cpu"
+    device: Literal["cpu", "cuda", "auto"] = "auto"
+    shards: int | None = Field(default=None, ge=1, le=1024)
     threads: int | None = Field(default=None, ge=1, le=256)
     checkpoint_every: int = Field(default=250, ge=1)
     log_every: int = Field(default=25, ge=1)
@@ -205,21 +225,29 @@ class CodecRun:
 
     Args:
         model: a fresh model (``DeepMorphModel.create``) or a loaded checkpoint.
-        config: training settings.
-        out: the bundle path written at checkpoints and at the end.
+        config: training settings (``device`` resolved: ``cpu`` or ``cuda``).
+        out: the bundle path written at checkpoints and at the end (by rank 0 alone).
+        world: this process's place in a data-parallel run (:func:`deepmorph_core.distributed.join`
+            already called); it draws the shards :func:`~deepmorph_core.distributed.rank_shards` gives it.
     """
 
     panels = CODEC_PANELS
 
-    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path):
+    def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path, world: World | None = None):
         self.model, self.cfg, self.out = model, config, Path(out)
-        self.device = torch.device(config.device)
-        if config.device == "cuda" and not torch.cuda.is_available():
-            raise DeepMorphError("--device cuda was asked for but no CUDA device is available")
+        self.world = world or World()
+        device = resolve_device(config.device)
+        self.device = torch.device("cuda", torch.cuda.current_device()) if device == "cuda" else torch.device("cpu")
+        self.shards = config.shards or 1
+        self.mine = rank_shards(self.shards, self.world)
         if config.threads:
             torch.set_num_threads(config.threads)
         model.encoder.to(self.device)
         model.decoder.to(self.device)
+        # on the CPU, convolutions run channels-last: the decoder's full-resolution layers (one
+        # input channel) take about a third of the time forward and backward, to float rounding
+        self.memory_format = torch.channels_last if self.device.type == "cpu" else torch.contiguous_format
+        model.decoder.to(memory_format=self.memory_format)
         self.raster = model.rasterizer()
         self.target = model.canonical_moments()
         self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
@@ -232,7 +260,9 @@ class CodecRun:
         self._augments[config.severity] = build_pipeline(config.severity, model.width, stored).to(self.device)
         self._small_augments: dict[tuple[str, int], nn.Module] = {}
         self.bce = nn.BCEWithLogitsLoss()
-        self.gen = torch.Generator(device="cpu").manual_seed(config.seed)
+        # shard 0's stream is the run's seed (and draws the encoder's spread start on every rank)
+        self._gens = {i: torch.Generator(device="cpu").manual_seed(shard_seed(config.seed, i)) for i in self.mine}
+        self.gen = self._gens.get(0) or torch.Generator(device="cpu").manual_seed(shard_seed(config.seed, 0))
         torch.manual_seed(config.seed)
         fresh = model.meta.record.step == 0 and not model.extra_tensors
         if config.encoder_init == "spread" and fresh and not config.freeze_encoder:
@@ -243,8 +273,10 @@ class CodecRun:
         self.opt_enc = torch.optim.Adam(model.encoder.parameters(), lr=config.encoder_lr)
         self.record = model.meta.record
         self.record.total_steps = config.steps
-        self.record.device = config.device
+        self.record.device = self.device.type
         self.record.threads = torch.get_num_threads()
+        self.record.world_size = self.world.size
+        self.record.global_batch = config.batch
         self._window: list[float] = []
         self._prev_window: float | None = None
         self._restore(model.extra_tensors)
@@ -254,7 +286,13 @@ class CodecRun:
     # -- state ----------------------------------------------------------------------------
 
     def _extra_state(self) -> dict[str, Tensor]:
-        out: dict[str, Tensor] = {"rng.cpu": self.gen.get_state(), "rng.torch": torch.get_rng_state()}
+        """Optimiser and generator state (every shard's stream, gathered from the ranks that draw
+        them: a collective call, made by every rank)."""
+        streams: dict[int, Tensor] = {}
+        for part in gather_objects({i: g.get_state() for i, g in self._gens.items()}, self.world):
+            streams.update(part)
+        out: dict[str, Tensor] = {"rng.cpu": streams[0], "rng.torch": torch.get_rng_state()}
+        out.update({f"rng.shard.{i}": state for i, state in streams.items() if i})
         for name, opt in (("opt_dec", self.opt_dec), ("opt_enc", self.opt_enc)):
             for pid, st in opt.state_dict()["state"].items():
                 for key, val in st.items():
@@ -267,7 +305,8 @@ class CodecRun:
     def _restore(self, extra: dict[str, Tensor]) -> None:
         if not extra:
             return
-        self.gen.set_state(extra["rng.cpu"])
+        for i, gen in self._gens.items():
+            gen.set_state(extra["rng.cpu" if i == 0 else f"rng.shard.{i}"])
         torch.set_rng_state(extra["rng.torch"])
         for name, opt in (("opt_dec", self.opt_dec), ("opt_enc", self.opt_enc)):
             sd = opt.state_dict()
@@ -283,12 +322,16 @@ class CodecRun:
 
     def checkpoint(self) -> None:
         """Write the bundle with optimiser and generator state (atomic); at the end, with the
-        decoder's ONNX graph."""
+        decoder's ONNX graph. Every rank calls it; rank 0 alone writes."""
         self.model.meta.record = self.record
+        extra = None if self.record.finished else self._extra_state()
+        if not self.world.main:
+            return
         if self.record.finished:
+            self.model.decoder.to(memory_format=torch.contiguous_format)
             drop_dormant_readout(self.model)
             self.model.store_decoder_graph()
-        self.model.save(self.out, extra=None if self.record.finished else self._extra_state())
+        self.model.save(self.out, extra=extra)
 
     # -- one step -------------------------------------------------------------------------
 
@@ -340,28 +383,45 @@ class CodecRun:
         return rungs[min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))]
 
     def step(self) -> dict[str, float]:
-        """One optimisation step; its loss, bit accuracy and whole-word accuracy."""
+        """One optimisation step; its loss, bit accuracy and whole-word accuracy over the global
+        batch (every shard, on every rank)."""
         cfg, rec = self.cfg, self.record
         stage2 = rec.stage == 2
         self.model.encoder.train(stage2)
         self.model.decoder.train()
-        bits = torch.randint(0, 2, (cfg.batch, self.model.codec.spec.code_bits), generator=self.gen).float()
-        bits = bits.to(self.device)
-        logits = self.model.decoder(self.images(bits, stage2))
-        loss = self.bce(logits, bits)
         self.opt_dec.zero_grad(set_to_none=True)
         self.opt_enc.zero_grad(set_to_none=True)
-        loss.backward()
+        sizes = shard_sizes(cfg.batch, self.shards)
+        norms = BatchNormShards(self.model.decoder) if self.shards > 1 else None
+        totals = torch.zeros(3, dtype=torch.float64, device=self.device)  # loss x rows, right bits, right words
+        for shard in self.mine:
+            self.gen = self._gens[shard]
+            bits = torch.randint(0, 2, (sizes[shard], self.model.codec.spec.code_bits), generator=self.gen).float()
+            bits = bits.to(self.device)
+            if norms:
+                norms.start()
+            images = self.images(bits, stage2).contiguous(memory_format=self.memory_format)
+            logits = self.model.decoder(images)
+            loss = self.bce(logits, bits)
+            (loss * (sizes[shard] / cfg.batch) if self.shards > 1 else loss).backward()
+            if norms:
+                norms.add()
+            with torch.no_grad():
+                right = (logits > 0) == (bits > 0.5)
+                totals += torch.stack([loss.detach().double() * sizes[shard], right.sum(), right.all(1).sum()])
+        if norms:
+            norms.finish(self.shards, self.world)
+        sum_gradients([*self.model.decoder.parameters(), *self.model.encoder.parameters()], self.world)
+        all_reduce_sum([totals], self.world)
         self._set_learning_rates()
         self.opt_dec.step()
         if stage2:
             self.opt_enc.step()
-        with torch.no_grad():
-            right = (logits > 0) == (bits > 0.5)
-            bit_acc = right.float().mean().item()
-            word_acc = right.all(1).float().mean().item()
+        loss_sum, right_bits, right_words = totals.tolist()
+        bit_acc = right_bits / (cfg.batch * self.model.codec.spec.code_bits)
+        word_acc = right_words / cfg.batch
         self._update_stage(bit_acc, rec.step + 1)  # the loop counts this step once it returns
-        return {"loss": loss.item(), "bit_acc": bit_acc, "word_acc": word_acc}
+        return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc}
 
     def _set_learning_rates(self) -> None:
         """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step (over every
@@ -397,7 +457,10 @@ class CodecRun:
             stalled = self._prev_window is not None and self._prev_window < READOUT_STALL
             readout = self.model.decoder.readout
             if stalled and readout is not None and not readout_fitted(self.model.decoder):
-                fit_readout(self.model.decoder, self.images, self.model.codec.spec.code_bits, self.gen, self.device)
+                if self.world.main:  # fitted from shard 0's stream, then given to every rank
+                    self.gen = self._gens[0]
+                    fit_readout(self.model.decoder, self.images, self.model.codec.spec.code_bits, self.gen, self.device)
+                broadcast_module(self.model.decoder, self.world)  # with the statistics the fit's batches moved
                 readout.requires_grad_(True)
 
 
@@ -434,8 +497,13 @@ def train_model(
     drop_unsupported: bool = False,
     validation_samples: tuple[int, int] | None = None,
     on_validation: Callable[[], None] | None = None,
+    world: World | None = None,
 ) -> TrainingSummary:
     """Train (or resume) a model for a drawing and write its bundle.
+
+    Under torchrun each process calls it: they train together, rank 0 alone writes the
+    checkpoints and the bundle, reports progress and warnings, and validates
+    (:mod:`deepmorph_core.distributed`).
 
     Args:
         svg: the drawing.
@@ -457,6 +525,66 @@ def train_model(
             :func:`~deepmorph_core.validation.default_samples`); the records are stored in the
             bundle, and a model reading fewer than 99 % gets a warning. ``(0, 0)``: none.
         on_validation: called when validation starts (a progress message).
+        world: this process's place in a data-parallel run (default: what torchrun's environment
+            says; one process without it).
+    """
+    world = world or world_from_env()
+    if not world.main:  # one process speaks: rank 0
+        on_start, on_validation, on_warning = None, None, lambda text: None
+    warn = on_warning or (lambda text: warnings.warn(text, stacklevel=3))
+    model, config, label = open_model(
+        svg, out, payload_bits, crc_bits, ecc_t, bounds, train, resume, overwrite, drop_unsupported, warn, world
+    )
+    out = Path(out)
+    _, joined = join(world, config.device)
+    try:
+        run = CodecRun(model, config, out, world)
+        loop = TrainingLoop(
+            out.with_suffix(".log.jsonl"),
+            config.log_every,
+            config.checkpoint_every,
+            f"checkpoint written to {out} (continue with --resume)",
+            main=world.main,
+            checkpoint_on_interrupt=not world.distributed,
+        )
+        on_log = on_start(config.steps, model.meta.record.step) if on_start else None
+        summary: LoopSummary = loop.run(run, on_log)
+    finally:
+        if joined:
+            leave()
+    model.encoder.cpu()  # validated (and used after training) on the CPU, as the photo chain runs
+    model.decoder.cpu()
+    if not world.main:
+        return TrainingSummary(out, summary.log, None, summary.steps, run.record.stage2_start, summary.elapsed_s)
+    records = _validate_and_store(
+        model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
+    )
+    return TrainingSummary(
+        out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records
+    )
+
+
+def open_model(
+    svg: str | Path | bytes,
+    out: str | Path,
+    payload_bits: int | Literal["auto"] = 24,
+    crc_bits: int | None = None,
+    ecc_t: int | None = None,
+    bounds: dict[str, Any] | None = None,
+    train: dict[str, Any] | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    drop_unsupported: bool = False,
+    warn: Callable[[str], None] = lambda text: warnings.warn(text, stacklevel=3),
+    world: World | None = None,
+) -> tuple[DeepMorphModel, TrainConfig, str]:
+    """The model a training starts from and its settings, as :func:`train_model` takes them:
+    a fresh one (seeded), or the checkpoint at ``out`` with ``resume``; and the drawing's label.
+    The settings' device is resolved (``auto``: CUDA where present) and their shards set (a
+    fresh run: one per process of ``world``; a checkpoint: its own, one where it has none).
+
+    Raises:
+        DeepMorphError: unreadable input, an ``out`` that may not be written, settings out of range.
     """
     out = check_target(out, f"--out {out}")  # before any work: a folder that cannot be written, say
     overrides = {k: v for k, v in (train or {}).items() if v is not None}
@@ -464,7 +592,6 @@ def train_model(
         data, label = svg, "<drawing>"
     else:
         data, label = read_svg_bytes(svg), str(svg)
-    warn = on_warning or (lambda text: warnings.warn(text, stacklevel=3))
     # the bundle holds the drawing as DeepMorph writes it: what it models, nothing else (read
     # first, so that hostile or unsupported input is refused before anything else)
     md = MorphableDrawing.load(data, label=label, drop_unsupported=drop_unsupported and not resume)
@@ -484,13 +611,14 @@ def train_model(
                     # the checkpoint's decoder decides (one without a transformer keeps none)
                     "spatial_transformer": model.meta.decoder.spatial_transformer,
                     "readout": model.meta.decoder.readout,
-                    **{k: v for k, v in overrides.items() if k in ("steps", "threads", "checkpoint_every")},
+                    **{k: v for k, v in overrides.items() if k in ("steps", "threads", "checkpoint_every", "device")},
                 }
             )
+            config = _resolved(config, config.shards or 1)
         else:
             if out.exists() and not overwrite:
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
-            config = TrainConfig(**overrides)
+            config = _resolved(TrainConfig(**overrides), (world or World()).size)
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
             augment = build_pipeline(config.severity, config.width, colour=md.colour)
             settings = RasterSettings(width=config.width)
@@ -511,19 +639,12 @@ def train_model(
             )
     except ValidationError as exc:
         raise _settings_error("training settings", exc) from None
-    run = CodecRun(model, config, out)
-    loop = TrainingLoop(
-        out.with_suffix(".log.jsonl"),
-        config.log_every,
-        config.checkpoint_every,
-        f"checkpoint written to {out} (continue with --resume)",
-    )
-    on_log = on_start(config.steps, model.meta.record.step) if on_start else None
-    summary: LoopSummary = loop.run(run, on_log)
-    records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, on_validation)
-    return TrainingSummary(
-        out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records
-    )
+    return model, config, label
+
+
+def _resolved(config: TrainConfig, shards: int) -> TrainConfig:
+    """``config`` with its device resolved and its shards set (``shards`` unless it names its own)."""
+    return config.model_copy(update={"device": resolve_device(config.device), "shards": config.shards or shards})
 
 
 def _payload_code(
@@ -564,14 +685,16 @@ def _validate_and_store(
     seed: int,
     warn: Callable[[str], None],
     on_validation: Callable[[], None] | None,
+    device: str = "cpu",
 ) -> list[ValidationRecord]:
-    """Validate a trained (or tuned) model, store the records in its bundle and warn when weak."""
+    """Validate a trained (or tuned) model (its networks on ``device``), store the records in its
+    bundle and warn when weak."""
     renders, photos = samples if samples is not None else default_samples()
     if renders <= 0:
         return []
     if on_validation:
         on_validation()
-    records = validate(model, default_registry(), renders, photos, seed=seed)
+    records = validate(model, default_registry(), renders, photos, seed=seed, device=device)
     model.meta.validation = records
     model.save(out)
     warning = validation_warning(records, label)
@@ -633,6 +756,7 @@ def tune_decoder(
     lr: float = 3e-4,
     seed: int = 0,
     threads: int | None = None,
+    device: str = "auto",
     overwrite: bool = False,
     on_start: Callable[[int, int], Callable[[dict[str, Any]], None]] | None = None,
     validation_samples: tuple[int, int] | None = None,
@@ -651,6 +775,7 @@ def tune_decoder(
     Args:
         model_path: a bundle whose training has finished.
         out: where to write the tuned bundle (may be ``model_path`` itself).
+        device: where it trains (``auto``: CUDA where present), wherever the bundle was trained.
         on_start: ``on_start(total_steps, done_steps)`` returning a per-log callback.
         validation_samples, on_validation, on_warning: the tuned decoder is validated as after
             training (:func:`train_model`).
@@ -664,7 +789,7 @@ def tune_decoder(
         raise DeepMorphError(f"{model_path}: its training has not finished; resume it before tuning")
     if out.exists() and not overwrite and out.resolve() != model_path.resolve():
         raise DeepMorphError(f"{out}: already exists; choose another --out")
-    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity", "device") if k in model.meta.train}
+    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity") if k in model.meta.train}
     try:
         config = TrainConfig(
             **kept,
@@ -674,6 +799,7 @@ def tune_decoder(
             lr=lr,
             seed=seed,
             threads=threads,
+            device=resolve_device(device),
             curriculum=0.0,
             freeze_encoder=True,
         )
@@ -687,7 +813,9 @@ def tune_decoder(
         f"the decoder tuned so far is in {out}",
     )
     loop.run(run, on_start(config.steps, 0) if on_start else None)
+    model.encoder.cpu()
+    model.decoder.cpu()
     model.meta.record = run.trained_record
     warn = on_warning or (lambda text: warnings.warn(text, stacklevel=3))
-    _validate_and_store(model, out, str(model_path), validation_samples, seed, warn, on_validation)
+    _validate_and_store(model, out, str(model_path), validation_samples, seed, warn, on_validation, config.device)
     return run.entry

@@ -44,7 +44,12 @@ def default_samples() -> tuple[int, int]:
 
 
 def validate_renders(
-    model: DeepMorphModel, samples: int = RENDER_SAMPLES, seed: int = 0, severity: str = SEVERITY, batch: int = 100
+    model: DeepMorphModel,
+    samples: int = RENDER_SAMPLES,
+    seed: int = 0,
+    severity: str = SEVERITY,
+    batch: int = 100,
+    device: str = "cpu",
 ) -> ValidationRecord:
     """Read ``samples`` fresh payloads from real renders under the training corruption.
 
@@ -53,6 +58,7 @@ def validate_renders(
         samples: how many payloads (each drawn at random from ``seed``).
         severity: the corruption (``easy``, ``medium``, ``hard``).
         batch: renders per decoder call.
+        device: where the networks and corruptions run (``cpu`` or ``cuda``; the renders are resvg's).
     """
     if samples < 1:
         raise ValueError(f"samples must be at least 1, got {samples}")
@@ -60,7 +66,7 @@ def validate_renders(
     codec = model.codec
     payloads = random_payloads(samples, codec.spec.payload_bits, np.random.default_rng(seed))
     codes = codec.encode(payloads)
-    probs = read_renders(model, codes, severity, seed, batch)
+    probs = read_renders(model, codes, severity, seed, batch, device)
     right_bits = int(((probs > 0.5) == (codes == 1)).sum())
     read = wrong = 0
     for result, payload in zip(codec.decode_batch(probs), payloads):
@@ -81,25 +87,38 @@ def validate_renders(
 
 
 def read_renders(
-    model: DeepMorphModel, codes: np.ndarray, severity: str = SEVERITY, seed: int = 0, batch: int = 100
+    model: DeepMorphModel,
+    codes: np.ndarray,
+    severity: str = SEVERITY,
+    seed: int = 0,
+    batch: int = 100,
+    device: str = "cpu",
 ) -> np.ndarray:
     """The decoder's ``P(bit = 1)``, ``(B, N_b)`` float64, on resvg renders of ``codes``
     (``(B, N_b)`` code words) framed by their ink and put through the ``severity`` corruption,
-    whose random draws come from ``seed + 1``, ``batch`` renders per decoder call."""
+    whose random draws come from ``seed + 1``, ``batch`` renders per decoder call; the networks
+    and the corruption on ``device`` (the model's networks are back on the CPU afterwards)."""
     model.eval()
     colour = model.drawing.colour
-    augment = build_pipeline(severity, model.width, colour=colour)
-    generator = torch.Generator().manual_seed(seed + 1)
+    on = torch.device(device)
+    augment = build_pipeline(severity, model.width, colour=colour).to(on)
+    generator = torch.Generator().manual_seed(seed + 1)  # on the CPU, so that every device draws the same
     target, size = model.canonical_moments(), model.image_size
     probs = []
-    for lo in range(0, len(codes), batch):
-        values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)))
-        real = model.real_renders(values, rgb=colour)
-        with torch.no_grad():
-            framed = augment(
-                frame_renders(stretch_ink(real, model.drawing.ink_level), target, size), generator=generator
-            )
-        probs.append(model.probabilities(framed).numpy().astype(np.float64))
+    model.encoder.to(on)
+    model.decoder.to(on)
+    try:
+        for lo in range(0, len(codes), batch):
+            values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)).to(on))
+            real = model.real_renders(values, rgb=colour)
+            with torch.no_grad():
+                framed = augment(
+                    frame_renders(stretch_ink(real, model.drawing.ink_level), target, size), generator=generator
+                )
+            probs.append(model.probabilities(framed).cpu().numpy().astype(np.float64))
+    finally:
+        model.encoder.cpu()
+        model.decoder.cpu()
     return np.concatenate(probs)
 
 
@@ -109,9 +128,11 @@ def validate(
     render_samples: int = RENDER_SAMPLES,
     photo_samples: int = PHOTO_SAMPLES,
     seed: int = 0,
+    device: str = "cpu",
 ) -> list[ValidationRecord]:
-    """Every validation: renders, then what plugins add (``photo_samples`` payloads each)."""
-    records = [validate_renders(model, render_samples, seed)]
+    """Every validation: renders (networks on ``device``), then what plugins add (``photo_samples``
+    payloads each; the photo chain runs on the CPU)."""
+    records = [validate_renders(model, render_samples, seed, device=device)]
     if photo_samples > 0:
         records.extend(registry.validate_model(model, photo_samples, seed))
     return records

@@ -47,7 +47,13 @@ if TYPE_CHECKING:
     import numpy as np
 
     from deepmorph_core.morphable import MorphableDrawing
+    from deepmorph_core.train_many import DrawingResult
 
+
+DeviceOpt = Annotated[
+    Literal["auto", "cpu", "cuda"],
+    typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
+]
 
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
@@ -374,9 +380,20 @@ def train(
             help="Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares.",
         ),
     ] = True,
-    device: Annotated[Literal["cpu", "cuda"], typer.Option("--device", help="Where torch trains.")] = "cpu",
+    device: DeviceOpt = "auto",
+    shards: Annotated[
+        Optional[int],
+        typer.Option(
+            "--shards",
+            min=1,
+            max=1024,
+            help="Random streams the batch is drawn from, shared by torchrun's processes (default: one per process).",
+        ),
+    ] = None,
     threads: ThreadsOpt = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue the checkpoint at --out (on any number of processes).")
+    ] = False,
     checkpoint_every: Annotated[
         int, typer.Option("--checkpoint-every", min=1, help="Steps between checkpoints (a crash loses at most these).")
     ] = 250,
@@ -388,13 +405,19 @@ def train(
     validation: ValidationOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
-    """Train an encoder/decoder pair that hides --payload-bits in the drawing."""
+    """Train an encoder/decoder pair that hides --payload-bits in the drawing.
+
+    Under `torchrun --nproc_per_node N -m deepmorph train ...` the N processes train it together
+    (docs/training.md); the first alone writes and prints.
+    """
+    from deepmorph_core.distributed import world_from_env
     from deepmorph_core.train import train_model
 
     def describe(m: dict[str, Any]) -> str:
         return f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
 
     use_threads(threads)
+    world = world_from_env()
     with step_progress("training", describe) as on_start:
         summary = train_model(
             svg,
@@ -419,6 +442,7 @@ def train(
                 "spatial_transformer": spatial_transformer,
                 "readout": readout,
                 "device": device,
+                "shards": shards,
                 "threads": threads,
                 "hard_fraction": hard_fraction,
                 "small_prints": small_prints,
@@ -429,7 +453,10 @@ def train(
             drop_unsupported=drop,
             validation_samples=_validation_samples(validation),
             on_validation=lambda: err.print("validating on fresh payloads ..."),
+            world=world,
         )
+    if not world.main:
+        return
     if as_json:
         result = training_result(summary, on_start.last, stage2_start=summary.stage2_start)
         print_json({**result, "validation": [r.model_dump() for r in summary.validation]})
@@ -439,6 +466,77 @@ def train(
         f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
     _print_validation([r.model_dump() for r in summary.validation])
+
+
+def train_many(
+    folder: Annotated[Path, typer.Argument(help="A folder of .svg drawings.", show_default=False)],
+    out_dir: Annotated[Path, typer.Option("--out", help="The folder of bundles: <drawing>.dmm each.")],
+    payload_bits: Annotated[
+        str, typer.Option("--payload-bits", help="Payload bits for every drawing, or auto: each its predicted size.")
+    ] = "auto",
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps of each drawing.")] = 4000,
+    batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
+    width: Annotated[
+        int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
+    ] = 96,
+    severity: Annotated[
+        SeverityName, typer.Option("--severity", help="Capture corruption to train against.")
+    ] = "medium",
+    seed: SeedOpt = 0,
+    move: MoveOpt = None,
+    device: DeviceOpt = "auto",
+    jobs: Annotated[
+        Optional[int],
+        typer.Option("--jobs", min=1, max=64, help="Worker processes [default: one per CUDA device, one on the CPU]."),
+    ] = None,
+    threads: ThreadsOpt = None,
+    validation: ValidationOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Train every drawing in a folder: done bundles are skipped, checkpoints resumed, one
+    process per device; a drawing that fails is reported and the others go on. Exits with 1
+    when a drawing failed."""
+    from deepmorph_core.train_many import train_many as run
+
+    def progress(result: DrawingResult, finished: int, total: int) -> None:
+        what = result.error if result.status == "failed" else f"{result.steps} steps, {result.seconds:.0f} s"
+        err.print(f"[{finished}/{total}] {safe(Path(result.drawing).name)}: {result.status} ({safe(what)})")
+        for text in result.warnings:
+            err.print(f"warning: {safe(text)}")
+
+    results = run(
+        folder,
+        out_dir,
+        payload_bits=_payload_bits(payload_bits),
+        bounds={"move": move},
+        train={"steps": steps, "batch": batch, "width": width, "severity": severity, "seed": seed, "threads": threads},
+        device=device,
+        jobs=jobs,
+        validation_samples=_validation_samples(validation),
+        on_result=progress,
+    )
+    failed = [r for r in results if r.status == "failed"]
+    counts = {s: sum(r.status == s for r in results) for s in ("trained", "resumed", "done", "failed")}
+    if as_json:
+        print_json({"drawings": [r.to_json() for r in results], "counts": counts})
+    else:
+        table = Table(title=f"{len(results)} drawings: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n))
+        for column in ("drawing", "status", "payload bits", "steps", "time", "read", "error"):
+            table.add_column(column, overflow="fold")
+        for r in results:
+            read = ", ".join(f"{name} {rate:.1%}" for name, rate in r.validation.items()) or "-"
+            table.add_row(
+                safe(Path(r.drawing).name),
+                r.status,
+                "-" if r.payload_bits is None else str(r.payload_bits),
+                "-" if r.steps is None else str(r.steps),
+                f"{r.seconds:.0f} s" if r.status in ("trained", "resumed") else "-",
+                read,
+                safe(r.error or ""),
+            )
+        out.print(table)
+    if failed:
+        raise typer.Exit(1)
 
 
 def _payload_bits(text: str) -> int | Literal["auto"]:
@@ -492,6 +590,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     from deepmorph_core.model import DeepMorphModel
 
     data = DeepMorphModel.load(model).info()
+    data["trained_on"] = _trained_on(data["record"])
     if as_json:
         print_json(data)
         return
@@ -523,6 +622,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
             f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
             f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}",
         ),
+        ("trained on", ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in data["trained_on"].items())),
         ("last metrics", json.dumps(rec["metrics"])),
         ("versions", json.dumps(data["versions"])),
     ]
@@ -562,6 +662,16 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     for k, v in rows:
         table.add_row(k, safe(v))
     out.print(table)
+
+
+def _trained_on(record: dict[str, Any]) -> dict[str, Any]:
+    """How the codec was trained: device, processes and global batch (``"not recorded"`` in
+    bundles written before they were)."""
+    return {
+        "device": record["device"],
+        "world_size": record.get("world_size") or "not recorded",
+        "global_batch": record.get("global_batch") or "not recorded",
+    }
 
 
 def tune_decoder(
@@ -614,17 +724,20 @@ def validate(
     seed: SeedOpt = 0,
     save: Annotated[bool, typer.Option("--save", help="Store the result in the bundle (shown by info).")] = False,
     threads: ThreadsOpt = None,
+    device: DeviceOpt = "auto",
     as_json: JsonOpt = False,
 ) -> None:
     """Read fresh random payloads back from renders and photos: what the model really reads."""
+    from deepmorph_core.distributed import resolve_device
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import default_registry
     from deepmorph_core.validation import validate as run_validation
     from deepmorph_core.validation import validation_warning
 
     use_threads(threads)
+    where = resolve_device(device)
     m = DeepMorphModel.load(model)
-    records = run_validation(m, default_registry(), samples, photos, seed=seed)
+    records = run_validation(m, default_registry(), samples, photos, seed=seed, device=where)
     if save:
         m.meta.validation = records
         m.save(model)
@@ -692,6 +805,7 @@ def register(cli: typer.Typer) -> None:
             ("morph", morph, PANEL_DRAWINGS),
             ("render", render, PANEL_DRAWINGS),
             ("train", train, PANEL_MODELS),
+            ("train-many", train_many, PANEL_MODELS),
             ("tune-decoder", tune_decoder, PANEL_MODELS),
             ("info", info, PANEL_MODELS),
             ("validate", validate, PANEL_MODELS),
