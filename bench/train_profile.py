@@ -19,6 +19,7 @@ in any part (bit draws, loss, metrics, the learning-rate schedule).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -170,6 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     threads = set_threads(args.threads)
 
+    import torch
+
     from deepmorph_core.train import CodecRun, TrainConfig, open_model
 
     if args.drawing:
@@ -192,6 +195,11 @@ def main(argv: list[str] | None = None) -> int:
         run.cfg = config
         run.record.stage, run.record.stage2_start = 2, ramp_end
         stage2 = time_steps(run, timer, args.steps)
+        # the same stage-2 steps with the decoder in the default (NCHW) layout: the step before
+        # CodecRun trained it channels-last on the CPU
+        layout, run.memory_format = run.memory_format, torch.contiguous_format
+        model.decoder.to(memory_format=torch.contiguous_format)
+        nchw = time_steps(run, timer, args.steps)
     # a default run: stage 1 for at most stage1_max_fraction of the steps, stage 2 the rest
     s1_share = config.stage1_max_fraction
     run_minutes = config.steps * (s1_share * stage1["step"] + (1 - s1_share) * stage2["step"]) / 60
@@ -211,6 +219,12 @@ def main(argv: list[str] | None = None) -> int:
         f"a default run ({config.steps} steps, stage 1 at most {s1_share:.0%}): about {run_minutes:.1f} min of "
         "training steps"
     )
+    nchw_decoder = 1000 * (nchw["decoder fwd"] + nchw["decoder bwd"])
+    print(
+        f"decoder layout: stage 2 {1000 * stage2['step']:.0f} ms/step {str(layout).split('.')[-1]}, "
+        f"{1000 * nchw['step']:.0f} ms/step NCHW (decoder fwd + bwd {nchw_decoder:.0f} ms); "
+        f"{nchw['step'] / stage2['step']:.2f}x"
+    )
     write_json(
         args.out,
         {
@@ -227,6 +241,10 @@ def main(argv: list[str] | None = None) -> int:
             "steps_timed": args.steps,
             "stage1_s": stage1,
             "stage2_s": stage2,
+            "decoder_layout": str(layout).split(".")[-1],
+            "stage2_nchw_decoder_s": nchw,
+            "layout_speedup": round(nchw["step"] / stage2["step"], 3),
+            "load_average": os.getloadavg(),
             "default_run_minutes": round(run_minutes, 2),
         },
     )

@@ -146,12 +146,12 @@ def rank_shards(shards: int, world: World) -> list[int]:
 
 
 def all_reduce_sum(tensors: Iterable[Tensor], world: World) -> None:
-    """Sum ``tensors`` (all on one device, any float dtype) across the ranks, in place, with one
-    flat all-reduce; nothing to do for one process."""
+    """Sum ``tensors`` (all on one device, of one float dtype) across the ranks, in place, with
+    one flat all-reduce; nothing to do for one process."""
     tensors = list(tensors)
     if not world.distributed or not tensors:
         return
-    flat = torch.cat([t.reshape(-1).to(torch.float64) for t in tensors])
+    flat = torch.cat([t.reshape(-1) for t in tensors])
     dist.all_reduce(flat)
     offset = 0
     for t in tensors:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from deepmorph_core.bundle import load_bundle
-from deepmorph_core.distributed import resolve_device
+from deepmorph_core.distributed import World, resolve_device
 from deepmorph_core.errors import DeepMorphError
 
 Status = Literal["trained", "resumed", "done", "failed"]
@@ -141,6 +141,7 @@ def run_job(job: Job) -> DrawingResult:
             resume=job.resume,
             on_warning=warnings.append,
             validation_samples=job.validation_samples,
+            world=World(),  # one process a drawing, whatever the environment says
         )
         status: Status = "resumed" if job.resume else "trained"
         return result_of(job.svg, job.out, status, time.perf_counter() - start, warnings)

@@ -55,6 +55,12 @@ DeviceOpt = Annotated[
     typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
 ]
 
+BatchOpt = Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")]
+ImageWidthOpt = Annotated[
+    int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
+]
+TrainSeverityOpt = Annotated[SeverityName, typer.Option("--severity", help="Capture corruption to train against.")]
+
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
 
@@ -340,13 +346,9 @@ def train(
     ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 4000,
-    batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
-    width: Annotated[
-        int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
-    ] = 96,
-    severity: Annotated[
-        SeverityName, typer.Option("--severity", help="Capture corruption to train against.")
-    ] = "medium",
+    batch: BatchOpt = 32,
+    width: ImageWidthOpt = 96,
+    severity: TrainSeverityOpt = "medium",
     hard_fraction: Annotated[
         float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
     ] = 0.25,
@@ -475,13 +477,9 @@ def train_many(
         str, typer.Option("--payload-bits", help="Payload bits for every drawing, or auto: each its predicted size.")
     ] = "auto",
     steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps of each drawing.")] = 4000,
-    batch: Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")] = 32,
-    width: Annotated[
-        int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
-    ] = 96,
-    severity: Annotated[
-        SeverityName, typer.Option("--severity", help="Capture corruption to train against.")
-    ] = "medium",
+    batch: BatchOpt = 32,
+    width: ImageWidthOpt = 96,
+    severity: TrainSeverityOpt = "medium",
     seed: SeedOpt = 0,
     move: MoveOpt = None,
     device: DeviceOpt = "auto",
