@@ -1,7 +1,7 @@
 """``deepmorph registry``: the payload registry's commands (``add``, ``list``, ``show``,
-``remove``, ``export``), added to the command line through the ``deepmorph_register_commands``
-hook (:mod:`deepmorph.plugin`), and the lookup ``decode --registry`` runs. Each parses its
-arguments and calls :mod:`deepmorph.registry`."""
+``remove``, ``export``), and ``deepmorph studio`` (:mod:`deepmorph.studio`), added to the
+command line through the ``deepmorph_register_commands`` hook (:mod:`deepmorph.plugin`), and
+the lookup ``decode --registry`` runs. Each parses its arguments and calls the library."""
 
 from __future__ import annotations
 
@@ -173,8 +173,9 @@ def decode_lookup(db: Path | None, model: DeepMorphModel) -> Callable[[dict[str,
 
 
 def register(cli: typer.Typer) -> None:
-    """Add the ``registry`` commands to ``cli`` and hand ``decode`` its registry lookup (the
-    photo chain's layer cannot import this one)."""
+    """Add the ``registry`` commands and ``studio`` (the local web app) to ``cli``, and hand
+    ``decode`` its registry lookup (the photo chain's layer cannot import this one)."""
+    from deepmorph.studio.cli import studio
     from deepmorph_detect import commands as photo_commands
 
     group = typer.Typer(name="registry", help=HELP, no_args_is_help=True)
@@ -189,6 +190,7 @@ def register(cli: typer.Typer) -> None:
         ),
     )
     cli.add_typer(group, name="registry", rich_help_panel=PANEL_CODES)
+    add_commands(cli, (("studio", studio, None),))
     photo_commands.payload_registry = decode_lookup
 
 

@@ -1,5 +1,6 @@
 """The facade's plugin module, loaded through the ``deepmorph`` entry point
-(``builtin_registry``) exactly as third-party plugins are: the payload registry's commands."""
+(``builtin_registry``) exactly as third-party plugins are: the payload registry's commands and
+the studio."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ if TYPE_CHECKING:
 
 @hookimpl
 def deepmorph_register_commands(cli: typer.Typer) -> None:
-    """Add ``registry`` (``add``, ``list``, ``show``, ``remove``, ``export``) and ``decode --registry``'s lookup."""
+    """Add ``registry`` (``add``, ``list``, ``show``, ``remove``, ``export``), ``decode --registry``'s
+    lookup and ``studio``."""
     from deepmorph import commands
 
     commands.register(cli)

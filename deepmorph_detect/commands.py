@@ -6,7 +6,7 @@ arguments and calls the library."""
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -65,20 +65,6 @@ def _size(text: str) -> tuple[int, int]:
     if not (64 <= w <= 8192 and 64 <= h <= 8192):
         raise DeepMorphError(f"--size {text!r}: width and height must be 64..8192 pixels")
     return w, h
-
-
-def _readable_frames(files: list[Path], skipped: list[dict[str, str]]) -> Iterator[tuple[str, Any]]:
-    """``(name, BGR image)`` of a folder's frames in order. A file that is not a readable image
-    (truncated while copying, say) is skipped with a warning and listed in ``skipped``: the
-    frames before and after it still count, and the work done on them is not thrown away."""
-    from deepmorph_core.image_io import read_image_bgr
-
-    for path in files:
-        try:
-            yield path.name, read_image_bgr(path)
-        except DeepMorphError as exc:
-            err.print(f"warning: skipped frame {exc}", markup=False, highlight=False)
-            skipped.append({"frame": path.name, "error": str(exc)})
 
 
 def _fits_camera(camera: Any, path: Path, size: tuple[int, int]) -> None:
@@ -147,11 +133,10 @@ def decode(
     from deepmorph_core.image_io import read_image_bgr
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.camera import parse_camera
-    from deepmorph_detect.fusion import FrameFuser
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.media import check_video, folder_frames, is_video, video_frame_count, video_frames
     from deepmorph_detect.overlay import draw_overlay
-    from deepmorph_detect.track import SequenceLocator
+    from deepmorph_detect.reading import folder_images, read_sequence
 
     use_threads(threads)
     m = DeepMorphModel.load(model)
@@ -197,30 +182,19 @@ def decode(
                 if image_task is not None:
                     progress.advance(image_task)
                 continue
-            fuser = FrameFuser(m.codec, locator.check_payload)
-            follow = SequenceLocator(locator)  # drawings read in one frame are followed into the next
-            skipped: list[dict[str, str]] = []
-            frames = _readable_frames(payload, skipped) if kind == "folder" else video_frames(path, every)
+            frames = folder_images(payload) if kind == "folder" else video_frames(path, every)
             total = len(payload) if kind == "folder" else video_frame_count(path, every)
             task = progress.add_task(path.name, total=total)
-            last = None
-            for label, frame in frames:
-                progress.advance(task)
-                try:
-                    dets = follow(frame, camera=cam, soft=soft)
-                except DeepMorphError as exc:  # a frame of another size than the calibration's, say
-                    err.print(f"warning: skipped frame {label}: {exc}", markup=False, highlight=False)
-                    skipped.append({"frame": label, "error": str(exc)})
-                    continue
-                fuser.add(label, dets, frame)
-                last = (frame, dets)
-            if last is None:  # a folder none of whose files is an image
-                raise DeepMorphError(f"{path}: no frame could be read ({skipped[0]['error']})")
-            entry = {"sequence": str(path), "frames": fuser.frames, "detections": fuser.results(soft)}
-            if skipped:
-                entry["skipped_frames"] = skipped
+            reading = read_sequence(
+                locator, frames, camera=cam, soft=soft, name=str(path),
+                on_frame=lambda task=task: progress.advance(task),
+                on_skip=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
+            )  # fmt: skip
+            entry = {"sequence": str(path), "frames": reading.frames, "detections": reading.detections}
+            if reading.skipped:
+                entry["skipped_frames"] = reading.skipped
             results.append(entry)
-            save_overlay(path, *last)
+            save_overlay(path, *reading.last)
     for d in (d for r in results for d in r["detections"] if look_up is not None):
         d["registry"] = look_up(d)
     _print_decoded(results, as_json)

@@ -1,0 +1,131 @@
+"""How fast ``deepmorph studio`` serves its first page, and how much memory it holds.
+
+Each round starts ``python -m deepmorph studio --no-browser`` as a user would (a fresh process,
+a fresh data folder, a free port) and times, from the process's start: the first page
+(``GET /?token=`` followed to ``/``, what the browser opens), then the bundled ghost's drawing
+and its first photo decoded (``POST /api/models/ghost/scan``: the model and the photo chain load
+on first use). The resident memory (VmRSS) is read idle after the first page and idle again
+after that first scan. The table gives the median of ``--repeats`` rounds.
+
+    .venv/bin/python bench/studio.py --repeats 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+from _common import RESULTS, environment, table, write_json
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGET_FIRST_PAGE_S = 2.0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _photo() -> bytes:
+    """A simulated close-up photo of a ghost print, as PNG bytes."""
+    import cv2
+    import numpy as np
+
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.scenes import close_up_photo
+
+    art = DeepMorphModel.load(BUNDLED_MODEL).code("0xA1B2C3").render(360)
+    ok, buf = cv2.imencode(".png", close_up_photo(art, "medium", np.random.default_rng(0)))
+    assert ok
+    return buf.tobytes()
+
+
+def one_round(photo: bytes) -> dict[str, float]:
+    port = _free_port()
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    with tempfile.TemporaryDirectory() as data:
+        started = time.perf_counter()
+        process = subprocess.Popen(
+            [sys.executable, "-m", "deepmorph", "studio", "--no-browser", "--port", str(port), "--data", data],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+        )
+        try:
+            assert process.stdout is not None
+            token = re.search(r"token=(\S+)", process.stdout.readline()).group(1)
+            url = f"http://127.0.0.1:{port}/?token={token}"
+            browser = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())  # keeps the token's cookie
+            while True:
+                try:
+                    with browser.open(url, timeout=5) as response:
+                        assert b"DeepMorph studio" in response.read()
+                    break
+                except urllib.error.HTTPError:
+                    raise
+                except OSError:
+                    if process.poll() is not None:
+                        raise RuntimeError("the studio stopped") from None
+                    time.sleep(0.02)
+            first_page = time.perf_counter() - started
+            time.sleep(1.0)
+            idle = _rss_mb(process.pid)
+            scan = urllib.request.Request(
+                f"http://127.0.0.1:{port}/api/models/ghost/scan", data=photo, headers={"X-DeepMorph-Token": token}
+            )
+            t0 = time.perf_counter()
+            with urllib.request.urlopen(scan, timeout=120) as response:
+                assert b'"ok":true' in response.read()
+            first_scan = time.perf_counter() - t0
+            with urllib.request.urlopen(scan, timeout=120) as response:
+                response.read()
+            time.sleep(1.0)
+            loaded = _rss_mb(process.pid)
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+    return {"first_page_s": first_page, "idle_rss_mb": idle, "first_scan_s": first_scan, "loaded_rss_mb": loaded}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--out", type=Path, default=RESULTS / "studio.json")
+    args = ap.parse_args()
+    photo = _photo()
+    rounds = [one_round(photo) for _ in range(args.repeats)]
+    med = {k: statistics.median(r[k] for r in rounds) for k in rounds[0]}
+    rows = [
+        ["start to first page", f"{med['first_page_s']:.2f} s", f"target {TARGET_FIRST_PAGE_S:g} s"],
+        ["idle memory (RSS) after the first page", f"{med['idle_rss_mb']:.0f} MB", "no torch loaded"],
+        ["first photo decoded (loads the model)", f"{med['first_scan_s']:.2f} s", "ghost, 240 px close-up"],
+        ["idle memory after a decode", f"{med['loaded_rss_mb']:.0f} MB", "torch, model, photo chain"],
+    ]
+    print(table(["what", f"median of {args.repeats}", "note"], rows))
+    path = write_json(args.out, {"environment": environment(), "median": med, "rounds": rounds})
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,633 @@
+"""The studio's web app: a Starlette application whose handlers parse a request, call the library
+(the drawing reader, :func:`deepmorph_core.capacity.predict`, the training queue, the payload
+registry, :class:`deepmorph_core.code.Code`, the photo chain and
+:func:`deepmorph_detect.reading.read_sequence`), and answer JSON or a file.
+
+Security (docs/studio.md): every request carries the studio's token (``?token=``, then a
+cookie, or the ``X-DeepMorph-Token`` header) or is refused with 403; the Host header must name
+the studio (DNS rebinding); a write from another origin is refused; uploads have size limits;
+SVGs are only ever served as DeepMorph writes them, as images, under a CSP that forbids
+everything; uploaded photos are never served back; every page has a restrictive CSP.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hmac
+import json
+import secrets
+import tempfile
+import threading
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import MutableHeaders
+from starlette.middleware import Middleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, RedirectResponse, Response, StreamingResponse
+from starlette.routing import Route
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from deepmorph.studio import drawing as drawings
+from deepmorph.studio.jobs import JobQueue
+from deepmorph_core.errors import DeepMorphError
+
+if TYPE_CHECKING:
+    from deepmorph.registry import PayloadRegistry
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.reading import SequenceReader
+
+STATIC = Path(__file__).parent / "static"
+TOKEN_COOKIE = "deepmorph_studio_token"
+TOKEN_HEADER = "x-deepmorph-token"
+MAX_PHOTO_BYTES = 20 * 1024 * 1024
+MAX_JSON_BYTES = 64 * 1024
+MAX_PRINT_MM = 1000.0
+LIVE_FRAMES = 300  # frames a camera stream fuses before it starts afresh (about 15 s at 20 frames/s)
+PAGE_CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
+    "media-src 'self' blob: mediastream:; connect-src 'self'; form-action 'self'; "
+    "base-uri 'none'; frame-ancestors 'none'"
+)
+#: what an SVG the studio serves may do: nothing (no script, no fetch, no navigation).
+SVG_CSP = "default-src 'none'; style-src 'unsafe-inline'; sandbox"
+STATIC_FILES = {
+    "index.html": "text/html; charset=utf-8",
+    "studio.js": "text/javascript; charset=utf-8",
+    "studio.css": "text/css; charset=utf-8",
+}
+BUNDLED_ID = "ghost"
+
+
+class HttpError(Exception):
+    """A request refused, with its status and a one-line message for the page."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass
+class Studio:
+    """What the handlers share: the data folder, the token, the current drawing, the models.
+
+    Attributes:
+        data: the data folder (``--data``): ``registry.sqlite3`` and ``studio/``.
+        token: the secret every request must carry.
+        hosts: the names the Host header may give (DNS rebinding is refused).
+    """
+
+    data: Path
+    token: str = field(default_factory=lambda: secrets.token_urlsafe(24))
+    hosts: set[str] = field(default_factory=lambda: {"127.0.0.1", "localhost", "[::1]"})
+    jobs: JobQueue | None = None
+    _models: dict[str, DeepMorphModel] = field(default_factory=dict)
+    _locators: dict[str, Locator] = field(default_factory=dict)
+    _live: dict[str, SequenceReader] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def __post_init__(self) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.jobs = JobQueue(self.folder / "jobs", self.folder / "models")
+
+    @property
+    def folder(self) -> Path:
+        return self.data / "studio"
+
+    @property
+    def drawing_path(self) -> Path:
+        return self.folder / "drawing.svg"
+
+    @property
+    def drawing_name_path(self) -> Path:
+        return self.folder / "drawing.name"
+
+    def registry(self) -> PayloadRegistry:
+        from deepmorph.registry import PayloadRegistry
+
+        return PayloadRegistry(self.data / "registry.sqlite3")
+
+    # -- models: the bundled ghost and every bundle trained here --------------------------------
+    def model_files(self) -> dict[str, Path]:
+        from deepmorph_core.bundled import BUNDLED_MODEL
+
+        files = {BUNDLED_ID: BUNDLED_MODEL}
+        for path in sorted(self.folder.joinpath("models").glob("*.dmm")):
+            files[path.stem] = path
+        return files
+
+    def model(self, model_id: str) -> DeepMorphModel:
+        from deepmorph_core.model import DeepMorphModel
+
+        path = self.model_files().get(model_id)
+        if path is None:
+            raise HttpError(404, f"no model {model_id!r}")
+        with self._lock:
+            if model_id not in self._models:
+                m = DeepMorphModel.load(path)
+                if not m.meta.record.finished:
+                    raise DeepMorphError(f"{path.name}: its training has not finished")
+                self._models[model_id] = m
+            return self._models[model_id]
+
+    def locator(self, model_id: str) -> Locator:
+        from deepmorph_detect.locate import Locator
+
+        m = self.model(model_id)
+        with self._lock:
+            if model_id not in self._locators:
+                self._locators[model_id] = Locator(m)
+            return self._locators[model_id]
+
+    def live(self, model_id: str, restart: bool = False) -> SequenceReader:
+        """The camera's stream for one model: drawings read in a frame are followed into the next
+        and their readings fused (:class:`~deepmorph_detect.reading.SequenceReader`, what
+        ``deepmorph decode`` reads videos with). A new stream, or one of :data:`LIVE_FRAMES`
+        frames, starts afresh."""
+        from deepmorph_detect.reading import SequenceReader
+
+        locator = self.locator(model_id)
+        with self._lock:
+            reader = self._live.get(model_id)
+            if reader is None or restart or reader.frames >= LIVE_FRAMES:
+                reader = self._live[model_id] = SequenceReader(locator)
+            return reader
+
+
+# -- requests ---------------------------------------------------------------------------------
+
+
+async def body(request: Request, limit: int, what: str) -> bytes:
+    """The request's body, refused with 413 as soon as it passes ``limit`` bytes."""
+    declared = request.headers.get("content-length")
+    if declared and declared.isdigit() and int(declared) > limit:
+        raise HttpError(413, f"{what}: {int(declared)} bytes is more than the studio accepts ({limit} bytes)")
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise HttpError(413, f"{what}: more than the studio accepts ({limit} bytes)")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+async def json_body(request: Request) -> dict[str, Any]:
+    try:
+        data = json.loads(await body(request, MAX_JSON_BYTES, "request"))
+    except ValueError:
+        raise HttpError(400, "the request is not JSON") from None
+    if not isinstance(data, dict):
+        raise HttpError(400, "the request is not a JSON object")
+    return data
+
+
+def upload_name(request: Request, default: str) -> str:
+    name = Path(request.headers.get("x-file-name", "") or default).name
+    return "".join(c for c in name if c.isprintable())[:80] or default
+
+
+def attachment(data: bytes, name: str, media: str) -> Response:
+    """A download: never shown inline, never sniffed, and inert if opened anyway."""
+    return Response(
+        data,
+        media_type=media,
+        headers={"Content-Disposition": f'attachment; filename="{name}"', "Content-Security-Policy": SVG_CSP},
+    )
+
+
+def svg_image(text: str) -> Response:
+    """An SVG DeepMorph wrote, served as an image under a CSP that forbids everything."""
+    return Response(
+        text.encode(),
+        media_type="image/svg+xml",
+        headers={"Content-Security-Policy": SVG_CSP, "Cache-Control": "no-store"},
+    )
+
+
+# -- handlers ---------------------------------------------------------------------------------
+
+Handler = Callable[[Request], Awaitable[Response]]
+
+
+def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per route
+    def current() -> tuple[str, str]:
+        if not studio.drawing_path.is_file():
+            raise HttpError(404, "no drawing yet: upload an SVG in the Drawing tab")
+        name = studio.drawing_name_path.read_text() if studio.drawing_name_path.is_file() else "drawing.svg"
+        return studio.drawing_path.read_text(), name
+
+    def keep(svg: str, name: str) -> None:
+        from deepmorph_core.fileio import atomic_write
+
+        atomic_write(studio.drawing_path, svg.encode())
+        atomic_write(studio.drawing_name_path, name.encode())
+
+    async def index(request: Request) -> Response:
+        if request.query_params.get("token"):  # the token leaves the address bar; the cookie stays
+            return RedirectResponse("/", status_code=303)
+        return FileResponse(STATIC / "index.html", media_type=STATIC_FILES["index.html"])
+
+    async def static(request: Request) -> Response:
+        name = request.path_params["name"]
+        if name not in STATIC_FILES:
+            raise HttpError(404, "no such file")
+        return FileResponse(STATIC / name, media_type=STATIC_FILES[name])
+
+    # drawing
+    async def drawing_upload(request: Request) -> Response:
+        data = await body(request, drawings.MAX_SVG_BYTES, "drawing")
+        name = upload_name(request, "drawing.svg")
+
+        def work() -> dict[str, Any]:
+            md = drawings.load(data, name)
+            svg = drawings.written(md)
+            keep(svg, name)
+            return {"name": name, **drawings.describe(drawings.load(svg.encode(), name))}
+
+        return JSONResponse(await run_in_threadpool(work))
+
+    async def drawing_bundled(request: Request) -> Response:
+        from deepmorph_core.bundled import BUNDLED_DRAWING
+
+        def work() -> dict[str, Any]:
+            md = drawings.load(BUNDLED_DRAWING.read_bytes(), BUNDLED_DRAWING.name)
+            svg = drawings.written(md)
+            keep(svg, BUNDLED_DRAWING.name)
+            return {"name": BUNDLED_DRAWING.name, **drawings.describe(md)}
+
+        return JSONResponse(await run_in_threadpool(work))
+
+    async def drawing_info(request: Request) -> Response:
+        svg, name = current()
+        return JSONResponse(
+            {"name": name, **await run_in_threadpool(lambda: drawings.describe(drawings.load(svg.encode(), name)))}
+        )
+
+    async def drawing_svg(request: Request) -> Response:
+        svg, _ = current()
+        return svg_image(svg)
+
+    async def drawing_download(request: Request) -> Response:
+        svg, name = current()
+        stem = Path(name).stem
+        return attachment(svg.encode(), f"{stem}-bounds.svg", "image/svg+xml")
+
+    async def drawing_bounds(request: Request) -> Response:
+        data = await json_body(request)
+        svg, name = current()
+        try:
+            index = int(data.get("index"))
+        except (TypeError, ValueError):
+            raise HttpError(400, "index: expected a primitive's number") from None
+        edit = drawings.BoundsEdit.from_json(data)
+
+        def work() -> dict[str, Any]:
+            out = drawings.annotate(svg, name, index, edit)
+            keep(out, name)
+            return {"name": name, **drawings.describe(drawings.load(out.encode(), name))}
+
+        return JSONResponse(await run_in_threadpool(work))
+
+    async def drawing_morph(request: Request) -> Response:
+        svg, name = current()
+        try:
+            seed = int(request.query_params.get("seed", "0"))
+        except ValueError:
+            raise HttpError(400, "seed: expected an integer") from None
+        extreme = request.query_params.get("extreme") == "1"
+        return svg_image(
+            await run_in_threadpool(lambda: drawings.random_morph(drawings.load(svg.encode(), name), seed, extreme))
+        )
+
+    async def capacity(request: Request) -> Response:
+        from deepmorph_core.capacity import predict
+
+        svg, name = current()
+
+        def work() -> dict[str, Any]:
+            report = predict(drawings.load(svg.encode(), name))
+            return {"name": name, **report.to_json(), "limits": report.limits()}
+
+        return JSONResponse(await run_in_threadpool(work))
+
+    # training
+    async def jobs_list(request: Request) -> Response:
+        return JSONResponse(studio.jobs.list())
+
+    async def jobs_submit(request: Request) -> Response:
+        data = await json_body(request)
+        svg, name = current()
+        settings = training_settings(data)
+        return JSONResponse(studio.jobs.submit(name, svg, settings))
+
+    async def jobs_cancel(request: Request) -> Response:
+        studio.jobs.cancel(request.path_params["job"])
+        return JSONResponse({"cancelled": request.path_params["job"]})
+
+    async def jobs_events(request: Request) -> Response:
+        async def stream():  # noqa: ANN202 - server-sent events
+            import anyio
+
+            seen = -1
+            last_sent = 0.0
+            while not await request.is_disconnected():
+                version = studio.jobs.version
+                if version != seen or time.monotonic() - last_sent > 15:
+                    seen, last_sent = version, time.monotonic()
+                    yield f"data: {json.dumps(studio.jobs.list())}\n\n"
+                await anyio.sleep(0.25)
+
+        return StreamingResponse(stream(), media_type="text/event-stream", headers={"Cache-Control": "no-store"})
+
+    # models and payloads
+    async def models(request: Request) -> Response:
+        def work() -> list[dict[str, Any]]:
+            rows = []
+            for model_id in studio.model_files():
+                try:
+                    m = studio.model(model_id)
+                except DeepMorphError:
+                    continue  # a run still training, or a file that is not a finished bundle
+                rows.append({"id": model_id, "drawing": m.meta.drawing_name, "payload_bits": m.codec.spec.payload_bits})
+            return rows
+
+        return JSONResponse(await run_in_threadpool(work))
+
+    async def random_payload(request: Request) -> Response:
+        import numpy as np
+
+        from deepmorph_core.payload import Payload, random_payloads
+
+        m = await run_in_threadpool(studio.model, request.path_params["model"])
+        bits = random_payloads(1, m.codec.spec.payload_bits, np.random.default_rng())[0]
+        return JSONResponse(Payload(bits).to_json())
+
+    async def entries(request: Request) -> Response:
+        m = await run_in_threadpool(studio.model, request.path_params["model"])
+        registry = studio.registry()
+        rows = await run_in_threadpool(lambda: registry.list(m) if registry.path.exists() else [])
+        return JSONResponse([e.to_json() for e in rows])
+
+    async def entry_add(request: Request) -> Response:
+        data = await json_body(request)
+        m = await run_in_threadpool(studio.model, request.path_params["model"])
+        kind = "text" if data.get("kind") == "text" else "url"
+        entry = await run_in_threadpool(
+            lambda: studio.registry().add(
+                m,
+                str(data.get("payload", "")).strip(),
+                str(data.get("target", "")),
+                kind,
+                str(data.get("note") or "") or None,
+                replace=bool(data.get("replace")),
+            )
+        )
+        return JSONResponse(entry.to_json())
+
+    async def entry_remove(request: Request) -> Response:
+        m = await run_in_threadpool(studio.model, request.path_params["model"])
+        payload = request.path_params["payload"]
+        entry = await run_in_threadpool(lambda: studio.registry().remove(m, payload))
+        if entry is None:
+            raise HttpError(404, f"{payload} has no entry")
+        return JSONResponse(entry.to_json())
+
+    # print
+    async def print_code(request: Request) -> Response:
+        from deepmorph_core.code import print_pixels
+
+        q = request.query_params
+        fmt = q.get("format", "svg").lower()
+        if fmt not in ("svg", "pdf", "png"):
+            raise HttpError(400, f"format: {fmt!r}; a code is written as svg, pdf or png")
+        try:
+            width_mm = float(q.get("width_mm", "50"))
+            dpi = int(q.get("dpi", "300"))
+        except ValueError:
+            raise HttpError(400, "width_mm and dpi: expected numbers") from None
+        if not 1 <= width_mm <= MAX_PRINT_MM or not 50 <= dpi <= 2400:
+            raise HttpError(400, f"width_mm: 1 to {MAX_PRINT_MM:g} mm; dpi: 50 to 2400")
+        if fmt == "png":
+            print_pixels(width_mm, dpi)  # refused before any work when too large
+        m = await run_in_threadpool(studio.model, request.path_params["model"])
+        code = await run_in_threadpool(m.code, q.get("payload", "").strip())
+        data = await run_in_threadpool(lambda: code.file(fmt.upper(), width_mm, dpi))
+        if q.get("preview") == "1" and fmt == "svg":
+            return svg_image(data.decode())
+        media = {"svg": "image/svg+xml", "pdf": "application/pdf", "png": "image/png"}[fmt]
+        name = f"{request.path_params['model']}-{code.payload.hex}-{width_mm:g}mm.{fmt}"
+        response = attachment(data, name, media)
+        response.headers["X-DeepMorph-Payload"] = code.payload.hex
+        return response
+
+    # scan
+    async def scan(request: Request) -> Response:
+        data = await body(request, MAX_PHOTO_BYTES, "photo")
+        model_id = request.path_params["model"]
+        live = request.query_params.get("live") == "1"
+        restart = request.query_params.get("first") == "1"
+        name = upload_name(request, "photo")
+        started = time.perf_counter()
+        result = await run_in_threadpool(lambda: read_photo(studio, model_id, data, name, live, restart))
+        result["ms"] = round(1000 * (time.perf_counter() - started), 1)
+        return JSONResponse(result)
+
+    async def token_check(request: Request) -> Response:
+        return JSONResponse({"ok": True})
+
+    return [
+        Route("/", index),
+        Route("/static/{name}", static),
+        Route("/api/check", token_check),
+        Route("/api/drawing", drawing_info),
+        Route("/api/drawing", drawing_upload, methods=["POST"]),
+        Route("/api/drawing/bundled", drawing_bundled, methods=["POST"]),
+        Route("/api/drawing/bounds", drawing_bounds, methods=["POST"]),
+        Route("/api/drawing.svg", drawing_svg),
+        Route("/api/drawing/download", drawing_download),
+        Route("/api/drawing/morph.svg", drawing_morph),
+        Route("/api/capacity", capacity),
+        Route("/api/jobs", jobs_list),
+        Route("/api/jobs", jobs_submit, methods=["POST"]),
+        Route("/api/jobs/{job}/cancel", jobs_cancel, methods=["POST"]),
+        Route("/api/jobs/events", jobs_events),
+        Route("/api/models", models),
+        Route("/api/models/{model}/random", random_payload),
+        Route("/api/models/{model}/entries", entries),
+        Route("/api/models/{model}/entries", entry_add, methods=["POST"]),
+        Route("/api/models/{model}/entries/{payload}/remove", entry_remove, methods=["POST"]),
+        Route("/api/models/{model}/print", print_code),
+        Route("/api/models/{model}/scan", scan, methods=["POST"]),
+    ]
+
+
+def training_settings(data: dict[str, Any]) -> dict[str, Any]:
+    """The worker's settings from the Train form; out-of-range values are one clear error."""
+
+    def integer(key: str, default: int, lo: int, hi: int) -> int:
+        value = data.get(key, default)
+        try:
+            n = int(value if value not in (None, "") else default)
+        except (TypeError, ValueError):
+            raise HttpError(400, f"{key}: expected an integer, got {value!r}") from None
+        if not lo <= n <= hi:
+            raise HttpError(400, f"{key}: {n} is outside {lo}..{hi}")
+        return n
+
+    bits_text = str(data.get("payload_bits", "auto")).strip().lower()
+    payload_bits: int | str = "auto" if bits_text in ("", "auto") else integer("payload_bits", 24, 1, 256)
+    steps = integer("steps", 4000, 1, 200_000)
+    validation = integer("validation", 200, 0, 10_000)
+    return {
+        "payload_bits": payload_bits,
+        "train": {
+            "steps": steps,
+            "batch": integer("batch", 32, 2, 1024),
+            "width": integer("image_width", 96, 32, 512),
+            "log_every": max(1, min(25, steps // 40)),
+            "threads": integer("threads", 1, 1, 64),
+        },
+        "validation": [validation, validation // 5],
+    }
+
+
+def read_photo(
+    studio: Studio, model_id: str, data: bytes, name: str, live: bool = False, restart: bool = False
+) -> dict[str, Any]:
+    """Every drawing of a model in an uploaded photo (``live``: a camera frame, followed from the
+    previous one; ``restart``: the first of a new stream), with each verified payload's registry
+    entry. The photo goes through the same
+    reader as ``deepmorph decode`` (a temporary file: size, pixel and format checks)."""
+    from deepmorph.registry import model_key
+    from deepmorph_core.image_io import read_image_bgr
+
+    m = studio.model(model_id)
+    with tempfile.TemporaryDirectory(prefix="deepmorph-studio-") as tmp:
+        path = Path(tmp) / "upload"
+        path.write_bytes(data)
+        try:
+            image = read_image_bgr(path)
+        except DeepMorphError as exc:
+            raise DeepMorphError(str(exc).replace(str(path), name)) from None
+    if live:
+        reader = studio.live(model_id, restart)
+        dets = reader.add(str(reader.frames), image)
+    else:
+        dets = studio.locator(model_id).locate(image)
+    registry = studio.registry()
+    key = model_key(m) if registry.path.exists() else None
+    found = []
+    for d in dets:
+        row = d.to_json()
+        entry = registry.get(key, row["payload"]["hex"]) if key is not None and row["ok"] else None
+        row["registry"] = entry.to_json() if entry else None
+        found.append(row)
+    height, width = image.shape[:2]
+    note = ""
+    if not found:
+        note = "no drawing found: is the print in view, lit, and larger than about 80 pixels?"
+    elif not any(d["ok"] for d in found):
+        note = "a drawing was found but not read: move closer or hold it steadier"
+    return {"width": width, "height": height, "detections": found, "note": note}
+
+
+# -- the application --------------------------------------------------------------------------
+
+
+class Guard:
+    """ASGI middleware in front of every route: the Host header, the origin of writes and the
+    token are checked before anything runs, and every answer gets the security headers (and the
+    token's cookie, so that a page opened with ``?token=`` keeps working without it)."""
+
+    def __init__(self, app: ASGIApp, studio: Studio) -> None:
+        self.app = app
+        self.studio = studio
+
+    def refusal(self, request: Request) -> str | None:
+        studio = self.studio
+        host = request.headers.get("host", "").rsplit(":", 1)[0]
+        if "*" not in studio.hosts and host not in studio.hosts:
+            return f"host {host!r} is not this studio's"
+        origin = request.headers.get("origin")
+        if request.method != "GET" and origin and origin != f"{request.url.scheme}://{request.headers['host']}":
+            return "a request from another site is refused"
+        given = (
+            request.query_params.get("token")
+            or request.headers.get(TOKEN_HEADER)
+            or request.cookies.get(TOKEN_COOKIE)
+            or ""
+        )
+        if not hmac.compare_digest(given.encode(), studio.token.encode()):
+            return "this studio needs its token: open the address `deepmorph studio` printed"
+        return None
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        request = Request(scope)
+        why = self.refusal(request)
+        if why is not None:
+            await JSONResponse({"error": why}, status_code=403, headers=security_headers(PAGE_CSP))(
+                scope, receive, send
+            )
+            return
+        set_cookie = request.cookies.get(TOKEN_COOKIE) != self.studio.token
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = MutableHeaders(scope=message)
+                for key, value in security_headers(headers.get("content-security-policy", PAGE_CSP)).items():
+                    headers[key] = value
+                if set_cookie:
+                    headers.append(
+                        "set-cookie", f"{TOKEN_COOKIE}={self.studio.token}; HttpOnly; SameSite=Strict; Path=/"
+                    )
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
+def security_headers(csp: str) -> dict[str, str]:
+    return {
+        "Content-Security-Policy": csp,
+        "X-Content-Type-Options": "nosniff",
+        "Referrer-Policy": "no-referrer",
+        "X-Frame-Options": "DENY",
+        "Cross-Origin-Resource-Policy": "same-origin",
+    }
+
+
+def create_app(studio: Studio) -> Starlette:
+    """The studio's ASGI application, locked by ``studio.token``."""
+
+    async def refused(request: Request, exc: Exception) -> Response:
+        status = exc.status if isinstance(exc, HttpError) else 400
+        return JSONResponse({"error": str(exc)}, status_code=status)
+
+    async def crashed(request: Request, exc: Exception) -> Response:
+        import traceback
+
+        traceback.print_exception(exc)  # on the studio's terminal; the page gets one line
+        return JSONResponse({"error": f"unexpected error ({type(exc).__name__}): {exc}"[:400]}, status_code=500)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        yield
+        studio.jobs.close()  # a running training writes its checkpoint before the studio stops
+
+    return Starlette(
+        routes=handlers(studio),
+        middleware=[Middleware(Guard, studio=studio)],
+        exception_handlers={HttpError: refused, DeepMorphError: refused, Exception: crashed},
+        lifespan=lifespan,
+    )
+
+
+__all__ = ["Studio", "create_app", "read_photo", "training_settings"]

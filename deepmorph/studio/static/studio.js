@@ -1,0 +1,483 @@
+// DeepMorph studio: plain JavaScript, no library. Every action calls the studio's JSON API;
+// the token travels in an HttpOnly cookie set when the page was opened with ?token=.
+"use strict";
+
+const $ = (sel) => document.querySelector(sel);
+const SVGNS = "http://www.w3.org/2000/svg";
+const state = { drawing: null, selected: null, weak: new Set(), models: [], live: null };
+
+function showError(message) {
+  const box = $("#error");
+  box.textContent = message || "";
+  box.hidden = !message;
+}
+
+async function api(path, options = {}) {
+  const response = await fetch(path, { credentials: "same-origin", ...options });
+  const type = response.headers.get("content-type") || "";
+  const data = type.includes("json") ? await response.json() : await response.blob();
+  if (!response.ok) {
+    const message = data && data.error ? data.error : `${response.status} ${response.statusText}`;
+    showError(message);
+    throw new Error(message);
+  }
+  showError("");
+  return data;
+}
+
+const postJson = (path, body) =>
+  api(path, { method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(body) });
+
+// -- tabs -------------------------------------------------------------------------------------
+function openTab(name) {
+  document.querySelectorAll("#tabs button").forEach((b) => b.classList.toggle("active", b.dataset.tab === name));
+  document.querySelectorAll(".tab").forEach((s) => (s.hidden = s.id !== `tab-${name}`));
+  location.hash = name;
+  if (name !== "scan") stopCamera();
+  if (["payloads", "print", "scan"].includes(name)) loadModels();
+  if (name === "payloads") loadEntries();
+  if (name === "print") printPreview();
+}
+document.querySelectorAll("#tabs button").forEach((b) => b.addEventListener("click", () => openTab(b.dataset.tab)));
+
+// -- drawing ----------------------------------------------------------------------------------
+function fmt(x) {
+  return Number(x).toFixed(2).replace(/\.?0+$/, "");
+}
+
+function mmPerUnit() {
+  const vb = state.drawing ? state.drawing.viewbox : [0, 0, 1, 1];
+  return Number($("#width-mm").value || 50) / vb[2];
+}
+
+function showDrawing(data, keepSelection = false) {
+  state.drawing = data;
+  $("#drawing-img").src = `/api/drawing.svg?v=${Date.now()}`;
+  const fixed = data.primitives.filter((p) => p.fixed).length;
+  $("#drawing-summary").textContent =
+    `${data.name}: ${data.primitives.length} shapes, ${data.n_variables} variables, ${fixed} fixed. ` +
+    `Click a shape to set how it may move; circles show each point's allowed movement to scale.`;
+  if (!keepSelection) state.selected = null;
+  drawOverlay();
+  selectShape(state.selected);
+}
+
+function drawOverlay() {
+  const svg = $("#overlay");
+  svg.replaceChildren();
+  if (!state.drawing) return;
+  const [x, y, w, h] = state.drawing.viewbox;
+  svg.setAttribute("viewBox", `${x} ${y} ${w} ${h}`);
+  const stroke = w / 150;
+  for (const p of state.drawing.primitives) {
+    const g = document.createElementNS(SVGNS, "g");
+    g.setAttribute("class", "shape" + (p.fixed ? " fixed" : "") + (state.weak.has(p.index) ? " weak" : "") +
+      (state.selected === p.index ? " selected" : ""));
+    g.dataset.index = p.index;
+    const line = document.createElementNS(SVGNS, "polyline");
+    line.setAttribute("points", p.points.map((q) => q.join(",")).join(" "));
+    line.setAttribute("class", "hit");
+    line.setAttribute("stroke-width", String(stroke * 5));
+    g.appendChild(line);
+    for (const [px, py] of p.points) {
+      if (p.move_radius > 0) {
+        const c = document.createElementNS(SVGNS, "circle");
+        c.setAttribute("cx", px);
+        c.setAttribute("cy", py);
+        c.setAttribute("r", p.move_radius);
+        c.setAttribute("class", "move");
+        c.setAttribute("stroke-width", String(stroke));
+        g.appendChild(c);
+      }
+      const dot = document.createElementNS(SVGNS, "circle");
+      dot.setAttribute("cx", px);
+      dot.setAttribute("cy", py);
+      dot.setAttribute("r", String(stroke * 1.5));
+      dot.setAttribute("class", "point");
+      g.appendChild(dot);
+    }
+    if (p.shift) {
+      const xs = p.points.map((q) => q[0]), ys = p.points.map((q) => q[1]);
+      const r = document.createElementNS(SVGNS, "rect");
+      r.setAttribute("x", Math.min(...xs) - p.shift[0]);
+      r.setAttribute("y", Math.min(...ys) - p.shift[1]);
+      r.setAttribute("width", Math.max(...xs) - Math.min(...xs) + 2 * p.shift[0]);
+      r.setAttribute("height", Math.max(...ys) - Math.min(...ys) + 2 * p.shift[1]);
+      r.setAttribute("class", "shift");
+      r.setAttribute("stroke-width", String(stroke));
+      g.appendChild(r);
+    }
+    g.addEventListener("click", (event) => {
+      event.stopPropagation();
+      selectShape(p.index);
+    });
+    svg.appendChild(g);
+  }
+}
+
+function selectShape(index) {
+  state.selected = index;
+  const form = $("#bounds-form");
+  document.querySelectorAll("#overlay .shape").forEach((g) =>
+    g.classList.toggle("selected", Number(g.dataset.index) === index));
+  if (index === null || index === undefined || !state.drawing) {
+    form.hidden = true;
+    return;
+  }
+  const p = state.drawing.primitives[index];
+  form.hidden = false;
+  $("#sel-index").textContent = `#${p.index}`;
+  $("#sel-info").textContent = `${p.kind} at line ${p.line}: ${p.variables} variables` +
+    (p.fixed ? ", fixed" : "");
+  const own = p.own || {};
+  form.move.value = own.move ?? (p.bounds.move ?? "");
+  form.shift.value = own.shift ?? "";
+  form.scale.value = own.scale ?? "";
+  form.rotate.value = own.rotate ?? "";
+  form.fixed.checked = p.fixed;
+  const mm = mmPerUnit();
+  $("#sel-mm").textContent = `at ${fmt($("#width-mm").value)} mm wide: each point may move ` +
+    `${fmt(p.move_radius * mm)} mm (${fmt(p.move_radius)} units)`;
+}
+
+$("#bounds-form").addEventListener("submit", async (event) => {
+  event.preventDefault();
+  const form = event.target;
+  const body = {
+    index: state.selected,
+    move: form.move.value,
+    shift: form.shift.value,
+    scale: form.scale.value,
+    rotate: form.rotate.value,
+    fixed: form.fixed.checked,
+  };
+  showDrawing(await postJson("/api/drawing/bounds", body), true);
+});
+
+$("#overlay").addEventListener("click", () => selectShape(null));
+$("#width-mm").addEventListener("input", () => selectShape(state.selected));
+
+$("#svg-file").addEventListener("change", async (event) => {
+  const file = event.target.files[0];
+  if (!file) return;
+  const data = await api("/api/drawing", {
+    method: "POST",
+    headers: { "content-type": "image/svg+xml", "x-file-name": file.name },
+    body: file,
+  });
+  state.weak = new Set();
+  showDrawing(data);
+  event.target.value = "";
+});
+
+$("#use-ghost").addEventListener("click", async () => {
+  state.weak = new Set();
+  showDrawing(await postJson("/api/drawing/bundled", {}));
+});
+
+let morphSeed = 0;
+function morph(extreme) {
+  if (!state.drawing) return;
+  morphSeed += 1;
+  $("#drawing-img").src = `/api/drawing/morph.svg?seed=${morphSeed}&extreme=${extreme ? 1 : 0}`;
+}
+$("#morph-random").addEventListener("click", () => morph(false));
+$("#morph-extreme").addEventListener("click", () => morph(true));
+
+// -- capacity ---------------------------------------------------------------------------------
+$("#capacity-run").addEventListener("click", async () => {
+  $("#capacity-table").replaceChildren();
+  const r = await api("/api/capacity");
+  const rows = [
+    ["drawing", r.name],
+    ["variables", `${r.n_variables} (${r.visible} visible)`],
+    ["readable", `${r.readable_groups}`],
+    ["code bits", `${r.code_bits}`],
+    ["payload", r.payload_bits ? `${r.payload_bits} bits read from 99 % of captures` : "none predicted to read"],
+  ];
+  for (const [k, v] of rows) {
+    const tr = document.createElement("tr");
+    const th = document.createElement("th");
+    const td = document.createElement("td");
+    th.textContent = k;
+    td.textContent = v;
+    if (k === "payload") td.id = "capacity-bits";
+    tr.append(th, td);
+    $("#capacity-table").appendChild(tr);
+  }
+  const ul = $("#capacity-limits");
+  ul.replaceChildren(...r.limits.map((line) => Object.assign(document.createElement("li"), { textContent: line })));
+  state.weak = new Set((r.elements || []).filter((e) => e.weak > 0).map((e) => e.index));
+  drawOverlay();
+});
+
+// -- training ---------------------------------------------------------------------------------
+$("#train-form").addEventListener("submit", async (event) => {
+  event.preventDefault();
+  const body = Object.fromEntries(new FormData(event.target).entries());
+  await postJson("/api/jobs", body);
+});
+
+function showJobs(jobs) {
+  const box = $("#jobs");
+  box.replaceChildren();
+  if (!jobs.length) box.textContent = "No training runs yet.";
+  for (const job of jobs) {
+    const div = document.createElement("div");
+    div.className = `job ${job.status}`;
+    div.dataset.id = job.id;
+    const title = document.createElement("h3");
+    title.textContent = `${job.drawing}: ${job.status}`;
+    const bar = document.createElement("progress");
+    bar.max = job.total || 1;
+    bar.value = job.step;
+    const text = document.createElement("p");
+    text.className = "job-progress";
+    const acc = job.metrics.bit_acc !== undefined ? `, bits read ${(100 * job.metrics.bit_acc).toFixed(1)} %` : "";
+    let eta = "";
+    if (job.status === "running" && job.step > 0 && job.total > job.step) {
+      eta = `, about ${Math.ceil((job.elapsed_s / job.step) * (job.total - job.step))} s left`;
+    }
+    text.textContent = `step ${job.step} / ${job.total || "?"}${acc}${eta}`;
+    const message = document.createElement("p");
+    message.className = "job-message";
+    message.textContent = job.message;
+    div.append(title, bar, text, plot(job.history), message);
+    if (["queued", "running"].includes(job.status)) {
+      const cancel = document.createElement("button");
+      cancel.textContent = "Cancel";
+      cancel.addEventListener("click", () => api(`/api/jobs/${job.id}/cancel`, { method: "POST" }));
+      div.appendChild(cancel);
+    }
+    box.appendChild(div);
+  }
+}
+
+function plot(history) {
+  const svg = document.createElementNS(SVGNS, "svg");
+  svg.setAttribute("viewBox", "0 0 200 50");
+  svg.setAttribute("class", "plot");
+  if (history.length > 1) {
+    const last = history[history.length - 1][0] || 1;
+    const line = document.createElementNS(SVGNS, "polyline");
+    line.setAttribute("points", history.map(([s, a]) => `${(200 * s) / last},${50 - 50 * a}`).join(" "));
+    svg.appendChild(line);
+  }
+  return svg;
+}
+
+function watchJobs() {
+  const events = new EventSource("/api/jobs/events");
+  events.onmessage = (event) => showJobs(JSON.parse(event.data));
+  events.onerror = () => {
+    events.close();
+    setTimeout(watchJobs, 2000); // the studio restarted, or the network blinked: attach again
+  };
+}
+
+// -- models and payloads ----------------------------------------------------------------------
+async function loadModels() {
+  const models = await api("/api/models");
+  state.models = models;
+  document.querySelectorAll(".model-select").forEach((select) => {
+    const keep = select.value;
+    select.replaceChildren(...models.map((m) => {
+      const o = document.createElement("option");
+      o.value = m.id;
+      o.textContent = `${m.id} (${m.drawing}, ${m.payload_bits} bits)`;
+      return o;
+    }));
+    if (models.some((m) => m.id === keep)) select.value = keep;
+  });
+  if (!$("#print-payload").value) await newPayload();
+}
+
+async function loadEntries() {
+  const model = $("#payloads-model").value || "ghost";
+  const rows = await api(`/api/models/${encodeURIComponent(model)}/entries`);
+  const table = $("#entries");
+  table.replaceChildren();
+  const head = document.createElement("tr");
+  for (const h of ["payload", "kind", "target", "note", ""]) {
+    head.appendChild(Object.assign(document.createElement("th"), { textContent: h }));
+  }
+  table.appendChild(head);
+  for (const e of rows) {
+    const tr = document.createElement("tr");
+    for (const v of [e.payload.hex, e.kind, e.target, e.note || ""]) {
+      tr.appendChild(Object.assign(document.createElement("td"), { textContent: v }));
+    }
+    const remove = Object.assign(document.createElement("button"), { textContent: "Remove" });
+    remove.addEventListener("click", async () => {
+      await api(`/api/models/${encodeURIComponent(model)}/entries/${e.payload.hex}/remove`, { method: "POST" });
+      loadEntries();
+    });
+    const td = document.createElement("td");
+    td.appendChild(remove);
+    tr.appendChild(td);
+    table.appendChild(tr);
+  }
+}
+$("#payloads-model").addEventListener("change", loadEntries);
+$("#entry-form").addEventListener("submit", async (event) => {
+  event.preventDefault();
+  const model = $("#payloads-model").value || "ghost";
+  const body = Object.fromEntries(new FormData(event.target).entries());
+  await postJson(`/api/models/${encodeURIComponent(model)}/entries`, body);
+  event.target.reset();
+  loadEntries();
+});
+
+// -- print ------------------------------------------------------------------------------------
+async function newPayload() {
+  const model = $("#print-model").value || "ghost";
+  const p = await api(`/api/models/${encodeURIComponent(model)}/random`);
+  $("#print-payload").value = p.hex;
+  printPreview();
+}
+$("#print-random").addEventListener("click", newPayload);
+$("#print-model").addEventListener("change", newPayload);
+
+function printQuery(format) {
+  const form = $("#print-form");
+  const q = new URLSearchParams({
+    payload: form.payload.value, width_mm: form.width_mm.value, dpi: form.dpi.value, format,
+  });
+  return `/api/models/${encodeURIComponent(form.model.value || "ghost")}/print?${q}`;
+}
+
+function printPreview() {
+  if (!$("#print-payload").value) return;
+  $("#print-preview").src = printQuery("svg") + "&preview=1";
+}
+$("#print-form").addEventListener("change", printPreview);
+
+document.querySelectorAll("#tab-print [data-format]").forEach((button) =>
+  button.addEventListener("click", async () => {
+    const format = button.dataset.format;
+    const blob = await api(printQuery(format));
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(blob);
+    a.download = `${$("#print-model").value}-${$("#print-payload").value}-${$("#print-form").width_mm.value}mm.${format}`;
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+  }));
+
+// -- scan -------------------------------------------------------------------------------------
+function showScan(result, image) {
+  const canvas = $("#scan-canvas");
+  canvas.width = result.width;
+  canvas.height = result.height;
+  const ctx = canvas.getContext("2d");
+  if (image) ctx.drawImage(image, 0, 0, result.width, result.height);
+  const lines = [];
+  for (const d of result.detections) {
+    if (d.corners) {
+      const c = d.corners;
+      ctx.lineWidth = Math.max(2, result.width / 200);
+      ctx.strokeStyle = d.ok ? "#0a0" : "#d40";
+      ctx.beginPath();
+      c.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+      ctx.closePath();
+      ctx.stroke();
+      // the drawing's axes at its top-left corner: x along its top edge (red), y down its side (blue)
+      for (const [to, colour] of [[c[1], "#e00"], [c[3], "#00e"]]) {
+        ctx.strokeStyle = colour;
+        ctx.beginPath();
+        ctx.moveTo(c[0][0], c[0][1]);
+        ctx.lineTo(c[0][0] + 0.4 * (to[0] - c[0][0]), c[0][1] + 0.4 * (to[1] - c[0][1]));
+        ctx.stroke();
+      }
+    }
+    let line = `${d.payload.hex} ${d.ok ? "read" : "not verified"}`;
+    if (d.pose) line += `, ${d.pose.tvec[2].toFixed(2)} drawing widths away`;
+    if (d.ok) line += d.registry ? ` → ${d.registry.kind}: ${d.registry.target}` : " (not in the registry)";
+    lines.push(line);
+  }
+  if (result.note) lines.push(result.note);
+  const box = $("#scan-result");
+  box.replaceChildren(...lines.map((t) => Object.assign(document.createElement("p"), { textContent: t })));
+  if (result.detections.some((d) => d.ok)) box.dataset.payload = result.detections.find((d) => d.ok).payload.hex;
+}
+
+$("#photo-file").addEventListener("change", async (event) => {
+  const file = event.target.files[0];
+  if (!file) return;
+  const model = $("#scan-model").value || "ghost";
+  const result = await api(`/api/models/${encodeURIComponent(model)}/scan`, {
+    method: "POST", headers: { "x-file-name": file.name }, body: file,
+  });
+  const image = await createImageBitmap(file).catch(() => null);
+  showScan(result, image);
+  event.target.value = "";
+});
+
+async function startCamera() {
+  const video = $("#camera");
+  let stream;
+  try {
+    stream = await navigator.mediaDevices.getUserMedia({ video: { width: 640, height: 480 }, audio: false });
+  } catch (exc) {
+    showError(`no camera: ${exc.message}`);
+    return;
+  }
+  video.srcObject = stream;
+  await video.play();
+  $("#camera-start").disabled = true;
+  $("#camera-stop").disabled = false;
+  const live = { stream, frames: 0, started: performance.now(), firstRead: null };
+  state.live = live;
+  const grab = document.createElement("canvas");
+  const model = $("#scan-model").value || "ghost";
+  while (state.live === live) {
+    grab.width = video.videoWidth;
+    grab.height = video.videoHeight;
+    grab.getContext("2d").drawImage(video, 0, 0);
+    const blob = await new Promise((resolve) => grab.toBlob(resolve, "image/jpeg", 0.9));
+    let result;
+    try {
+      const first = live.frames === 0 ? "&first=1" : "";
+      result = await api(`/api/models/${encodeURIComponent(model)}/scan?live=1${first}`, { method: "POST", body: blob });
+    } catch (exc) {
+      break;
+    }
+    if (state.live !== live) break;
+    live.frames += 1;
+    if (live.firstRead === null && result.detections.some((d) => d.ok)) {
+      live.firstRead = performance.now() - live.started;
+    }
+    showScan(result, grab);
+    const seconds = (performance.now() - live.started) / 1000;
+    const rate = $("#scan-rate");
+    rate.textContent = `${(live.frames / seconds).toFixed(1)} frames/s, ${result.ms} ms a frame on the studio`;
+    rate.dataset.fps = (live.frames / seconds).toFixed(2);
+    rate.dataset.frames = live.frames;
+  }
+}
+
+function stopCamera() {
+  if (!state.live) return;
+  state.live.stream.getTracks().forEach((t) => t.stop());
+  state.live = null;
+  $("#camera-start").disabled = false;
+  $("#camera-stop").disabled = true;
+}
+$("#camera-start").addEventListener("click", startCamera);
+$("#camera-stop").addEventListener("click", stopCamera);
+
+// -- start ------------------------------------------------------------------------------------
+async function start() {
+  watchJobs();
+  try {
+    const kept = await api("/api/drawing");
+    if (!state.drawing) showDrawing(kept); // unless a drawing was opened meanwhile
+  } catch (exc) {
+    showError("");
+  }
+  const tab = location.hash.slice(1);
+  openTab(["drawing", "capacity", "train", "payloads", "print", "scan"].includes(tab) ? tab : "drawing");
+  document.body.dataset.ready = "1";
+}
+start();
