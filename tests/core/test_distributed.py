@@ -134,6 +134,46 @@ def test_a_checkpoint_of_one_process_resumes_on_two(drawing: Path) -> None:
     assert [line["step"] for line in read_log(broken.with_suffix(".log.jsonl"))] == [4, 8, 12, 16, 20, 24]
 
 
+#: Rank 0 of a torchrun of this script stops at step 16, after the checkpoint of step 12 (a run
+#: of several processes writes none on an interrupt); the other rank then fails with it.
+STOP_AT_16 = """
+import sys
+from deepmorph_core.train import train_model
+train = {train!r}
+
+def stop_at_16(total, done):
+    def on_log(m):
+        if m["step"] == 16:
+            raise KeyboardInterrupt
+    return on_log
+
+train_model("tiny.svg", "broken2.dmm", payload_bits=4, crc_bits=8, ecc_t=0, train=train, on_start=stop_at_16,
+            validation_samples=(0, 0))
+"""
+
+
+def test_a_checkpoint_of_two_processes_resumes_on_one(drawing: Path) -> None:
+    """The checkpoint holds both processes' random streams (gathered to rank 0): one process
+    resumes it to the model of the uninterrupted run."""
+    train = {**CFG, "steps": 24, "shards": 2, "log_every": 4, "checkpoint_every": 12, "plateau_window": 10,
+             "plateau_gain": 1.0, "stage1_max_fraction": 1.0}  # fmt: skip
+    straight = drawing.parent / "straight.dmm"
+    if not straight.exists():  # the previous test's reference, with other checkpoints
+        train_model(drawing, straight, **CODE, train={**train, "checkpoint_every": 6}, validation_samples=(0, 0))
+    script = drawing.parent / "stop.py"
+    script.write_text(STOP_AT_16.format(train=train))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
+    subprocess.run(command, cwd=drawing.parent, env=env, capture_output=True, text=True, timeout=240)
+    broken = drawing.parent / "broken2.dmm"
+    checkpoint = DeepMorphModel.load(broken)
+    assert checkpoint.meta.record.step == 12 and not checkpoint.meta.record.finished
+    assert {"rng.cpu", "rng.shard.1"} <= set(checkpoint.extra_tensors)
+    train_model(drawing, broken, resume=True, validation_samples=(0, 0), world=World())
+    assert DeepMorphModel.load(broken).meta.record.world_size == 1
+    assert_same_networks(straight, broken)
+
+
 def test_shards_split_the_batch_and_the_ranks_share_them() -> None:
     assert shard_sizes(8, 2) == [4, 4] and shard_sizes(10, 4) == [3, 3, 2, 2] and shard_sizes(5, 1) == [5]
     assert rank_shards(4, World(1, 2)) == [1, 3] and rank_shards(3, World(0, 2)) == [0, 2]
