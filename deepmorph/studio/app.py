@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from deepmorph_detect.reading import SequenceReader
 
 STATIC = Path(__file__).parent / "static"
-TOKEN_COOKIE = "deepmorph_studio_token"
+TOKEN_COOKIE = "deepmorph_studio_token_{port}"  # cookies ignore ports: one name per studio's port
 TOKEN_HEADER = "x-deepmorph-token"
 MAX_PHOTO_BYTES = 20 * 1024 * 1024
 MAX_JSON_BYTES = 64 * 1024
@@ -560,7 +560,7 @@ class Guard:
         given = (
             request.query_params.get("token")
             or request.headers.get(TOKEN_HEADER)
-            or request.cookies.get(TOKEN_COOKIE)
+            or request.cookies.get(cookie_name(request.scope))
             or ""
         )
         if not hmac.compare_digest(given.encode(), studio.token.encode()):
@@ -578,7 +578,8 @@ class Guard:
                 scope, receive, send
             )
             return
-        set_cookie = request.cookies.get(TOKEN_COOKIE) != self.studio.token
+        cookie = cookie_name(scope)
+        set_cookie = request.cookies.get(cookie) != self.studio.token
 
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
@@ -586,12 +587,16 @@ class Guard:
                 for key, value in security_headers(headers.get("content-security-policy", PAGE_CSP)).items():
                     headers[key] = value
                 if set_cookie:
-                    headers.append(
-                        "set-cookie", f"{TOKEN_COOKIE}={self.studio.token}; HttpOnly; SameSite=Strict; Path=/"
-                    )
+                    headers.append("set-cookie", f"{cookie}={self.studio.token}; HttpOnly; SameSite=Strict; Path=/")
             await send(message)
 
         await self.app(scope, receive, send_with_headers)
+
+
+def cookie_name(scope: Scope) -> str:
+    """The token's cookie for the port this studio listens on."""
+    server = scope.get("server") or ("", 0)
+    return TOKEN_COOKIE.format(port=server[1] or 0)
 
 
 def security_headers(csp: str) -> dict[str, str]:

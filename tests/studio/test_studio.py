@@ -113,6 +113,27 @@ def test_a_training_run_is_refused_when_the_disk_is_full(tmp_path: Path) -> None
     assert queue.list() == []
 
 
+def test_listening_beyond_this_machine_warns(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from tests.studio.conftest import free_port
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "deepmorph", "studio", "--no-browser", "--host", "0.0.0.0",
+         "--port", str(free_port()), "--data", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        warning = process.stderr.readline()
+        address = process.stdout.readline()
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+    assert warning.startswith("warning: --host 0.0.0.0: the studio is reachable from other machines")
+    assert "?token=" in address
+
+
 # -- in the browser ---------------------------------------------------------------------------
 
 
@@ -130,6 +151,11 @@ def _click_shape(page, index: int) -> None:  # noqa: ANN001
 
 def test_bounds_set_by_clicking_are_in_the_downloaded_svg(page, server: Server, tmp_path: Path) -> None:
     open_studio(page, server)
+    broken = tmp_path / "broken.svg"
+    broken.write_bytes(b'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 10 10"><text>hi</text></svg>')
+    page.set_input_files("#svg-file", str(broken))
+    page.wait_for_selector("#error:not([hidden])")
+    assert "broken.svg" in page.text_content("#error") and "Traceback" not in page.text_content("#error")
     page.set_input_files("#svg-file", str(GHOST))
     page.wait_for_function("() => state.drawing && state.drawing.name === 'ghost.svg'")
     # the left arm (primitive 4): wider movement; the right arm (5): fixed
