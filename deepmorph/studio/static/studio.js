@@ -36,6 +36,7 @@ function openTab(name) {
   if (name !== "scan") stopCamera();
   if (["payloads", "print", "scan"].includes(name)) loadModels();
   if (name === "payloads") loadEntries();
+  if (name === "capacity" && state.drawing) runCapacity(); // the bounds as they are now
   if (name === "print") printPreview();
 }
 document.querySelectorAll("#tabs button").forEach((b) => b.addEventListener("click", () => openTab(b.dataset.tab)));
@@ -185,7 +186,7 @@ $("#morph-random").addEventListener("click", () => morph(false));
 $("#morph-extreme").addEventListener("click", () => morph(true));
 
 // -- capacity ---------------------------------------------------------------------------------
-$("#capacity-run").addEventListener("click", async () => {
+async function runCapacity() {
   $("#capacity-table").replaceChildren();
   const r = await api("/api/capacity");
   const rows = [
@@ -209,7 +210,8 @@ $("#capacity-run").addEventListener("click", async () => {
   ul.replaceChildren(...r.limits.map((line) => Object.assign(document.createElement("li"), { textContent: line })));
   state.weak = new Set((r.elements || []).filter((e) => e.weak > 0).map((e) => e.index));
   drawOverlay();
-});
+}
+$("#capacity-run").addEventListener("click", runCapacity);
 
 // -- training ---------------------------------------------------------------------------------
 $("#train-form").addEventListener("submit", async (event) => {
