@@ -48,6 +48,8 @@ class Job:
         metrics: the last log line's metrics (``loss``, ``bit_acc`` ...).
         history: ``[step, bit_acc]`` pairs for the plot.
         message: why it failed or stopped; or the validation in words.
+        warnings: what training warned of (a payload above the predicted capacity, a validation
+            under 99 % ...).
         created: when it was queued (seconds since the epoch).
     """
 
@@ -63,6 +65,7 @@ class Job:
     metrics: dict[str, float] = field(default_factory=dict)
     history: list[list[float]] = field(default_factory=list)
     message: str = ""
+    warnings: list[str] = field(default_factory=list)
     created: float = field(default_factory=time.time)
 
     def to_json(self) -> dict[str, Any]:
@@ -246,7 +249,7 @@ class JobQueue:
                 job.history.append([job.step, float(line["bit_acc"])])
                 job.history = job.history[-HISTORY_POINTS:]
         elif kind == "warning":
-            job.message = event["text"]
+            job.warnings.append(str(event["text"])[:500])
         elif kind == "validating":
             job.status = "validating"
         elif kind == "done":

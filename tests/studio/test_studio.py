@@ -134,6 +134,19 @@ def test_listening_beyond_this_machine_warns(tmp_path: Path) -> None:
     assert "?token=" in address
 
 
+def test_the_validation_is_said_in_plain_words() -> None:
+    from deepmorph.studio.jobs import validation_words
+
+    records = [
+        {"name": "renders", "samples": 1000, "read": 994, "wrong": 0},
+        {"name": "close-ups", "samples": 200, "read": 199, "wrong": 1},
+    ]
+    assert validation_words(records) == (
+        "reads 99.4 % of 1000 fresh renders; reads 99.5 % of 200 simulated phone photos, 1 wrong"
+    )
+    assert validation_words([]) == "finished (no validation asked for)"
+
+
 # -- in the browser ---------------------------------------------------------------------------
 
 

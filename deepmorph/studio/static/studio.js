@@ -245,6 +245,9 @@ function showJobs(jobs) {
     message.className = "job-message";
     message.textContent = job.message;
     div.append(title, bar, text, plot(job.history), message);
+    for (const warning of job.warnings || []) {
+      div.appendChild(Object.assign(document.createElement("p"), { className: "job-warning", textContent: warning }));
+    }
     if (["queued", "running"].includes(job.status)) {
       const cancel = document.createElement("button");
       cancel.textContent = "Cancel";
