@@ -289,7 +289,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         edit = drawings.BoundsEdit.from_json(data)
 
         def work() -> dict[str, Any]:
-            out = drawings.annotate(svg, name, index, edit)
+            out = drawings.annotate(svg, name, index, edit, group=bool(data.get("group")))
             keep(out, name)
             return {"name": name, **drawings.describe(drawings.load(out.encode(), name))}
 

@@ -104,16 +104,32 @@ def written(md: MorphableDrawing) -> str:
     return md.to_svg(md.neutral_values()[0])
 
 
-def annotate(svg: str, label: str, index: int, edit: BoundsEdit) -> str:
-    """``svg`` with primitive ``index``'s ``dm:`` attributes set by ``edit``, written again.
+def _group_of(element: Any) -> Any:
+    """The ``<g>`` an element sits in, or ``None`` (the root is not a group)."""
+    from lxml import etree
+
+    parent = element.getparent()
+    if parent is None or parent.getparent() is None or etree.QName(parent).localname != "g":
+        return None
+    return parent
+
+
+def annotate(svg: str, label: str, index: int, edit: BoundsEdit, group: bool = False) -> str:
+    """``svg`` with primitive ``index``'s ``dm:`` attributes set by ``edit`` (``group``: those of
+    the ``<g>`` it sits in, which its shapes inherit), written again.
 
     Raises:
-        DeepMorphError: no such primitive, or bounds the reader refuses (a negative move ...).
+        DeepMorphError: no such primitive, one in no group, or bounds the reader refuses (a
+            negative move ...).
     """
     md = load(svg.encode(), label)
     if not 0 <= index < len(md.drawing.primitives):
         raise DeepMorphError(f"{label}: no primitive {index} (it has {len(md.drawing.primitives)})")
     element = md.drawing.primitives[index].element
+    if group:
+        element = _group_of(element)
+        if element is None:
+            raise DeepMorphError(f"{label}: primitive {index} is not in a <g>")
     for name, value in edit.attributes().items():
         key = f"{{{DM_NS}}}{name}"
         if value is None:
@@ -140,6 +156,7 @@ def describe(md: MorphableDrawing) -> dict[str, Any]:
         own = {
             q.split("}")[1]: v for q, v in p.element.attrib.items() if q.startswith(f"{{{DM_NS}}}")
         }  # what a click set here, as opposed to what it inherits
+        group = _group_of(p.element)
         bounds = row["bounds"]
         prims.append(
             {
@@ -150,6 +167,12 @@ def describe(md: MorphableDrawing) -> dict[str, Any]:
                 "variables": row["variables"],
                 "bounds": bounds,
                 "own": own,
+                "group": None
+                if group is None
+                else {
+                    "line": group.sourceline,
+                    "own": {q.split("}")[1]: v for q, v in group.attrib.items() if q.startswith(f"{{{DM_NS}}}")},
+                },
                 "points": np.round(points, 4).tolist(),
                 "move_radius": 0.0 if row["fixed"] else round(float(bounds.get("move") or 0.0) * unit, 5),
                 "shift": None if row["fixed"] or not bounds.get("shift") else [v * unit for v in bounds["shift"]],

@@ -184,6 +184,15 @@ def test_bounds_set_by_clicking_are_in_the_downloaded_svg(page, server: Server, 
     with page.expect_response("**/api/drawing/bounds"):
         page.click("#apply-bounds")
     page.wait_for_function("() => state.drawing.primitives[5].fixed")
+    # the eyes' group (fixed in the ghost): may now move a little, set once on the <g>
+    _click_shape(page, 1)
+    page.wait_for_function("() => document.querySelector('#sel-index').textContent === '#1'")
+    page.check("#bounds-form input[name=group]")
+    page.uncheck("#bounds-form input[name=fixed]")
+    page.fill("#bounds-form input[name=move]", "0.6")
+    with page.expect_response("**/api/drawing/bounds"):
+        page.click("#apply-bounds")
+    page.wait_for_function("() => !state.drawing.primitives[2].fixed")
     assert page.evaluate("() => state.drawing.primitives[4].move_radius") == pytest.approx(2.2)
     _click_shape(page, 4)
     assert "2.2 units" in page.text_content("#sel-mm")
@@ -195,6 +204,8 @@ def test_bounds_set_by_clicking_are_in_the_downloaded_svg(page, server: Server, 
     shapes = [e for e in etree.parse(str(path)).getroot().iter() if etree.QName(e).localname == "polyline"]
     assert shapes[0].get(f"{DM}move") == "2.2"  # the left arm
     assert shapes[1].get(f"{DM}fixed") == "true"  # the right arm
+    eyes = next(e for e in etree.parse(str(path)).getroot().iter() if etree.QName(e).localname == "g")
+    assert eyes.get(f"{DM}move") == "0.6" and eyes.get(f"{DM}fixed") is None
     assert b"<script" not in path.read_bytes()
 
 

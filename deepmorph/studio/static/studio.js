@@ -81,15 +81,14 @@ function drawOverlay() {
     line.setAttribute("stroke-width", String(stroke * 5));
     g.appendChild(line);
     for (const [px, py] of p.points) {
-      if (p.move_radius > 0) {
-        const c = document.createElementNS(SVGNS, "circle");
-        c.setAttribute("cx", px);
-        c.setAttribute("cy", py);
-        c.setAttribute("r", p.move_radius);
-        c.setAttribute("class", "move");
-        c.setAttribute("stroke-width", String(stroke));
-        g.appendChild(c);
-      }
+      // the allowed movement to scale; a point that may not move still gets a small target to click
+      const c = document.createElementNS(SVGNS, "circle");
+      c.setAttribute("cx", px);
+      c.setAttribute("cy", py);
+      c.setAttribute("r", p.move_radius > 0 ? p.move_radius : stroke * 4);
+      c.setAttribute("class", p.move_radius > 0 ? "move" : "grab");
+      c.setAttribute("stroke-width", String(stroke));
+      g.appendChild(c);
       const dot = document.createElementNS(SVGNS, "circle");
       dot.setAttribute("cx", px);
       dot.setAttribute("cy", py);
@@ -130,12 +129,14 @@ function selectShape(index) {
   $("#sel-index").textContent = `#${p.index}`;
   $("#sel-info").textContent = `${p.kind} at line ${p.line}: ${p.variables} variables` +
     (p.fixed ? ", fixed" : "");
-  const own = p.own || {};
+  $("#group-choice").hidden = !p.group;
+  if (!p.group) form.group.checked = false;
+  const own = (form.group.checked && p.group ? p.group.own : p.own) || {};
   form.move.value = own.move ?? (p.bounds.move ?? "");
   form.shift.value = own.shift ?? "";
   form.scale.value = own.scale ?? "";
   form.rotate.value = own.rotate ?? "";
-  form.fixed.checked = p.fixed;
+  form.fixed.checked = form.group.checked ? own.fixed === "true" : p.fixed;
   const mm = mmPerUnit();
   $("#sel-mm").textContent = `at ${fmt($("#width-mm").value)} mm wide: each point may move ` +
     `${fmt(p.move_radius * mm)} mm (${fmt(p.move_radius)} units)`;
@@ -151,11 +152,13 @@ $("#bounds-form").addEventListener("submit", async (event) => {
     scale: form.scale.value,
     rotate: form.rotate.value,
     fixed: form.fixed.checked,
+    group: form.group.checked,
   };
   showDrawing(await postJson("/api/drawing/bounds", body), true);
 });
 
 $("#overlay").addEventListener("click", () => selectShape(null));
+$("#bounds-form").group.addEventListener("change", () => selectShape(state.selected));
 $("#width-mm").addEventListener("input", () => selectShape(state.selected));
 
 $("#svg-file").addEventListener("change", async (event) => {
