@@ -32,7 +32,9 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 CAMERA_PAYLOAD = "0x5A3C96"  # what the fake camera's print carries
-CLIP_FRAMES = 24
+CLIP_FPS = 15
+CLIP_EMPTY = 8  # frames of the bare desk, then the print comes into view ...
+CLIP_PRINT = 16  # ... for this many frames; the clip loops
 
 
 @dataclass
@@ -103,8 +105,10 @@ def _write_y4m(frames: list[np.ndarray], path: Path, fps: int = 15) -> None:
 
 @pytest.fixture(scope="session")
 def camera_clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 640x480 clip: simulated close-up photos (easy) of a print of the bundled ghost carrying
-    :data:`CAMERA_PAYLOAD`, each frame a fresh photo, placed on a desk."""
+    """A 640x480 clip at :data:`CLIP_FPS`: :data:`CLIP_EMPTY` frames of a bare desk, then
+    :data:`CLIP_PRINT` simulated close-up photos (easy) of a print of the bundled ghost carrying
+    :data:`CAMERA_PAYLOAD`, each a fresh photo placed on the same desk. Chromium loops it, so the
+    print comes into view every ``(CLIP_EMPTY + CLIP_PRINT) / CLIP_FPS`` seconds."""
     from deepmorph_core.bundled import BUNDLED_MODEL
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.scenes import close_up_photo
@@ -112,14 +116,15 @@ def camera_clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
     code = DeepMorphModel.load(BUNDLED_MODEL).code(CAMERA_PAYLOAD)
     art = code.render(360)
     rng = np.random.default_rng(5)
-    frames = []
-    for _ in range(CLIP_FRAMES):
+    desk = np.full((480, 640, 3), 153, np.uint8)  # 0.6 grey, as close_up_photo's desk below
+    frames = [desk] * CLIP_EMPTY
+    for _ in range(CLIP_PRINT):
         photo = close_up_photo(art, "easy", rng, size=440, desk=0.6)
-        frame = np.full((480, 640, 3), int(photo[0, 0].mean()), np.uint8)
+        frame = desk.copy()
         frame[20:460, 100:540] = photo
         frames.append(frame)
     path = tmp_path_factory.mktemp("camera") / "ghost.y4m"
-    _write_y4m(frames, path)
+    _write_y4m(frames, path, CLIP_FPS)
     return path
 
 

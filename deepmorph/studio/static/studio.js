@@ -435,11 +435,12 @@ async function startCamera() {
   await video.play();
   $("#camera-start").disabled = true;
   $("#camera-stop").disabled = false;
-  const live = { stream, frames: 0, started: performance.now(), firstRead: null };
+  const live = { stream, frames: 0, started: performance.now(), firstRead: null, log: [] };
   state.live = live;
   const grab = document.createElement("canvas");
   const model = $("#scan-model").value || "ghost";
   while (state.live === live) {
+    const grabbed = performance.now();
     grab.width = video.videoWidth;
     grab.height = video.videoHeight;
     grab.getContext("2d").drawImage(video, 0, 0);
@@ -457,6 +458,11 @@ async function startCamera() {
       live.firstRead = performance.now() - live.started;
     }
     showScan(result, grab);
+    // the last frames' timings (when grabbed, when shown, what was found): how fast a print is read
+    live.log.push({ grabbed, shown: performance.now(), found: result.detections.length,
+      ok: result.detections.some((d) => d.ok),
+      read: result.detections.filter((d) => d.ok).map((d) => d.payload.hex) });
+    if (live.log.length > 600) live.log.shift();
     const seconds = (performance.now() - live.started) / 1000;
     const rate = $("#scan-rate");
     rate.textContent = `${(live.frames / seconds).toFixed(1)} frames/s, ${result.ms} ms a frame on the studio`;
