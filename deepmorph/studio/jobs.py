@@ -105,6 +105,7 @@ class JobQueue:
         self._jobs: dict[str, Job] = {}
         self._process: subprocess.Popen[str] | None = None
         self._running: str | None = None
+        self._cancelled: set[str] = set()  # runs asked to stop (a worker killed before its loop began says nothing)
         self.version = 0  # bumped at every change: the event stream sends a snapshot then
         for path in sorted(folder.glob("*.json")):
             try:
@@ -163,6 +164,7 @@ class JobQueue:
                 self._save(job)
                 return
             process = self._process if self._running == job_id else None
+            self._cancelled.add(job_id)
         if process is not None:
             process.terminate()  # SIGTERM: the training loop checkpoints, then the worker says "cancelled"
 
@@ -192,7 +194,13 @@ class JobQueue:
                 self._wake.wait(1.0)
                 self._wake.clear()
                 continue
-            self._run(job)
+            try:
+                self._run(job)
+            except OSError as exc:  # the worker could not be started (no disk space for its files, say)
+                with self._lock:
+                    job.status, job.message = "failed", f"the training process could not start: {exc}"
+                    self._process, self._running = None, None
+                    self._save(job)
 
     def _run(self, job: Job) -> None:
         svg_path = self.folder / f"{job.id}.svg"
@@ -225,7 +233,9 @@ class JobQueue:
         stderr = process.stderr.read() if process.stderr else ""
         code = process.wait()
         with self._lock:
-            if not ended:
+            if not ended and job.id in self._cancelled:
+                job.status, job.message = "cancelled", "cancelled before training began"
+            elif not ended:
                 job.status = "failed"
                 last = stderr.strip().splitlines()[-1:] or [f"exit status {code}"]
                 job.message = f"the training process stopped: {last[0][:300]}"

@@ -134,6 +134,27 @@ def test_listening_beyond_this_machine_warns(tmp_path: Path) -> None:
     assert "?token=" in address
 
 
+def test_a_run_cancelled_as_it_starts_says_cancelled(tmp_path: Path) -> None:
+    from deepmorph.studio.jobs import JobQueue
+    from deepmorph_core.errors import DeepMorphError
+
+    queue = JobQueue(tmp_path / "jobs", tmp_path / "models", min_free_bytes=0)
+    settings = {"payload_bits": 4, "validation": [0, 0],
+                "train": {"steps": 100_000, "batch": 8, "width": 40, "log_every": 25, "threads": 1}}  # fmt: skip
+    job = queue.submit("tiny.svg", TINY.decode(), settings)
+    deadline = time.monotonic() + 30
+    while queue.list()[0]["status"] != "running" and time.monotonic() < deadline:
+        time.sleep(0.01)
+    queue.cancel(job["id"])  # while the worker still imports torch, or just after
+    while queue.list()[0]["status"] == "running" and time.monotonic() < deadline + 30:
+        time.sleep(0.05)
+    run = queue.list()[0]
+    assert run["status"] == "cancelled", run
+    # a run that has ended cannot be cancelled again, and says why
+    with pytest.raises(DeepMorphError, match="already ended"):
+        queue.cancel(job["id"])
+
+
 def test_the_validation_is_said_in_plain_words() -> None:
     from deepmorph.studio.jobs import validation_words
 
