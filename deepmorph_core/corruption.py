@@ -311,15 +311,17 @@ def added_steps(severity: str, config: Mapping[str, Any] | None, width: int) -> 
     return [spec for spec in AugmentConfig.parse(config).steps if spec.name not in preset]
 
 
-def capture_pipeline(severity: str, width: int, extra: list[AugmentationSpec] | None = None) -> AugmentPipeline:
-    """The camera's steps of a photo severity on photos ``width`` pixels wide
+def capture_pipeline(
+    severity: str, shrink: float = 1.0, extra: list[AugmentationSpec] | None = None
+) -> AugmentPipeline:
+    """The camera's steps of a photo severity on photos as taken (``shrink`` 1) or shrunk
     (:func:`deepmorph_core.severity.capture_steps`), plus ``extra`` steps, through the
     registered plugins; applied with :meth:`AugmentPipeline.capture`.
 
     Raises:
         DeepMorphError: an unknown severity or ``none``; AugmentConfigError: a bad extra step.
     """
-    steps = [AugmentationSpec(name=n, p=p, params=params) for n, p, params in capture_steps(severity, width)]
+    steps = [AugmentationSpec(name=n, p=p, params=params) for n, p, params in capture_steps(severity, shrink)]
     return AugmentPipeline(AugmentConfig(steps=steps + list(extra or [])))
 
 

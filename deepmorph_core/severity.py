@@ -14,7 +14,8 @@ A severity names how rough a capture is. Two things read it:
   print (tilt, size in the frame, how far a close-up may turn) and :attr:`Severity.capture` is
   what the camera then does to the whole photo (light, shadow, contrast, blur, motion, noise,
   JPEG), as steps of the same registered augmentation plugins training uses, their
-  pixel-valued parameters given for a :data:`PHOTO_SIZE`-pixel-wide photo.
+  pixel-valued parameters in the camera's own pixels: a print 60 px wide in a photo is blurred
+  by the same pixels as one 400 px wide, so small prints lose detail as they do in a camera.
 
 ``none`` corrupts nothing and has no photo settings.
 """
@@ -28,9 +29,10 @@ from deepmorph_core.errors import DeepMorphError
 
 #: Reference image width of the residual steps' pixel-valued parameters.
 PRESET_SIZE = 96
-#: Reference photo width of the capture steps' pixel-valued parameters.
+#: The width of the simulated camera's scenes (a VGA frame, what the photo chain's detector sees
+#: shrunk): a scene made smaller stands for this frame shrunk (its pixel parameters scaled).
 PHOTO_SIZE = 640
-#: Parameters measured in pixels (scaled by ``size / PRESET_SIZE`` or ``width / PHOTO_SIZE``).
+#: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``, or by a photo's shrink).
 PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length"), ("shadow", "softness")}
 
 Step = tuple[str, float, dict[str, Any]]  # (augmentation name, probability, parameters)
@@ -60,8 +62,7 @@ class Severity:
         name: ``none``, ``easy``, ``medium`` or ``hard``.
         residual: the decoder-frame corruption steps ``(name, p, params)``.
         photo: where the photo simulator puts prints (``None`` for ``none``).
-        capture: the camera's steps on a whole photo, pixel parameters for a
-            :data:`PHOTO_SIZE`-pixel-wide one.
+        capture: the camera's steps on a whole photo, pixel parameters in camera pixels.
         colour: the colour steps of a colour print (the pipeline's ``"colour"`` stage, on RGB).
     """
 
@@ -214,15 +215,15 @@ def residual_steps(name: str, size: int | None = None, *, colour: bool = False) 
     return scaled_steps(level.residual + (level.colour if colour else ()), (size or PRESET_SIZE) / PRESET_SIZE)
 
 
-def capture_steps(name: str, width: int) -> list[Step]:
-    """The camera's steps of a photo severity on a photo ``width`` pixels wide (pixel
-    parameters scaled from :data:`PHOTO_SIZE`).
+def capture_steps(name: str, shrink: float = 1.0) -> list[Step]:
+    """The camera's steps of a photo severity, on a photo as the camera took it (``shrink``
+    1) or shrunk to ``shrink`` of its pixels (pixel parameters scaled by it).
 
     Raises:
         DeepMorphError: an unknown severity, or ``none`` (a photo is never clean).
     """
     photo_ranges(name)
-    return scaled_steps(severity(name).capture, width / PHOTO_SIZE)
+    return scaled_steps(severity(name).capture, shrink)
 
 
 def scaled_steps(steps: tuple[Step, ...], factor: float) -> list[Step]:

@@ -30,6 +30,7 @@ from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
 from deepmorph_core.loop import Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, SceneMaker
@@ -125,7 +126,7 @@ class SceneBatches(torch.utils.data.IterableDataset):
     def __iter__(self) -> Iterator[tuple[Tensor, Tensor, Tensor, Tensor]]:
         torch.set_num_threads(1)
         makers = {
-            sev: SceneMaker(self.model, INPUT_SIZE, sev, seed=self.cfg.seed, payload_pool=96)
+            sev: SceneMaker(self.model, INPUT_SIZE, sev, seed=self.cfg.seed, payload_pool=96, camera_width=PHOTO_SIZE)
             for sev in ("medium", "hard")
         }
         worker = torch.utils.data.get_worker_info()

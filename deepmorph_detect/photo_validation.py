@@ -2,7 +2,8 @@
 
 Each fresh payload's code is rendered at :data:`PRINT_PX`, printed and photographed close
 (:func:`~deepmorph_detect.scenes.close_up_photo`: a scan, or a phone held close, at ``medium``;
-a colour code is printed in colour, through the colour plugins, :func:`printed`) and decoded
+a colour code is printed in colour, through the colour plugins, :func:`printed`; the print
+spans 144-192 of the photo's 240 camera pixels, or about ``print_px``) and decoded
 by the whole photo chain (:class:`~deepmorph_detect.locate.Locator`). A model without a
 trained detector is read from whole frames, as such photos need no detector.
 """
@@ -21,25 +22,36 @@ from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.validation import SEVERITY
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.scenes import close_up_photo, colour_print, model_added_steps
+from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_photo, colour_print, model_added_steps
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
+#: The close-up photo's width: its drawing spans 60-80 % of it, 144-192 camera pixels.
+PHOTO_PX = 240
 
 
-def printed(model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator) -> np.ndarray:
+def photo_for_print(print_px: float) -> int:
+    """The width of a close-up photo whose drawing spans about ``print_px`` camera pixels (the
+    middle of :data:`~deepmorph_detect.scenes.CLOSE_UP_SIZE`)."""
+    return max(16, round(print_px / (sum(CLOSE_UP_SIZE) / 2)))
+
+
+def printed(
+    model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator, width: int = PRINT_PX
+) -> np.ndarray:
     """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white: a colour
     drawing rendered in colour and put through the colour corruptions of the capture (ink,
     paper, white balance, chroma: the registered ``colour`` plugins) before it becomes the
     luminance the camera simulation works on; a black-and-white one rendered as it is."""
     if colours is None:
-        return render_svg(svg, PRINT_PX)
-    return colour_print(render_svg_rgb(svg, PRINT_PX), colours, rng)
+        return render_svg(svg, width)
+    return colour_print(render_svg_rgb(svg, width), colours, rng)
 
 
 def validate_close_ups(
-    model: DeepMorphModel, samples: int, seed: int = 0, severity: str = SEVERITY
+    model: DeepMorphModel, samples: int, seed: int = 0, severity: str = SEVERITY, print_px: float | None = None
 ) -> ValidationRecord:
-    """Read ``samples`` fresh payloads from close-up photos through the photo chain."""
+    """Read ``samples`` fresh payloads from close-up photos through the photo chain: photos
+    :data:`PHOTO_PX` wide, or with the drawing about ``print_px`` camera pixels wide."""
     start = time.perf_counter()
     model.eval()
     codec = model.codec
@@ -49,10 +61,13 @@ def validate_close_ups(
     locator = Locator(model)
     colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
     added = model_added_steps(model)
+    photo_px = PHOTO_PX if print_px is None else photo_for_print(print_px)
+    low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
     read = wrong = right_bits = missed = 0
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-        photo = close_up_photo(printed(model, model.drawing.to_svg(values), colours, rng), severity, rng, extra=added)
+        art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
+        photo = close_up_photo(art, severity, rng, size=photo_px, extra=added)
         found = locator.locate(photo)
         if not found:
             missed += 1
@@ -65,7 +80,7 @@ def validate_close_ups(
             wrong += not same
     return ValidationRecord(
         name="close-ups",
-        description=f"photos of {PRINT_PX}-px prints filling the frame, through the photo chain",
+        description=f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain",
         severity=severity,
         samples=samples,
         read=read,
@@ -76,4 +91,4 @@ def validate_close_ups(
     )
 
 
-__all__ = ["PRINT_PX", "printed", "validate_close_ups"]
+__all__ = ["PHOTO_PX", "PRINT_PX", "photo_for_print", "printed", "validate_close_ups"]

@@ -137,6 +137,9 @@ class SceneMaker:
         seed: the random stream (same seed, same scenes).
         payload_pool: when set, payloads come from a fixed pool of this many random payloads
             whose renders are cached (detector training: fast); otherwise each is fresh.
+        camera_width: the width of the camera's frame when the photos are that frame shrunk
+            (the detector's input, say): the capture's pixel parameters shrink with it. By
+            default the photos are the camera's frame (:mod:`deepmorph_core.severity`).
     """
 
     def __init__(
@@ -146,10 +149,12 @@ class SceneMaker:
         severity: str = "medium",
         seed: int = 0,
         payload_pool: int | None = None,
+        camera_width: int | None = None,
     ) -> None:
         self.severity = photo_ranges(severity)
         self.model = model
-        self._capture = capture_pipeline(severity, size[0], model_added_steps(model))
+        shrink = size[0] / camera_width if camera_width else 1.0
+        self._capture = capture_pipeline(severity, shrink, model_added_steps(model))
         self.size = size
         self.rng = np.random.default_rng(seed)
         self.viewbox = model.drawing.drawing.viewbox
@@ -367,8 +372,10 @@ def close_up_photo(
 
     ``art`` (``(H, W)`` float, 1 = white; a render of a code, or anything else) is printed on a
     sheet with a margin and photographed as scenes are (:class:`SceneMaker`), but near-frontal,
-    filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk. ``extra``
-    capture steps (:func:`model_added_steps`) join the severity's.
+    filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk. The photo is
+    ``size`` pixels of the camera (blur, motion and noise in those pixels): a small ``size``
+    is a print seen small, as far away. ``extra`` capture steps (:func:`model_added_steps`)
+    join the severity's.
 
     Returns:
         ``(size, size, 3)`` uint8 BGR photo.
@@ -388,19 +395,14 @@ def close_up_photo(
     img = np.full((size, size, 3), tone, np.float32)
     art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
     _print_and_place(img, np.asarray(art, np.float32), plane @ art_to_frame, margin, aw, rng)
-    return _photograph(img, _capture(severity, size, extra), rng)
+    capture = capture_pipeline(severity, 1.0, extra) if extra else _plain_capture(severity)
+    return _photograph(img, capture, rng)
 
 
-def _capture(severity: str, width: int, extra: list[AugmentationSpec] | None) -> AugmentPipeline:
-    if extra:
-        return capture_pipeline(severity, width, extra)
-    return _plain_capture(severity, width)
-
-
-@functools.lru_cache(maxsize=16)
-def _plain_capture(severity: str, width: int) -> AugmentPipeline:
-    """The severity's own capture at a photo width (built once: close-ups come in thousands)."""
-    return capture_pipeline(severity, width)
+@functools.lru_cache(maxsize=8)
+def _plain_capture(severity: str) -> AugmentPipeline:
+    """The severity's own capture (built once: close-ups come in thousands)."""
+    return capture_pipeline(severity)
 
 
 def _shake(rng: np.random.Generator, size: tuple[int, int], px: float) -> np.ndarray:

@@ -61,19 +61,38 @@ def test_a_print_finer_than_the_photo_is_averaged_by_the_camera_not_sampled() ->
     assert 0.55 < patch.mean() < 0.7  # the stripes' mean (2/3) in the paper and ink tones
 
 
-def test_the_camera_is_the_registered_plugins_scaled_to_the_photo() -> None:
+def test_the_camera_is_the_registered_plugins_in_camera_pixels() -> None:
     """One simulator: a photo's capture is built from the augmentation registry, the severity
-    table's steps with their pixel parameters scaled from a 640-pixel-wide photo."""
+    table's steps with their pixel parameters in the camera's pixels, scaled only for a frame
+    shrunk (the detector's input)."""
     from deepmorph_core.corruption import capture_pipeline
     from deepmorph_core.severity import capture_steps
 
-    pipeline = capture_pipeline("hard", 320)
+    pipeline = capture_pipeline("hard")
     names = [step.name for step in pipeline.steps]
     assert names == ["blur", "motion_blur", "lighting", "shadow", "intensity", "gaussian_noise", "jpeg"]
-    steps = {name: params for name, _, params in capture_steps("hard", 320)}
-    wide = {name: params for name, _, params in capture_steps("hard", 640)}
-    assert steps["blur"]["sigma"] == [s / 2 for s in wide["blur"]["sigma"]]
-    assert steps["shadow"]["softness"] == [s / 2 for s in wide["shadow"]["softness"]]
-    assert steps["jpeg"] == wide["jpeg"] and steps["gaussian_noise"] == wide["gaussian_noise"]
+    taken = {name: params for name, _, params in capture_steps("hard")}
+    shrunk = {name: params for name, _, params in capture_steps("hard", 0.5)}
+    assert shrunk["blur"]["sigma"] == [s / 2 for s in taken["blur"]["sigma"]]
+    assert shrunk["shadow"]["softness"] == [s / 2 for s in taken["shadow"]["softness"]]
+    assert shrunk["jpeg"] == taken["jpeg"] and shrunk["gaussian_noise"] == taken["gaussian_noise"]
     with pytest.raises(DeepMorphError, match="'none' has no photo settings"):
-        capture_steps("none", 640)
+        capture_steps("none")
+
+
+def test_a_print_seen_small_loses_detail_as_in_a_camera(ghost_render) -> None:
+    """Blur is in the camera's pixels: the same print filling a 64-pixel photo is blurred by as
+    many pixels as in a 400-pixel one, so it keeps less of its edges (mean gradient of the
+    photo, each resized to 64 px, over 20 photos)."""
+    import cv2
+
+    def sharpness(size: int) -> float:
+        rng = np.random.default_rng(3)
+        total = 0.0
+        for _ in range(20):
+            photo = close_up_photo(ghost_render, "hard", rng, size=size, desk=0.7)
+            gray = cv2.resize(cv2.cvtColor(photo, cv2.COLOR_BGR2GRAY), (64, 64), interpolation=cv2.INTER_AREA)
+            total += float(np.abs(np.diff(gray.astype(np.float32), axis=1)).mean())
+        return total / 20
+
+    assert sharpness(64) < 0.8 * sharpness(400)
