@@ -214,7 +214,10 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
             out.print(f"{name}: no drawing found")
         for d in r["detections"]:
             status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
-            if d.get("morph_check") == "failed":
+            if "too_small" in d:
+                across, needs = d["too_small"]["width_px"], d["too_small"]["needs_px"]
+                status = f"NOT READ: too small to read ({across:.0f} px across, needs {needs:.0f})"
+            elif d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             elif d.get("morph_check") == "contradicted":
                 why = disagreement(d["bits_contradicted"], d["weakest_bits_support"])

@@ -164,6 +164,7 @@ class Locator:
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment
             located = self.decode_drawing(gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft)
+            located.needs_px = float(self.model.width)  # prints narrower than the decoder's frame lose detail
             if located.result.ok or alignment.correlation >= self.min_correlation + UNREAD_MARGIN:
                 results.append(located)
         return results

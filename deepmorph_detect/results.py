@@ -69,6 +69,23 @@ class Located(Detection):
     # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
     # and "track conflict" (another payload than the track's passed: ok withdrawn)
     morph_check: str = "not run"
+    # the narrowest print (photo pixels) its model reads well: the decoder's frame width
+    needs_px: float | None = None
+
+    @property
+    def width_px(self) -> float | None:
+        """The print's width in the photo: the mean length of its frame's top and bottom edges."""
+        if self.corners is None:
+            return None
+        c = np.asarray(self.corners, dtype=np.float64)
+        return float(0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])))
+
+    @property
+    def too_small(self) -> bool:
+        """Whether the payload is not read and the print is narrower than :attr:`needs_px`: the
+        reason to give is its size (move closer, or print larger), not the light."""
+        width = self.width_px
+        return not self.result.ok and self.needs_px is not None and width is not None and width < self.needs_px
 
     @property
     def pose(self) -> Pose | None:
@@ -103,6 +120,9 @@ class Located(Detection):
         out["pose_aligned_to"] = "decoded morph" if self.aligned_to_morph else "unmorphed drawing"
         if self.corners is not None:
             out["corners"] = np.round(self.corners, 2).tolist()
+            out["width_px"] = round(float(self.width_px or 0.0), 1)
+        if self.too_small:
+            out["too_small"] = {"width_px": round(float(self.width_px or 0.0), 1), "needs_px": self.needs_px}
         if self.homography is not None:
             inv = np.linalg.inv(self.homography)
             out["homography"] = (inv / inv[2, 2]).round(8).tolist()  # image -> drawing (SVG units)

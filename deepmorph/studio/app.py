@@ -49,7 +49,6 @@ TOKEN_HEADER = "x-deepmorph-token"
 MAX_PHOTO_BYTES = 20 * 1024 * 1024
 MAX_JSON_BYTES = 64 * 1024
 MAX_PRINT_MM = 1000.0
-SMALL_PRINT_PX = 75  # prints narrower than this in a photo are mostly not read (README, Known limits)
 LIVE_FRAMES = 300  # frames a camera stream fuses before it starts afresh (about 15 s at 20 frames/s)
 PAGE_CSP = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
@@ -534,18 +533,16 @@ def read_photo(
     if not found:
         note = "no drawing found: is the print in view, lit, and larger than about 80 pixels?"
     elif not any(d["ok"] for d in found):
-        widths = [_width_px(d["corners"]) for d in found if d.get("corners")]
-        if widths and max(widths) < SMALL_PRINT_PX:
-            note = f"the print is {max(widths):.0f} pixels wide in the image, too small to read: move closer"
+        small = [d["too_small"] for d in found if "too_small" in d]
+        if small and len(small) == len(found):
+            widest = max(small, key=lambda t: t["width_px"])
+            note = (
+                f"the print is {widest['width_px']:.0f} pixels wide in the image, too small to read "
+                f"(needs {widest['needs_px']:.0f}): move closer"
+            )
         else:
             note = "a drawing was found but not read: hold it steadier, in even light"
     return {"width": width, "height": height, "detections": found, "note": note}
-
-
-def _width_px(corners: list[list[float]]) -> float:
-    """The mean length of a quadrilateral's top and bottom edges, in pixels."""
-    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = corners[:4]
-    return 0.5 * (((x1 - x0) ** 2 + (y1 - y0) ** 2) ** 0.5 + ((x2 - x3) ** 2 + (y2 - y3) ** 2) ** 0.5)
 
 
 # -- the application --------------------------------------------------------------------------
