@@ -332,6 +332,8 @@ class DeepMorphModel:
             "codec": {**m.codec.model_dump(), "ecc_bits": m.codec.ecc_bits},
             "n_variables": m.n_variables,
             "image_size": list(self.image_size),
+            # prints narrower than the decoder's frame in a photo lose detail; decode calls them too small
+            "smallest_print_px": self.width,
             "decoder": m.decoder.model_dump(),
             "bounds_defaults": m.bounds_defaults,
             "augment": m.augment,

@@ -608,6 +608,11 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         ("variables N_v", str(data["n_variables"])),
         ("image size", "x".join(map(str, data["image_size"][::-1]))),
         (
+            "smallest print",
+            f"{data['smallest_print_px']} px across in a photo (the decoder's frame); narrower ones that do not "
+            "read are reported too small",
+        ),
+        (
             "decoder",
             f"{'spatial transformer, then ' if dec['spatial_transformer'] else ''}CNN "
             f"(stem {dec['stem']}, channels {list(dec['channels'])}, head {dec['hidden']})"

@@ -60,3 +60,10 @@ def test_decode_says_a_print_is_too_small(model, locator, tmp_path: Path) -> Non
     data = json.loads(CliRunner().invoke(app, ["decode", str(BUNDLED_MODEL), str(path), "--json"]).output)
     (detection,) = data[0]["detections"]
     assert detection["too_small"]["needs_px"] == 96.0 and not detection["ok"]
+
+
+def test_info_gives_the_smallest_print() -> None:
+    data = json.loads(CliRunner().invoke(app, ["info", str(BUNDLED_MODEL), "--json"]).output)
+    assert data["smallest_print_px"] == 96 == data["image_size"][1]
+    shown = CliRunner().invoke(app, ["info", str(BUNDLED_MODEL)], env={"COLUMNS": "200"})
+    assert "96 px across in a photo" in shown.output
