@@ -13,7 +13,9 @@ The real-renderer share closes the gap between what the soft rasterizer draws an
 resvg (and so a printer) draws. Those rows carry no gradient to the encoder, so they only
 teach the decoder to read real renders.
 
-The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s.
+The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s; the
+device and the processes of a torchrun (each drawing its shards of the batch, gradients summed
+across them) are :mod:`deepmorph_core.distributed`'s.
 Checkpoints are whole bundles plus optimiser and generator state, so ``resume`` continues a
 run exactly. :func:`train_model` and :func:`tune_decoder` are what the command line calls.
 """
