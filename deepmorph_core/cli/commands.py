@@ -485,7 +485,7 @@ def train_many(
     device: DeviceOpt = "auto",
     jobs: Annotated[
         Optional[int],
-        typer.Option("--jobs", min=1, max=64, help="Worker processes [default: one per CUDA device, one on the CPU]."),
+        typer.Option("--jobs", min=1, max=64, help="Worker processes (default: one per CUDA device, one on the CPU)."),
     ] = None,
     threads: ThreadsOpt = None,
     validation: ValidationOpt = None,
