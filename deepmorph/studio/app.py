@@ -1,6 +1,7 @@
 """The studio's web app: a Starlette application whose handlers parse a request, call the library
-(the drawing reader, :func:`deepmorph_core.capacity.predict`, the training queue, the payload
-registry, :class:`deepmorph_core.code.Code`, the photo chain and
+(the drawing reader, :func:`deepmorph_core.capacity.predict` and
+:mod:`deepmorph_core.print_size`, the training queue, the payload registry,
+:class:`deepmorph_core.code.Code`, :func:`deepmorph.sheet.make_sheet`, the photo chain and
 :func:`deepmorph_detect.reading.read_sequence`), and answer JSON or a file.
 
 Security (docs/studio.md): every request carries the studio's token (``?token=``, then a
@@ -15,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import hmac
 import json
+import math
 import secrets
 import tempfile
 import threading
@@ -38,8 +40,13 @@ from deepmorph.studio.jobs import JobQueue
 from deepmorph_core.errors import DeepMorphError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from deepmorph.registry import PayloadRegistry
+    from deepmorph.sheet import Sheet
+    from deepmorph_core.code import FileFormat
     from deepmorph_core.model import DeepMorphModel
+    from deepmorph_core.morphable import MorphableDrawing
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.reading import SequenceReader
 
@@ -309,10 +316,19 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         from deepmorph_core.capacity import predict
 
         svg, name = current()
+        q = request.query_params
+        print_mm = number(q.get("print_mm"), "print width (mm)", 50.0)
+        distance_cm = number(q.get("distance_cm"), "reading distance (cm)", 30.0)
 
         def work() -> dict[str, Any]:
-            report = predict(drawings.load(svg.encode(), name))
-            return {"name": name, **report.to_json(), "limits": report.limits()}
+            md = drawings.load(svg.encode(), name)
+            report = predict(md)
+            return {
+                "name": name,
+                **report.to_json(),
+                "limits": report.limits(),
+                "print_size": print_size(md, report.visible_mask, print_mm, distance_cm),
+            }
 
         return JSONResponse(await run_in_threadpool(work))
 
@@ -426,6 +442,30 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         response.headers["X-DeepMorph-Payload"] = code.payload.hex
         return response
 
+    async def print_sheet(request: Request) -> Response:
+        data = await json_body(request)
+        model_id = request.path_params["model"]
+        fmt = str(data.get("format", "svg")).lower()
+        if fmt not in ("svg", "pdf", "png"):
+            raise HttpError(400, f"format: {fmt!r}; a sheet is written as svg, pdf or png")
+        code_mm = number(data.get("code_mm"), "code width (mm)", 40.0)
+        margin_mm = number(data.get("margin_mm"), "margins (mm)", 10.0)
+        dpi = number(data.get("dpi"), "dpi", 300.0)
+        if not 1 <= code_mm <= MAX_PRINT_MM or not 0 <= margin_mm <= MAX_PRINT_MM or not 50 <= dpi <= 2400:
+            raise HttpError(
+                400, f"code width: 1 to {MAX_PRINT_MM:g} mm; margins: 0 to {MAX_PRINT_MM:g} mm; dpi: 50 to 2400"
+            )
+        data_out, sheet = await run_in_threadpool(
+            lambda: sheet_file(studio, model_id, data, fmt.upper(), code_mm, margin_mm, int(dpi))
+        )
+        if data.get("preview") and fmt == "svg":
+            return svg_image(data_out.decode())
+        media = {"svg": "image/svg+xml", "pdf": "application/pdf", "png": "image/png"}[fmt]
+        page = str(data.get("page") or "A4")
+        response = attachment(data_out, f"{model_id}-sheet-{len(sheet.placed)}-codes-{page}.{fmt}", media)
+        response.headers["X-DeepMorph-Codes"] = str(len(sheet.placed))
+        return response
+
     # scan
     async def scan(request: Request) -> Response:
         data = await body(request, MAX_PHOTO_BYTES, "photo")
@@ -463,8 +503,81 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         Route("/api/models/{model}/entries", entry_add, methods=["POST"]),
         Route("/api/models/{model}/entries/{payload}/remove", entry_remove, methods=["POST"]),
         Route("/api/models/{model}/print", print_code),
+        Route("/api/models/{model}/sheet", print_sheet, methods=["POST"]),
         Route("/api/models/{model}/scan", scan, methods=["POST"]),
     ]
+
+
+def number(value: object, what: str, default: float) -> float:
+    """A finite number from a form field (``default`` when empty), or one clear error."""
+    if value in (None, ""):
+        return default
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise HttpError(400, f"{what}: expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise HttpError(400, f"{what}: expected a number, got {value!r}")
+    return x
+
+
+def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, distance_cm: float) -> dict[str, Any]:
+    """What ``deepmorph capacity --print-mm --distance-cm`` adds to the prediction: the print's
+    width in a 1080p phone's photo (:func:`~deepmorph_core.print_size.pixels_across`) and how
+    far the visible variables move there and at 96, 150, 200 and 300 px
+    (:func:`~deepmorph_core.print_size.plan`), in the command's words."""
+    from deepmorph_core.print_size import PHONE_FOV_DEG, PHONE_FRAME_PX, pixels_across, plan, plan_sizes, rows_to_json
+
+    pixels = pixels_across(print_mm, distance_cm)
+    return {
+        "print_mm": print_mm,
+        "distance_cm": distance_cm,
+        "frame_px": PHONE_FRAME_PX,
+        "fov_deg": PHONE_FOV_DEG,
+        "pixels": pixels,
+        "sizes": rows_to_json(plan(md, visible, plan_sizes(pixels))),
+        "span": f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {PHONE_FRAME_PX}-px, "
+        f"{PHONE_FOV_DEG:g}° frame",
+        "note": "models read every print in their decoder's frame (96 px unless trained with --image-width), so "
+        "the payload above is the same for every print at least that wide",
+    }
+
+
+def sheet_file(
+    studio: Studio, model_id: str, data: dict[str, Any], fmt: FileFormat, code_mm: float, margin_mm: float, dpi: int
+) -> tuple[bytes, Sheet]:
+    """The Print tab's sheet: its payloads (``count`` from ``start``, or ``lines``, one a line),
+    each code labelled with its registry entry's text when it has one, laid out by
+    :func:`deepmorph.sheet.make_sheet` and written as ``fmt``."""
+    from deepmorph.registry import model_key
+    from deepmorph.sheet import batch_payloads, make_sheet
+
+    m = studio.model(model_id)
+    bits = m.codec.spec.payload_bits
+    if data.get("mode") == "list":
+        payloads = batch_payloads(bits, lines=str(data.get("lines") or ""))
+    else:
+        count = data.get("count", 12)
+        try:
+            n = int(str(count).strip())
+        except ValueError:
+            raise HttpError(400, f"number of codes: expected a whole number, got {count!r}") from None
+        payloads = batch_payloads(bits, start=str(data.get("start") or "").strip(), count=n)
+    registry = studio.registry()
+    texts: list[str | None] = [None] * len(payloads)
+    if registry.path.exists():
+        key = model_key(m)
+        for i, p in enumerate(payloads):
+            entry = registry.get(key, p.hex)
+            texts[i] = entry.target if entry else None
+    sheet = make_sheet(
+        [m.code(p) for p in payloads],
+        texts=texts,
+        page=str(data.get("page") or "A4"),
+        code_mm=code_mm,
+        margin_mm=margin_mm,
+    )
+    return sheet.file(fmt, dpi), sheet
 
 
 def training_settings(data: dict[str, Any]) -> dict[str, Any]:
@@ -643,4 +756,4 @@ def create_app(studio: Studio) -> Starlette:
     )
 
 
-__all__ = ["Studio", "create_app", "read_photo", "training_settings"]
+__all__ = ["Studio", "create_app", "print_size", "read_photo", "sheet_file", "training_settings"]

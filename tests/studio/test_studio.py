@@ -375,3 +375,175 @@ def test_the_scan_tab_reads_the_fake_camera(page, server: Server) -> None:
     assert len(delays) >= 2
     assert max(delays) < 1.0, delays
     assert fps >= 10.0, f"{fps:.1f} frames/s; the studio's target is 10 on two cores"
+
+
+def _capacity_rows(page) -> list[list[str]]:  # noqa: ANN001
+    return page.evaluate(
+        "() => [...document.querySelectorAll('#capacity-sizes tr')].slice(1)"
+        ".map(tr => [...tr.children].map(td => td.textContent))"
+    )
+
+
+def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple[float, list[list[str]]]:
+    """The travel table the CLI prints for the studio's drawing as it is now, from the library."""
+    from deepmorph.studio import drawing as drawings
+    from deepmorph_core.capacity import predict
+    from deepmorph_core.print_size import pixels_across, plan, plan_sizes
+
+    status, svg = request(server, "/api/drawing.svg", token=server.token)
+    assert status == 200
+    md = drawings.load(svg, "drawing.svg")
+    pixels = pixels_across(print_mm, distance_cm)
+    rows = plan(md, predict(md).visible_mask, plan_sizes(pixels))
+    return pixels, [
+        [f"{r.pixels:.0f} px" + (" ←" if abs(r.pixels - pixels) < 0.5 else ""), f"{r.median_move:.1f} px",
+         f"{r.smallest_move:.1f} px", str(r.sub_pixel)]
+        for r in rows
+    ]  # fmt: skip
+
+
+def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> None:
+    request(server, "/api/drawing/bundled", token=server.token, data=b"{}")
+    open_studio(page, server, "capacity")
+    page.wait_for_selector("#capacity-sizes tr.yours")
+    pixels, rows = _expected_rows(server, 50, 30)
+    assert page.text_content("#capacity-span") == (
+        f"a 50 mm print at 30 cm spans {pixels:.0f} px of a 1920-px, 65° frame"
+    )
+    assert _capacity_rows(page) == rows and [r[0] for r in rows].count(f"{pixels:.0f} px ←") == 1
+    assert "models read every print in their decoder's frame" in page.text_content("#capacity-note")
+    assert "the payload above is the same for every print at least that wide" in page.text_content("#capacity-note")
+
+    # another size and distance: the table follows
+    page.fill("#capacity-form input[name=print_mm]", "80")
+    page.fill("#capacity-form input[name=distance_cm]", "20")
+    with page.expect_response("**/api/capacity?print_mm=80&distance_cm=20"):
+        page.click("#capacity-run")
+    page.wait_for_function("() => document.querySelector('#capacity-span').textContent.startsWith('a 80 mm')")
+    pixels, rows = _expected_rows(server, 80, 20)
+    assert f"spans {pixels:.0f} px" in page.text_content("#capacity-span")
+    assert _capacity_rows(page) == rows
+
+    # a wider move for the ghost's mouth (the least-moving shape), set in the Drawing tab: the
+    # smallest move grows
+    before = _capacity_rows(page)
+    page.click("#tabs button[data-tab=drawing]")
+    _click_shape(page, 3)
+    page.wait_for_function("() => document.querySelector('#sel-index').textContent === '#3'")
+    page.fill("#bounds-form input[name=move]", "3")
+    with page.expect_response("**/api/drawing/bounds"):
+        page.click("#apply-bounds")
+    with page.expect_response("**/api/capacity?**"):
+        page.click("#tabs button[data-tab=capacity]")
+    page.wait_for_selector("#capacity-sizes tr.yours")
+    _, rows = _expected_rows(server, 80, 20)
+    assert _capacity_rows(page) == rows and rows != before
+    assert float(rows[-1][2].split()[0]) > float(before[-1][2].split()[0])
+
+    # bad input: one line in the red bar, no table, no traceback
+    for field, value, words in (("print_mm", "-5", "-5.0 mm"), ("distance_cm", "0", "0.0 cm")):
+        page.fill("#capacity-form input[name=print_mm]", "50")
+        page.fill("#capacity-form input[name=distance_cm]", "30")
+        page.fill(f"#capacity-form input[name={field}]", value)
+        page.click("#capacity-run")
+        page.wait_for_selector("#error:not([hidden])")
+        error = page.text_content("#error")
+        assert error.startswith("print size, distance and frame width must be positive") and words in error, error
+        assert "\n" not in error and "Traceback" not in error
+        assert _capacity_rows(page) == []
+    status, body = request(server, "/api/capacity?print_mm=fifty", token=server.token)
+    assert status == 400 and json.loads(body)["error"] == "print width (mm): expected a number, got 'fifty'"
+
+
+def _download(page, selector: str, path: Path) -> Path:  # noqa: ANN001
+    with page.expect_download() as download:
+        page.click(selector)
+    download.value.save_as(path)
+    return path
+
+
+def test_a_sheet_of_labelled_codes(page, server: Server, tmp_path: Path) -> None:
+
+    import numpy as np
+    from PIL import Image
+
+    import deepmorph
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.pdf import page_size_points
+
+    menu = "Table 7: the autumn menu, with every dish and its allergens"
+    entry = {"payload": "0x5A3C97", "kind": "text", "target": menu, "replace": True}
+    status, body = request(server, "/api/models/ghost/entries", token=server.token, data=json.dumps(entry).encode(),
+                           headers={"Content-Type": "application/json"})  # fmt: skip
+    assert status == 200, body
+    open_studio(page, server, "print")
+    page.wait_for_function("() => document.querySelector('#print-payload').value.startsWith('0x')")
+    page.fill("#sheet-form input[name=start]", "0x5A3C96")
+    page.fill("#sheet-form input[name=count]", "6")
+    page.press("#sheet-form input[name=count]", "Tab")  # a change: the preview follows
+    page.wait_for_function("() => { const i = document.querySelector('#sheet-preview'); "
+                           "return !i.hidden && i.complete && i.naturalWidth > 0; }")  # fmt: skip
+
+    # SVG: the page in mm, six nested codes in mm, labelled with the payload (and the entry, cut to fit)
+    svg = etree.parse(str(_download(page, "#sheet-svg", tmp_path / "sheet.svg"))).getroot()
+    assert (svg.get("width"), svg.get("height")) == ("210mm", "297mm")
+    nested = [e for e in svg if etree.QName(e).localname == "svg"]
+    assert len(nested) == 6 and all(e.get("width") == "40" for e in nested)
+    texts = [e.text for e in svg if etree.QName(e).localname == "text"]
+    hexes = [f"0x{0x5A3C96 + i:06X}" for i in range(6)]
+    assert [t for t in texts if t.startswith("0x")] == hexes
+    label = next(t for t in texts if t.startswith("Table 7"))
+    assert label.endswith("…") and menu.startswith(label[:-1]), label
+    assert b"<script" not in etree.tostring(svg)
+
+    # PNG: a code cropped from the sheet reads back, with the model, to its payload
+    png = Image.open(_download(page, "#sheet-png", tmp_path / "sheet.png"))
+    assert png.info["dpi"] == pytest.approx((300, 300), abs=0.01)
+    pixels = np.asarray(png.convert("L"))
+    mm = png.size[0] / 210
+    model = deepmorph.load(BUNDLED_MODEL)
+    for index in (1, 4):
+        x, y, w, h = (float(nested[index].get(k)) for k in ("x", "y", "width", "height"))
+        crop = pixels[round((y - 3) * mm) : round((y + h + 3) * mm), round((x - 3) * mm) : round((x + w + 3) * mm)]
+        assert [(f.payload.hex, f.ok) for f in model.decode(crop)] == [(hexes[index], True)]
+
+    # PDF: one A4 page
+    pdf = _download(page, "#sheet-pdf", tmp_path / "sheet.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF")
+    assert page_size_points(pdf) == pytest.approx((210 / 25.4 * 72, 297 / 25.4 * 72), abs=0.01)
+    screenshot(page, "print-sheet")
+
+    # a list, one a line
+    page.check("#sheet-form input[value=list]")
+    page.fill("#sheet-form textarea[name=lines]", "0x000001\n\n0xABCDEF\n")
+    svg = etree.parse(str(_download(page, "#sheet-svg", tmp_path / "list.svg"))).getroot()
+    assert [e.text for e in svg if etree.QName(e).localname == "text"] == ["0x000001", "0xABCDEF"]
+
+    # what cannot be made says why, in one line
+    page.check("#sheet-form input[value=range]")
+    cases = [
+        ({"count": "0"}, "no payloads: a sheet holds 1 to 100 codes (got 0)"),
+        ({"count": "101"}, "101 payloads: a sheet holds at most 100 codes"),
+        ({"count": "5", "start": "0xFFFFFE"}, "5 payloads from 0xFFFFFE pass the model's largest payload, 0xFFFFFF"),
+        ({"count": "5", "start": "0x0000010"}, "0x0000010"),
+        ({"count": "5", "start": "0x000001", "code_mm": "300"}, "a 300 mm code (306 mm tall with its label) does "
+         "not fit on A4 with 10 mm margins"),
+        ({"count": "40", "code_mm": "40"}, "40 codes 40 mm wide do not fit on A4 with 10 mm margins (20 do)"),
+    ]  # fmt: skip
+    for fields, message in cases:
+        page.fill("#sheet-form input[name=code_mm]", fields.get("code_mm", "40"))
+        page.fill("#sheet-form input[name=start]", fields.get("start", "0x000001"))
+        page.fill("#sheet-form input[name=count]", fields["count"])
+        page.click("#sheet-svg")
+        page.wait_for_function(
+            "(m) => document.querySelector('#error').textContent.includes(m)", arg=message, timeout=10_000
+        )
+        error = page.text_content("#error")
+        assert "\n" not in error and "Traceback" not in error, error
+    page.fill("#sheet-form input[name=code_mm]", "40")
+    page.fill("#sheet-form input[name=count]", "3")
+    page.click("#sheet-svg")
+    page.wait_for_selector("#error", state="hidden")
+    status, body = request(server, "/api/models/ghost/sheet", token=server.token,
+                           data=b'{"count": 2, "start": "0x000001", "code_mm": "wide"}')  # fmt: skip
+    assert status == 400 and json.loads(body)["error"] == "code width (mm): expected a number, got 'wide'"

@@ -12,21 +12,39 @@ function showError(message) {
   box.hidden = !message;
 }
 
-async function api(path, options = {}) {
+// quiet: leave the red bar to the caller (a request that a newer one may have overtaken)
+async function api(path, { quiet = false, ...options } = {}) {
   const response = await fetch(path, { credentials: "same-origin", ...options });
   const type = response.headers.get("content-type") || "";
   const data = type.includes("json") ? await response.json() : await response.blob();
   if (!response.ok) {
     const message = data && data.error ? data.error : `${response.status} ${response.statusText}`;
-    showError(message);
+    if (!quiet) showError(message);
     throw new Error(message);
   }
-  showError("");
+  if (!quiet) showError("");
   return data;
 }
 
-const postJson = (path, body) =>
-  api(path, { method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(body) });
+// the answer (or error) of the newest of a kind of request only: an older one still in flight
+// gives null
+const latest = {};
+async function newest(kind, request) {
+  const seq = (latest[kind] = (latest[kind] || 0) + 1);
+  try {
+    const data = await request();
+    if (latest[kind] !== seq) return null;
+    showError("");
+    return data;
+  } catch (exc) {
+    if (latest[kind] !== seq) return null;
+    showError(exc.message);
+    throw exc;
+  }
+}
+
+const postJson = (path, body, quiet = false) =>
+  api(path, { method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(body), quiet });
 
 // -- tabs -------------------------------------------------------------------------------------
 function openTab(name) {
@@ -189,9 +207,24 @@ $("#morph-random").addEventListener("click", () => morph(false));
 $("#morph-extreme").addEventListener("click", () => morph(true));
 
 // -- capacity ---------------------------------------------------------------------------------
+function clearCapacity() {
+  for (const id of ["#capacity-table", "#capacity-limits", "#capacity-sizes", "#capacity-span", "#capacity-note"]) {
+    $(id).replaceChildren();
+  }
+}
+
 async function runCapacity() {
-  $("#capacity-table").replaceChildren();
-  const r = await api("/api/capacity");
+  const form = $("#capacity-form");
+  const q = new URLSearchParams({ print_mm: form.print_mm.value, distance_cm: form.distance_cm.value });
+  let r;
+  try {
+    r = await newest("capacity", () => api(`/api/capacity?${q}`, { quiet: true }));
+  } catch (exc) {
+    clearCapacity(); // no stale numbers beside the error
+    return;
+  }
+  if (r === null) return; // a newer prediction is on its way
+  clearCapacity();
   const rows = [
     ["drawing", r.name],
     ["variables", `${r.n_variables} (${r.visible} visible)`],
@@ -213,8 +246,36 @@ async function runCapacity() {
   ul.replaceChildren(...r.limits.map((line) => Object.assign(document.createElement("li"), { textContent: line })));
   state.weak = new Set((r.elements || []).filter((e) => e.weak > 0).map((e) => e.index));
   drawOverlay();
+  showPrintSize(r.print_size);
 }
-$("#capacity-run").addEventListener("click", runCapacity);
+
+// how far the visible variables move in a photo, as `deepmorph capacity --print-mm --distance-cm` says it
+function showPrintSize(p) {
+  $("#capacity-span").textContent = p.span;
+  const table = $("#capacity-sizes");
+  table.appendChild(Object.assign(document.createElement("caption"),
+    { textContent: "moves in the photo (control points across each variable's range)" }));
+  const head = document.createElement("tr");
+  for (const h of ["print width", "median move", "smallest move", "under 1 px"]) {
+    head.appendChild(Object.assign(document.createElement("th"), { textContent: h }));
+  }
+  table.appendChild(head);
+  for (const row of p.sizes) {
+    const tr = document.createElement("tr");
+    const yours = Math.abs(row.pixels - p.pixels) < 0.5;
+    if (yours) tr.className = "yours";
+    const cells = [`${row.pixels.toFixed(0)} px${yours ? " ←" : ""}`, `${row.median_move.toFixed(1)} px`,
+      `${row.smallest_move.toFixed(1)} px`, String(row.sub_pixel)];
+    for (const v of cells) tr.appendChild(Object.assign(document.createElement("td"), { textContent: v }));
+    table.appendChild(tr);
+  }
+  $("#capacity-note").textContent = `note: ${p.note}`;
+}
+$("#capacity-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  runCapacity();
+});
+$("#capacity-form").addEventListener("change", () => runCapacity());
 
 // -- training ---------------------------------------------------------------------------------
 $("#train-form").addEventListener("submit", async (event) => {
@@ -357,20 +418,62 @@ function printQuery(format) {
 function printPreview() {
   if (!$("#print-payload").value) return;
   $("#print-preview").src = printQuery("svg") + "&preview=1";
+  sheetPreview();
 }
 $("#print-form").addEventListener("change", printPreview);
+
+function saveBlob(blob, name) {
+  const a = document.createElement("a");
+  a.href = URL.createObjectURL(blob);
+  a.download = name;
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+}
 
 document.querySelectorAll("#tab-print [data-format]").forEach((button) =>
   button.addEventListener("click", async () => {
     const format = button.dataset.format;
     const blob = await api(printQuery(format));
-    const a = document.createElement("a");
-    a.href = URL.createObjectURL(blob);
-    a.download = `${$("#print-model").value}-${$("#print-payload").value}-${$("#print-form").width_mm.value}mm.${format}`;
-    document.body.appendChild(a);
-    a.click();
-    a.remove();
-    setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+    saveBlob(blob, `${$("#print-model").value}-${$("#print-payload").value}-${$("#print-form").width_mm.value}mm.${format}`);
+  }));
+
+// a sheet of labelled codes: N consecutive payloads from a first one (the payload above unless
+// given), or a list, one a line
+function sheetRequest(format, preview = false, quiet = false) {
+  const f = $("#sheet-form");
+  const model = $("#print-model").value || "ghost";
+  const body = {
+    mode: f.mode.value, count: f.count.value, start: f.start.value || $("#print-payload").value,
+    lines: f.lines.value, page: f.page.value, code_mm: f.code_mm.value, margin_mm: f.margin_mm.value,
+    dpi: $("#print-form").dpi.value, format, preview,
+  };
+  return postJson(`/api/models/${encodeURIComponent(model)}/sheet`, body, quiet);
+}
+
+let sheetShown = null;
+async function sheetPreview() {
+  const img = $("#sheet-preview");
+  if (!$("#print-payload").value) return;
+  try {
+    const blob = await newest("sheet", () => sheetRequest("svg", true, true));
+    if (blob === null) return;
+    if (sheetShown) URL.revokeObjectURL(sheetShown);
+    sheetShown = img.src = URL.createObjectURL(blob);
+    img.hidden = false;
+  } catch (exc) {
+    img.hidden = true; // the error is in the red bar
+  }
+}
+$("#sheet-form").addEventListener("change", sheetPreview);
+
+document.querySelectorAll("#sheet-form [data-sheet]").forEach((button) =>
+  button.addEventListener("click", async () => {
+    const format = button.dataset.sheet;
+    const blob = await sheetRequest(format);
+    const f = $("#sheet-form");
+    saveBlob(blob, `${$("#print-model").value || "ghost"}-sheet-${f.page.value}-${f.code_mm.value}mm.${format}`);
   }));
 
 // -- scan -------------------------------------------------------------------------------------
