@@ -120,4 +120,5 @@ def plan_sizes(pixels: float | None) -> list[float]:
 
 
 def rows_to_json(rows: list[SizeRow]) -> list[dict[str, Any]]:
+    """The rows as ``capacity --json`` gives them (``print_size.sizes``)."""
     return [asdict(row) for row in rows]
