@@ -71,7 +71,9 @@ def test_capacity_plans_a_print_from_its_size_and_distance(tmp_path) -> None:
     assert shown.exit_code == 0, shown.output
     assert "a 50 mm print at 30 cm spans 251 px of a 1920-px, 65° frame" in shown.output
     assert "251 px ←" in shown.output
-    data = json.loads(CliRunner().invoke(app, ["capacity", str(svg), "--move", "0.5", "--pixels", "200", "--json"]).output)
+    data = json.loads(
+        CliRunner().invoke(app, ["capacity", str(svg), "--move", "0.5", "--pixels", "200", "--json"]).output
+    )
     plan_json = data["print_size"]
     assert plan_json["pixels"] == 200 and plan_json["camera"] is None
     assert [row["pixels"] for row in plan_json["sizes"]] == [96.0, 150.0, 200.0, 300.0]
