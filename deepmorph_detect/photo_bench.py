@@ -37,7 +37,7 @@ from deepmorph_detect.labels import Label, read_labels
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.media import IMAGE_SUFFIXES
 from deepmorph_detect.metrics import corner_error
-from deepmorph_detect.results import Located
+from deepmorph_detect.results import Located, measure_width
 
 STATUSES = ("read", "wrong", "not verified", "missed")
 MIN_BLUR_PIXELS = 16  # a frame covering fewer pixels than this has no sharpness to speak of
@@ -122,12 +122,6 @@ def _take(dets: list[Located], label: Label, want: Any) -> Located | None:
         if want(det) and (label.corners is None or (det.corners is not None and _near(det.corners, label.corners))):
             return dets.pop(i)
     return None
-
-
-def measure_width(corners: np.ndarray) -> float:
-    """The printed width as seen: the mean length of the frame's top and bottom edges."""
-    c = np.asarray(corners, dtype=np.float64)
-    return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
 
 
 def measure_tilt(corners: np.ndarray, viewbox: tuple[float, float, float, float], camera: Camera) -> float:

@@ -14,6 +14,12 @@ from deepmorph_detect.check import MorphFit
 from deepmorph_detect.synthesis import BitEvidence
 
 
+def measure_width(corners: np.ndarray) -> float:
+    """The printed width as seen: the mean length of the frame's top and bottom edges."""
+    c = np.asarray(corners, dtype=np.float64)
+    return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
+
+
 @dataclass(frozen=True)
 class Pose:
     """Where the camera is, in the drawing's own frame (:mod:`deepmorph_detect.camera`): origin
@@ -75,10 +81,7 @@ class Located(Detection):
     @property
     def width_px(self) -> float | None:
         """The print's width in the photo: the mean length of its frame's top and bottom edges."""
-        if self.corners is None:
-            return None
-        c = np.asarray(self.corners, dtype=np.float64)
-        return float(0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])))
+        return None if self.corners is None else measure_width(self.corners)
 
     @property
     def too_small(self) -> bool:
