@@ -222,18 +222,37 @@ def subsample_chroma(images: Tensor, upsample: str = "bilinear") -> Tensor:
     """
     if upsample not in UPSAMPLING:
         raise ValueError(f"upsample: expected one of {', '.join(UPSAMPLING)}, got {upsample!r}")
-    h, w = images.shape[-2:]
     ycc = rgb_to_ycbcr(images)
+    chroma = unpool_chroma(pool_chroma(ycc), images.shape[-2:], upsample)
+    return ycbcr_to_rgb(torch.cat([ycc[:, :1], chroma], 1))
+
+
+def pool_chroma(ycc: Tensor) -> Tensor:
+    """Cb and Cr of a YCbCr batch averaged over 2x2 blocks, odd edges replicated (as libjpeg pads).
+
+    Shape:
+        ycc: ``(B, 3, H, W)``; returns ``(B, 2, ceil(H / 2), ceil(W / 2))``.
+    """
+    h, w = ycc.shape[-2:]
     chroma = ycc[:, 1:]
     if h % 2 or w % 2:
         chroma = F.pad(chroma, (0, w % 2, 0, h % 2), mode="replicate")
-    chroma = F.avg_pool2d(chroma, 2)
+    return F.avg_pool2d(chroma, 2)
+
+
+def unpool_chroma(chroma: Tensor, size: tuple[int, int], upsample: str = "bilinear") -> Tensor:
+    """Pooled chroma (:func:`pool_chroma`) back to ``size`` ``(H, W)``: bilinear with half-pixel
+    centres (libjpeg's "fancy" upsampling), or each block repeated (``"nearest"``).
+
+    Shape:
+        chroma: ``(B, C, h, w)``; returns ``(B, C, H, W)``.
+    """
     if upsample == "nearest":
         chroma = chroma.repeat_interleave(2, -2).repeat_interleave(2, -1)
     else:
-        size = (2 * chroma.shape[-2], 2 * chroma.shape[-1])
-        chroma = F.interpolate(chroma, size=size, mode="bilinear", align_corners=False)
-    return ycbcr_to_rgb(torch.cat([ycc[:, :1], chroma[..., :h, :w]], 1))
+        doubled = (2 * chroma.shape[-2], 2 * chroma.shape[-1])
+        chroma = F.interpolate(chroma, size=doubled, mode="bilinear", align_corners=False)
+    return chroma[..., : size[0], : size[1]]
 
 
 class ChromaSubsampling(ColourAugmentation):

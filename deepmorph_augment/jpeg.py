@@ -24,6 +24,7 @@ from kornia.color import rgb_to_ycbcr, ycbcr_to_rgb
 from torch import Tensor
 
 from deepmorph_augment.base import Params, RandomAugmentation
+from deepmorph_augment.colour import pool_chroma, unpool_chroma
 from deepmorph_augment.sampling import Sampler, value_range
 
 ROUNDINGS = ("ste", "cubic")
@@ -123,17 +124,11 @@ def jpeg_compress(images: Tensor, quality: Tensor, rounding: str = "ste") -> Ten
     luma = quality_tables(quality.to(images.dtype))
     if images.shape[1] == 1:
         return compress_planes(images, luma, rounding)
-    h, w = images.shape[-2:]
     ycc = rgb_to_ycbcr(images)
     y = compress_planes(ycc[:, :1], luma, rounding)
-    chroma = ycc[:, 1:]
-    if h % 2 or w % 2:
-        chroma = F.pad(chroma, (0, w % 2, 0, h % 2), mode="replicate")
     chroma_tables = quality_tables(quality.to(images.dtype), CHROMINANCE_TABLE)
-    chroma = compress_planes(F.avg_pool2d(chroma, 2), chroma_tables, rounding)
-    size = (2 * chroma.shape[-2], 2 * chroma.shape[-1])  # libjpeg's "fancy" (bilinear) upsampling
-    chroma = F.interpolate(chroma, size=size, mode="bilinear", align_corners=False)[..., :h, :w]
-    return ycbcr_to_rgb(torch.cat([y, chroma], 1))
+    chroma = compress_planes(pool_chroma(ycc), chroma_tables, rounding)
+    return ycbcr_to_rgb(torch.cat([y, unpool_chroma(chroma, images.shape[-2:])], 1))
 
 
 def compress_planes(images: Tensor, tables: Tensor, rounding: str = "ste") -> Tensor:
