@@ -20,8 +20,10 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.print_size import PHONE_FOV_DEG
 
-DEFAULT_HFOV_DEG = 65.0
+#: The phone camera assumed without a calibration: the one ``deepmorph capacity`` plans prints for.
+DEFAULT_HFOV_DEG = PHONE_FOV_DEG
 ASPECT_TOLERANCE = 0.01  # a calibration's image shape and the photo's may differ this much (rounding)
 
 
