@@ -5,13 +5,11 @@ through the same plugin registry, with no test-only registration."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
+
+from tests.plugins.installing import install_plugin, run_python
 
 PLUGIN_PYPROJECT = """
 [build-system]
@@ -77,22 +75,11 @@ print(json.dumps({
 
 @pytest.fixture(scope="module")
 def installed_fog(tmp_path_factory) -> Path:
-    src = tmp_path_factory.mktemp("fog-src")
-    (src / "pyproject.toml").write_text(PLUGIN_PYPROJECT)
-    (src / "deepmorph_fog_test.py").write_text(textwrap.dedent(PLUGIN_CODE))
-    target = tmp_path_factory.mktemp("fog-site")
-    subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation", "--no-index",
-         "--target", str(target), str(src)],
-        check=True,
-        capture_output=True,
-    )  # fmt: skip
-    return target
+    return install_plugin(tmp_path_factory, PLUGIN_PYPROJECT, "deepmorph_fog_test", PLUGIN_CODE)
 
 
 def test_an_installed_corruption_reaches_close_ups_and_scenes(installed_fog: Path) -> None:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(installed_fog), os.environ.get("PYTHONPATH", "")])}
-    run = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True)
+    run = run_python(installed_fog, "-c", PROBE)
     assert run.returncode == 0, run.stderr
     out = json.loads(run.stdout)
     assert out["added"] == ["fog"]

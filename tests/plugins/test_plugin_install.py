@@ -4,13 +4,12 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
+
+from tests.plugins.installing import install_plugin, run_python
 
 PLUGIN_PYPROJECT = """
 [build-system]
@@ -52,34 +51,12 @@ def deepmorph_register_primitives(register):
 
 @pytest.fixture(scope="module")
 def installed_plugin(tmp_path_factory) -> Path:
-    src = tmp_path_factory.mktemp("plugin-src")
-    (src / "pyproject.toml").write_text(PLUGIN_PYPROJECT)
-    (src / "deepmorph_square_test.py").write_text(textwrap.dedent(PLUGIN_CODE))
-    target = tmp_path_factory.mktemp("site")
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--no-deps",
-            "--no-build-isolation",
-            "--no-index",
-            "--target",
-            str(target),
-            str(src),
-        ],
-        check=True,
-        capture_output=True,
-    )
-    return target
+    return install_plugin(tmp_path_factory, PLUGIN_PYPROJECT, "deepmorph_square_test", PLUGIN_CODE)
 
 
 def run_cli(site: Path, *args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
     code = "import sys; from deepmorph_core.cli import main; sys.argv = ['deepmorph', *sys.argv[1:]]; main()"
-    return subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True, text=True)
+    return run_python(site, "-c", code, *args)
 
 
 def test_installed_plugin_is_listed_and_used(installed_plugin: Path, tmp_path: Path) -> None:
