@@ -9,6 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -123,24 +125,24 @@ def train(
     drawing: str | Path,
     out: str | Path,
     *,
-    payload_bits: int | Literal["auto"] = 24,
+    payload_bits: int | Literal["auto"] = PAYLOAD_BITS,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
-    steps: int = 4000,
-    batch: int = 32,
-    image_width: int = 96,
-    severity: Severity = "medium",
-    real_render_share: float = 0.25,
-    small_prints: float = 0.0,
-    seed: int = 0,
-    encoder_init: Literal["spread", "random"] = "spread",
-    spatial_transformer: bool = True,
-    readout: bool = True,
-    device: Literal["auto", "cpu", "cuda"] = "auto",
-    shards: int | None = None,
-    threads: int | None = None,
+    steps: int = DEFAULTS.steps,
+    batch: int = DEFAULTS.batch,
+    image_width: int = DEFAULTS.width,
+    severity: Severity = DEFAULTS.severity,
+    real_render_share: float = DEFAULTS.hard_fraction,
+    small_prints: float = DEFAULTS.small_prints,
+    seed: int = DEFAULTS.seed,
+    encoder_init: Literal["spread", "random"] = DEFAULTS.encoder_init,
+    spatial_transformer: bool = DEFAULTS.spatial_transformer,
+    readout: bool = DEFAULTS.readout,
+    device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
+    shards: int | None = DEFAULTS.shards,
+    threads: int | None = DEFAULTS.threads,
     resume: bool = False,
-    checkpoint_every: int = 250,
+    checkpoint_every: int = DEFAULTS.checkpoint_every,
     move: float | None = None,
     shift: float | tuple[float, float] | None = None,
     scale: tuple[float, float] | None = None,
@@ -151,7 +153,8 @@ def train(
     on_warning: Callable[[str], None] | None = None,
 ) -> Model:
     """Train a model for ``drawing`` and write it to ``out``: ``deepmorph train``, one keyword per
-    option (``--crc`` is ``crc_bits``), with the same defaults.
+    option (``--crc`` is ``crc_bits``), with the same defaults
+    (:mod:`deepmorph_core.train_settings`).
 
     Args:
         drawing: the SVG.

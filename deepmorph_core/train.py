@@ -32,7 +32,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 import torch.nn.functional as F
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 from torch import Tensor, nn
 
 from deepmorph_core.bounds import format_validation_error
@@ -67,83 +67,18 @@ from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
+from deepmorph_core.train_settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TrainSettings
 from deepmorph_core.validation import default_samples, validate, validation_warning
 
 
-class TrainConfig(BaseModel):
-    """Training settings (stored in the bundle).
-
-    Attributes:
-        steps: total optimisation steps (both stages).
-        batch: perturbations per step.
-        width: image width in pixels (decoder input; the height follows the drawing).
-        lr, encoder_lr: Adam learning rates of the decoder and the encoder (decayed by a cosine
-            to 10 % over stage 2).
-        stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
-        plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
-            window) gains less than ``plateau_gain`` from one window to the next.
-        hard_fraction: share of each batch rendered by the real renderer (resvg).
-        small_prints: share of each batch captured as a small print: shrunk to
-            :data:`SMALL_PRINT_SCALE` of the decoder's width, corrupted at that size (the
-            preset scaled to it), and enlarged again. A print 60 px wide in a photo is blurred,
-            noised and compressed at 60 px, not at the decoder's width. A decoder tuned so
-            (:func:`tune_decoder`) reads more payloads from photos, and lets a few more CRC
-            collisions through (``docs/training.md``).
-        severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
-            at the end of the curriculum.
-        curriculum: share of ``steps`` over which corruption ramps up through the milder presets
-            (a decoder facing full corruption from a random start stays at chance); by default
-            the first 1500 of 4000 steps, so the last 2500 train at ``severity``.
-        encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
-            variables at full range (:func:`deepmorph_core.networks.spread_weights`), for far
-            fewer bit errors under corruption. ``random``: the paper's dense random matrix.
-        spatial_transformer: put a learned homography in front of the decoder
-            (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
-            perspective and turn that framing by ink moments leaves (``docs/training.md``).
-        readout: give the decoder a linear readout of the pixels, fitted by least squares
-            (:func:`fit_readout`) and then trained with the CNN where the CNN alone stalls in
-            stage 1 (below :data:`READOUT_STALL` of bits); left out of the bundle where it
-            does not (``docs/training.md``).
-        freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
-            stage 2), learning rate decaying by a cosine to 10 % over all steps: what
-            :func:`tune_decoder` runs on a trained bundle.
-        seed: makes a run reproducible (same seed, same threads: same model).
-        device: ``cpu``, ``cuda`` or ``auto`` (CUDA where present); a bundle stores the device
-            it resolved to.
-        shards: random streams the batch is drawn from (:mod:`deepmorph_core.distributed`):
-            the processes of a torchrun share them, so a run's numbers depend on its seed and
-            shards, not on how many processes train it. ``None``: one per process.
-        threads: torch CPU threads (``None``: torch's default).
-        checkpoint_every, log_every: in steps.
-    """
+class TrainConfig(BaseModel, TrainSettings):
+    """Training settings, validated (stored in the bundle): the fields, their defaults and
+    bounds are :class:`~deepmorph_core.train_settings.TrainSettings`', declared there once for
+    this model, the command line, :func:`deepmorph.train` and the studio."""
 
     model_config = ConfigDict(extra="forbid")
 
-    steps: int = Field(default=4000, ge=1, le=10_000_000)
-    batch: int = Field(default=32, ge=2, le=4096)
-    width: int = Field(default=96, ge=32, le=512)
-    lr: float = Field(default=2e-3, gt=0, le=1)
-    encoder_lr: float = Field(default=1e-2, gt=0, le=10)
-    stage1_max_fraction: float = Field(default=0.35, ge=0, le=1)
-    plateau_window: int = Field(default=150, ge=10)
-    plateau_gain: float = Field(default=0.004, ge=0)
-    hard_fraction: float = Field(default=0.25, ge=0, le=1)
-    small_prints: float = Field(default=0.0, ge=0, le=1)
-    severity: Literal["none", "easy", "medium", "hard"] = "medium"
-    curriculum: float = Field(default=0.375, ge=0, le=1)
-    encoder_init: Literal["spread", "random"] = "spread"
-    spatial_transformer: bool = True
-    readout: bool = True
-    freeze_encoder: bool = False
-    seed: int = 0
-    device: Literal["cpu", "cuda", "auto"] = "auto"
-    shards: int | None = Field(default=None, ge=1, le=1024)
-    threads: int | None = Field(default=None, ge=1, le=256)
-    checkpoint_every: int = Field(default=250, ge=1)
-    log_every: int = Field(default=25, ge=1)
 
-
-SMALL_PRINT_SCALE = (0.55, 0.95)  # small prints: shrunk to this share of the decoder width
 #: The plot of a codec training log.
 CODEC_PANELS = (
     Panel("loss", ("loss",), log_scale=True),
@@ -487,7 +422,7 @@ def train_model(
     svg: str | Path,
     out: str | Path,
     *,
-    payload_bits: int | Literal["auto"] = 24,
+    payload_bits: int | Literal["auto"] = PAYLOAD_BITS,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
     bounds: dict[str, Any] | None = None,
@@ -569,7 +504,7 @@ def train_model(
 def open_model(
     svg: str | Path | bytes,
     out: str | Path,
-    payload_bits: int | Literal["auto"] = 24,
+    payload_bits: int | Literal["auto"] = PAYLOAD_BITS,
     crc_bits: int | None = None,
     ecc_t: int | None = None,
     bounds: dict[str, Any] | None = None,

@@ -27,13 +27,12 @@ from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.framing import frame_renders
 from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.payload import random_payloads
+from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES
 
 if TYPE_CHECKING:
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Registry
 
-RENDER_SAMPLES = 1000  # payloads read from renders after training
-PHOTO_SAMPLES = 200  # payloads read from close-up photos after training (plugins' validations)
 TARGET_RATE = 0.99  # below this share of payloads read, training ends with a warning
 SEVERITY = "medium"
 

@@ -38,6 +38,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from deepmorph.studio import drawing as drawings
 from deepmorph.studio.jobs import JobQueue
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.train_settings import DEFAULTS, PHOTO_SAMPLES, RENDER_SAMPLES, exposed
 
 if TYPE_CHECKING:
     import numpy as np
@@ -336,6 +337,9 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
     async def jobs_list(request: Request) -> Response:
         return JSONResponse(studio.jobs.list())
 
+    async def jobs_form(request: Request) -> Response:
+        return JSONResponse(train_form())
+
     async def jobs_submit(request: Request) -> Response:
         data = await json_body(request)
         svg, name = current()
@@ -497,6 +501,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         Route("/api/jobs", jobs_submit, methods=["POST"]),
         Route("/api/jobs/{job}/cancel", jobs_cancel, methods=["POST"]),
         Route("/api/jobs/events", jobs_events),
+        Route("/api/jobs/form", jobs_form),
         Route("/api/models", models),
         Route("/api/models/{model}/random", random_payload),
         Route("/api/models/{model}/entries", entries),
@@ -580,33 +585,64 @@ def sheet_file(
     return sheet.file(fmt, dpi), sheet
 
 
-def training_settings(data: dict[str, Any]) -> dict[str, Any]:
-    """The worker's settings from the Train form; out-of-range values are one clear error."""
+#: A run queued from the page trains within these (below the training settings' own limits: a
+#: page is no place for a week-long run) ...
+STUDIO_CAPS = {"steps": 200_000, "batch": 1024, "threads": 64}
+#: ... and on one CPU thread unless asked (it shares the machine with the page).
+STUDIO_DEFAULTS = {"threads": 1}
+MAX_VALIDATION_PHOTOS = 10_000
 
-    def integer(key: str, default: int, lo: int, hi: int) -> int:
-        value = data.get(key, default)
+
+def train_form() -> dict[str, dict[str, Any]]:
+    """The Train form's inputs by name: each one's ``default``, ``min`` and ``max``.
+
+    The training settings are named by their :func:`deepmorph.train` keywords, with the defaults
+    and bounds of :mod:`deepmorph_core.train_settings`, capped by :data:`STUDIO_CAPS` (and the
+    studio's own defaults, :data:`STUDIO_DEFAULTS`, where it has them). A new model hides the
+    payload ``deepmorph capacity`` predicts to read (``auto``) and is validated on photos, as
+    many by default as the command line reads (and five times as many renders, its share). The
+    page fills its form from this, and :func:`training_settings` checks what it sends against it."""
+    from deepmorph_core.payload import MAX_PAYLOAD_BITS
+
+    form: dict[str, dict[str, Any]] = {"payload_bits": {"default": "auto", "min": 1, "max": MAX_PAYLOAD_BITS}}
+    for name in ("steps", "batch", "width", "threads"):
+        setting = exposed()[name]
+        limits = [x for x in (setting.le, STUDIO_CAPS.get(name)) if x is not None]
+        default = STUDIO_DEFAULTS.get(name, getattr(DEFAULTS, name))
+        form[setting.keyword] = {"default": default, "min": setting.ge, "max": min(limits)}
+    form["validation"] = {"default": PHOTO_SAMPLES, "min": 0, "max": MAX_VALIDATION_PHOTOS}
+    return form
+
+
+def training_settings(data: dict[str, Any]) -> dict[str, Any]:
+    """The worker's settings from the Train form (:func:`train_form`); out-of-range values are
+    one clear error."""
+    form = train_form()
+
+    def integer(key: str) -> int:
+        value, default = data.get(key), form[key]["default"]
         try:
             n = int(value if value not in (None, "") else default)
         except (TypeError, ValueError):
             raise HttpError(400, f"{key}: expected an integer, got {value!r}") from None
-        if not lo <= n <= hi:
-            raise HttpError(400, f"{key}: {n} is outside {lo}..{hi}")
+        if not form[key]["min"] <= n <= form[key]["max"]:
+            raise HttpError(400, f"{key}: {n} is outside {form[key]['min']}..{form[key]['max']}")
         return n
 
-    bits_text = str(data.get("payload_bits", "auto")).strip().lower()
-    payload_bits: int | str = "auto" if bits_text in ("", "auto") else integer("payload_bits", 24, 1, 256)
-    steps = integer("steps", 4000, 1, 200_000)
-    validation = integer("validation", 200, 0, 10_000)
+    bits_text = str(data.get("payload_bits", form["payload_bits"]["default"])).strip().lower()
+    payload_bits: int | str = "auto" if bits_text in ("", "auto") else integer("payload_bits")
+    steps = integer("steps")
+    validation = integer("validation")
     return {
         "payload_bits": payload_bits,
         "train": {
             "steps": steps,
-            "batch": integer("batch", 32, 2, 1024),
-            "width": integer("image_width", 96, 32, 512),
-            "log_every": max(1, min(25, steps // 40)),
-            "threads": integer("threads", 1, 1, 64),
+            "batch": integer("batch"),
+            "width": integer("image_width"),
+            "log_every": max(1, min(DEFAULTS.log_every, steps // 40)),
+            "threads": integer("threads"),
         },
-        "validation": [5 * validation, validation],  # renders and close-up photos, as the default 1000 and 200
+        "validation": [RENDER_SAMPLES * validation // PHOTO_SAMPLES, validation],
     }
 
 
@@ -756,4 +792,4 @@ def create_app(studio: Studio) -> Starlette:
     )
 
 
-__all__ = ["Studio", "create_app", "print_size", "read_photo", "sheet_file", "training_settings"]
+__all__ = ["Studio", "create_app", "print_size", "read_photo", "sheet_file", "train_form", "training_settings"]

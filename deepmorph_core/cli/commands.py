@@ -42,6 +42,7 @@ from deepmorph_core.cli.frame import (
 )
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import refuse_to_overwrite
+from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, PHOTO_SAMPLES, RENDER_SAMPLES, exposed
 
 if TYPE_CHECKING:
     import numpy as np
@@ -55,11 +56,19 @@ DeviceOpt = Annotated[
     typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
 ]
 
-BatchOpt = Annotated[int, typer.Option("--batch", min=2, help="Morphs per step.")]
-ImageWidthOpt = Annotated[
-    int, typer.Option("--image-width", min=32, max=512, help="Width in pixels of the image the decoder reads.")
-]
-TrainSeverityOpt = Annotated[SeverityName, typer.Option("--severity", help="Capture corruption to train against.")]
+
+def setting_option(field: str, help: str | None = None) -> Any:  # noqa: A002 - the option's help
+    """The option of training setting ``field``: its flag, help and bounds as
+    :class:`~deepmorph_core.train_settings.TrainSettings` declares them (``help`` replaces its
+    line; a flag on or off is ``--x/--no-x``). Its default is :data:`~deepmorph_core.train_settings.DEFAULTS`'."""
+    setting = exposed()[field]
+    flag = f"--{setting.option}" + (f"/--no-{setting.option}" if setting.switch else "")
+    return typer.Option(flag, min=setting.ge, max=setting.le, help=help or setting.help)
+
+
+BatchOpt = Annotated[int, setting_option("batch")]
+ImageWidthOpt = Annotated[int, setting_option("width")]
+TrainSeverityOpt = Annotated[SeverityName, setting_option("severity")]
 
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
@@ -340,65 +349,28 @@ def train(
             "--payload-bits",
             help="Payload length in bits (1-256), or auto: the largest `deepmorph capacity` predicts to read.",
         ),
-    ] = "24",
+    ] = str(PAYLOAD_BITS),
     crc: Annotated[
         Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
     ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps (both stages).")] = 4000,
-    batch: BatchOpt = 32,
-    width: ImageWidthOpt = 96,
-    severity: TrainSeverityOpt = "medium",
-    hard_fraction: Annotated[
-        float, typer.Option("--real-render-share", min=0, max=1, help="Share of each batch drawn by resvg.")
-    ] = 0.25,
-    small_prints: Annotated[
-        float,
-        typer.Option(
-            "--small-prints",
-            min=0,
-            max=1,
-            help="Share of each batch captured as a small print (corrupted at 55-95 % of the width, enlarged).",
-        ),
-    ] = 0.0,
-    seed: SeedOpt = 0,
-    encoder_init: Annotated[
-        Literal["spread", "random"],
-        typer.Option(
-            "--encoder-init", help="Encoder start: spread (each bit drives its own variables) or random (the paper's)."
-        ),
-    ] = "spread",
-    spatial_transformer: Annotated[
-        bool,
-        typer.Option(
-            "--spatial-transformer/--no-spatial-transformer",
-            help="Learn a homography in front of the decoder that undoes leftover perspective.",
-        ),
-    ] = True,
-    readout: Annotated[
-        bool,
-        typer.Option(
-            "--readout/--no-readout",
-            help="Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares.",
-        ),
-    ] = True,
-    device: DeviceOpt = "auto",
-    shards: Annotated[
-        Optional[int],
-        typer.Option(
-            "--shards",
-            min=1,
-            max=1024,
-            help="Random streams the batch is drawn from, shared by torchrun's processes (default: one per process).",
-        ),
-    ] = None,
-    threads: ThreadsOpt = None,
+    steps: Annotated[int, setting_option("steps")] = DEFAULTS.steps,
+    batch: BatchOpt = DEFAULTS.batch,
+    width: ImageWidthOpt = DEFAULTS.width,
+    severity: TrainSeverityOpt = DEFAULTS.severity,
+    hard_fraction: Annotated[float, setting_option("hard_fraction")] = DEFAULTS.hard_fraction,
+    small_prints: Annotated[float, setting_option("small_prints")] = DEFAULTS.small_prints,
+    seed: SeedOpt = DEFAULTS.seed,
+    encoder_init: Annotated[Literal["spread", "random"], setting_option("encoder_init")] = DEFAULTS.encoder_init,
+    spatial_transformer: Annotated[bool, setting_option("spatial_transformer")] = DEFAULTS.spatial_transformer,
+    readout: Annotated[bool, setting_option("readout")] = DEFAULTS.readout,
+    device: DeviceOpt = DEFAULTS.device,
+    shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
+    threads: ThreadsOpt = DEFAULTS.threads,
     resume: Annotated[
         bool, typer.Option("--resume", help="Continue the checkpoint at --out (on any number of processes).")
     ] = False,
-    checkpoint_every: Annotated[
-        int, typer.Option("--checkpoint-every", min=1, help="Steps between checkpoints (a crash loses at most these).")
-    ] = 250,
+    checkpoint_every: Annotated[int, setting_option("checkpoint_every")] = DEFAULTS.checkpoint_every,
     move: MoveOpt = None,
     shift: ShiftOpt = None,
     scale: ScaleOpt = None,
@@ -476,18 +448,18 @@ def train_many(
     payload_bits: Annotated[
         str, typer.Option("--payload-bits", help="Payload bits for every drawing, or auto: each its predicted size.")
     ] = "auto",
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps of each drawing.")] = 4000,
-    batch: BatchOpt = 32,
-    width: ImageWidthOpt = 96,
-    severity: TrainSeverityOpt = "medium",
-    seed: SeedOpt = 0,
+    steps: Annotated[int, setting_option("steps", "Training steps of each drawing.")] = DEFAULTS.steps,
+    batch: BatchOpt = DEFAULTS.batch,
+    width: ImageWidthOpt = DEFAULTS.width,
+    severity: TrainSeverityOpt = DEFAULTS.severity,
+    seed: SeedOpt = DEFAULTS.seed,
     move: MoveOpt = None,
-    device: DeviceOpt = "auto",
+    device: DeviceOpt = DEFAULTS.device,
     jobs: Annotated[
         Optional[int],
         typer.Option("--jobs", min=1, max=64, help="Worker processes (default: one per CUDA device, one on the CPU)."),
     ] = None,
-    threads: ThreadsOpt = None,
+    threads: ThreadsOpt = DEFAULTS.threads,
     validation: ValidationOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -720,10 +692,12 @@ def tune_decoder(
 
 def validate(
     model: ModelArg,
-    samples: Annotated[int, typer.Option("--samples", min=1, max=100_000, help="Payloads read from renders.")] = 1000,
+    samples: Annotated[
+        int, typer.Option("--samples", min=1, max=100_000, help="Payloads read from renders.")
+    ] = RENDER_SAMPLES,
     photos: Annotated[
         int, typer.Option("--photos", min=0, max=100_000, help="Payloads read from close-up photos.")
-    ] = 200,
+    ] = PHOTO_SAMPLES,
     seed: SeedOpt = 0,
     save: Annotated[bool, typer.Option("--save", help="Store the result in the bundle (shown by info).")] = False,
     threads: ThreadsOpt = None,

@@ -20,6 +20,7 @@ from rich.text import Text
 
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import atomic_write
+from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES
 
 _UNPRINTABLE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069]")
 
@@ -283,6 +284,7 @@ ValidationOpt = Annotated[
     Optional[str],
     typer.Option(
         "--validation",
-        help="Fresh payloads read back when done, from renders and close-up photos: R,P (default 1000,200; 0: none).",
+        help="Fresh payloads read back when done, from renders and close-up photos: R,P "
+        f"(default {RENDER_SAMPLES},{PHOTO_SAMPLES}; 0: none).",
     ),
 ]

@@ -3,7 +3,6 @@ for anything else, colour order, PDFs that decode, and ``train`` as the command 
 
 from __future__ import annotations
 
-import inspect
 import math
 from pathlib import Path
 
@@ -11,13 +10,10 @@ import cv2
 import numpy as np
 import pypdfium2
 import pytest
-import typer
 from PIL import Image
 
 import deepmorph
 from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
-from deepmorph_core.cli import application
-from deepmorph_core.train import TrainConfig
 from deepmorph_detect.scenes import close_up_photo
 
 PAYLOAD = 0xA1B2C3
@@ -160,35 +156,6 @@ def test_the_pdf_is_the_print_size_and_its_raster_decodes(ghost: deepmorph.Model
     small = cv2.resize(sheet, (200, 200), interpolation=cv2.INTER_AREA).astype(np.float32) / 255
     snap = close_up_photo(small, "medium", np.random.default_rng(1))  # a phone photo of that print
     assert [(f.payload.hex, f.ok) for f in ghost.decode(snap, bgr=True)] == [("0xA1B2C3", True)]
-
-
-# CLI options whose keyword is spelled otherwise in Python, and options that only shape output
-ALIASES = {"svg": "drawing", "crc": "crc_bits"}
-PRESENTATION = {"json", "help"}
-TRAIN_SETTINGS = {"image_width": "width", "real_render_share": "hard_fraction"}  # keyword -> TrainConfig field
-
-
-def test_train_has_a_keyword_for_every_cli_option_with_its_default() -> None:
-    command = typer.main.get_command(application()).commands["train"]  # type: ignore[attr-defined]
-    keywords = inspect.signature(deepmorph.train).parameters
-    for param in command.params:
-        flag = (param.opts[0].lstrip("-") if param.opts[0].startswith("-") else param.opts[0]).replace("-", "_")
-        if flag in PRESENTATION:
-            continue
-        name = ALIASES.get(flag, flag)
-        assert name in keywords, f"deepmorph.train has no keyword for {param.opts[0]}"
-        if not param.required:
-            cli_default = param.default
-            if name in ("shift", "scale", "rotate"):  # "LO HI" text on the command line
-                assert cli_default is None and keywords[name].default is None
-            else:
-                api_default = keywords[name].default
-                assert api_default == cli_default or str(api_default) == cli_default, (
-                    name
-                )  # --payload-bits: "24" or "auto"
-            setting = TRAIN_SETTINGS.get(name, name)
-            if setting in TrainConfig.model_fields:  # the training defaults are the library's, not copies
-                assert keywords[name].default == TrainConfig.model_fields[setting].default, name
 
 
 def test_train_passes_each_keyword_on(tmp_path: Path) -> None:

@@ -298,6 +298,19 @@ def test_a_printed_pdf_of_the_ghost_in_two_clicks(page, server: Server, tmp_path
     screenshot(page, "print")
 
 
+def test_the_train_form_starts_at_the_training_defaults(page, server: Server) -> None:
+    """The page keeps no copy of the training defaults: its form shows the server's (the
+    training settings', :func:`deepmorph.studio.app.train_form`), ranges included."""
+    from deepmorph.studio.app import train_form
+
+    open_studio(page, server, "train")
+    form = train_form()
+    for name in ("steps", "batch", "image_width", "validation"):
+        shown = page.eval_on_selector(f"#train-form input[name={name}]", "e => [e.value, e.min, e.max]")
+        assert shown == [str(form[name][k]) for k in ("default", "min", "max")], name
+    assert page.input_value("#train-form input[name=payload_bits]") == form["payload_bits"]["default"] == "auto"
+
+
 def tiny_run(page, steps: int) -> None:  # noqa: ANN001
     """The Train form filled for a tiny, fast run (typing only: no clicks)."""
     for name, value in (("payload_bits", "4"), ("steps", str(steps)), ("batch", "8"), ("image_width", "40"),

@@ -278,6 +278,17 @@ $("#capacity-form").addEventListener("submit", (event) => {
 $("#capacity-form").addEventListener("change", () => runCapacity());
 
 // -- training ---------------------------------------------------------------------------------
+// the form's defaults and ranges are the training settings' (one place for them: the server's)
+async function fillTrainForm() {
+  const form = await api("/api/jobs/form");
+  for (const input of document.querySelectorAll("#train-form input[name]")) {
+    const spec = form[input.name];
+    if (!spec) continue;
+    input.value = spec.default;
+    if (input.type === "number") Object.assign(input, { min: spec.min, max: spec.max });
+  }
+}
+
 $("#train-form").addEventListener("submit", async (event) => {
   event.preventDefault();
   const body = Object.fromEntries(new FormData(event.target).entries());
@@ -587,6 +598,11 @@ $("#camera-stop").addEventListener("click", stopCamera);
 // -- start ------------------------------------------------------------------------------------
 async function start() {
   watchJobs();
+  try {
+    await fillTrainForm();
+  } catch (exc) {
+    // the red bar says why; an empty input trains at the server's default
+  }
   try {
     const kept = await api("/api/drawing");
     if (!state.drawing) showDrawing(kept); // unless a drawing was opened meanwhile

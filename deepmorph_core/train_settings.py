@@ -1,0 +1,202 @@
+"""The training settings, each declared once: its type, default, bounds and help.
+
+:class:`TrainSettings` is the one declaration. :class:`deepmorph_core.train.TrainConfig` (the
+validated settings a bundle stores) inherits its fields; ``deepmorph train`` and
+``deepmorph train-many`` take their options' defaults, bounds and help from it
+(:func:`exposed`, :data:`DEFAULTS`), :func:`deepmorph.train` its keywords' defaults, and the
+studio its Train form's. Changing a default here changes it in all of them.
+
+Nothing here imports torch or pydantic: building the command line (``deepmorph --help``) reads
+it. Bounds are :mod:`annotated_types` constraints, which pydantic validates and the command line
+turns into its options' ranges.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from functools import cache
+from typing import Annotated, Any, Literal, get_args, get_origin, get_type_hints
+
+from annotated_types import Ge, Gt, Le
+
+#: The payload length a new model hides unless told (``--payload-bits``, ``payload_bits=``).
+PAYLOAD_BITS = 24
+#: Fresh payloads read back after training unless told: from renders and from close-up photos
+#: (``--validation``, ``validation=``; :mod:`deepmorph_core.validation`).
+RENDER_SAMPLES, PHOTO_SAMPLES = 1000, 200
+#: Small prints are shrunk to this share of the decoder's width (``small_prints``).
+SMALL_PRINT_SCALE = (0.55, 0.95)
+
+
+def _setting(default: Any, option: str | None = None, help: str = "") -> Any:  # noqa: A002 - the option's help
+    """A field of :class:`TrainSettings`: ``option`` is its public name (``--image-width`` on the
+    command line, ``image_width=`` in Python) where training exposes it, ``help`` its one line."""
+    return dataclasses.field(default=default, metadata={"option": option, "help": help})
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Training settings (stored in the bundle, as :class:`deepmorph_core.train.TrainConfig`).
+
+    Attributes:
+        steps: total optimisation steps (both stages).
+        batch: perturbations per step.
+        width: image width in pixels (decoder input; the height follows the drawing).
+        lr, encoder_lr: Adam learning rates of the decoder and the encoder (decayed by a cosine
+            to 10 % over stage 2).
+        stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
+        plateau_window, plateau_gain: stage 1 also ends when the bit accuracy (averaged over a
+            window) gains less than ``plateau_gain`` from one window to the next.
+        hard_fraction: share of each batch rendered by the real renderer (resvg).
+        small_prints: share of each batch captured as a small print: shrunk to
+            :data:`SMALL_PRINT_SCALE` of the decoder's width, corrupted at that size (the
+            preset scaled to it), and enlarged again. A print 60 px wide in a photo is blurred,
+            noised and compressed at 60 px, not at the decoder's width. A decoder tuned so
+            (:func:`~deepmorph_core.train.tune_decoder`) reads more payloads from photos, and
+            lets a few more CRC collisions through (``docs/training.md``).
+        severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
+            at the end of the curriculum.
+        curriculum: share of ``steps`` over which corruption ramps up through the milder presets
+            (a decoder facing full corruption from a random start stays at chance); by default
+            the first 1500 of 4000 steps, so the last 2500 train at ``severity``.
+        encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
+            variables at full range (:func:`deepmorph_core.networks.spread_weights`), for far
+            fewer bit errors under corruption. ``random``: the paper's dense random matrix.
+        spatial_transformer: put a learned homography in front of the decoder
+            (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
+            perspective and turn that framing by ink moments leaves (``docs/training.md``).
+        readout: give the decoder a linear readout of the pixels, fitted by least squares
+            (:func:`~deepmorph_core.train.fit_readout`) and then trained with the CNN where the
+            CNN alone stalls in stage 1 (below :data:`~deepmorph_core.train.READOUT_STALL` of
+            bits); left out of the bundle where it does not (``docs/training.md``).
+        freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
+            stage 2), learning rate decaying by a cosine to 10 % over all steps: what
+            :func:`~deepmorph_core.train.tune_decoder` runs on a trained bundle.
+        seed: makes a run reproducible (same seed, same threads: same model).
+        device: ``cpu``, ``cuda`` or ``auto`` (CUDA where present); a bundle stores the device
+            it resolved to.
+        shards: random streams the batch is drawn from (:mod:`deepmorph_core.distributed`):
+            the processes of a torchrun share them, so a run's numbers depend on its seed and
+            shards, not on how many processes train it. ``None``: one per process.
+        threads: torch CPU threads (``None``: torch's default).
+        checkpoint_every, log_every: in steps.
+    """
+
+    steps: Annotated[int, Ge(1), Le(10_000_000)] = _setting(4000, "steps", "Training steps (both stages).")
+    batch: Annotated[int, Ge(2), Le(4096)] = _setting(32, "batch", "Morphs per step.")
+    width: Annotated[int, Ge(32), Le(512)] = _setting(
+        96, "image-width", "Width in pixels of the image the decoder reads."
+    )
+    lr: Annotated[float, Gt(0), Le(1)] = 2e-3
+    encoder_lr: Annotated[float, Gt(0), Le(10)] = 1e-2
+    stage1_max_fraction: Annotated[float, Ge(0), Le(1)] = 0.35
+    plateau_window: Annotated[int, Ge(10)] = 150
+    plateau_gain: Annotated[float, Ge(0)] = 0.004
+    hard_fraction: Annotated[float, Ge(0), Le(1)] = _setting(
+        0.25, "real-render-share", "Share of each batch drawn by resvg."
+    )
+    small_prints: Annotated[float, Ge(0), Le(1)] = _setting(
+        0.0,
+        "small-prints",
+        "Share of each batch captured as a small print (corrupted at "
+        f"{SMALL_PRINT_SCALE[0] * 100:.0f}-{SMALL_PRINT_SCALE[1] * 100:.0f} % of the width, enlarged).",
+    )
+    severity: Literal["none", "easy", "medium", "hard"] = _setting(
+        "medium", "severity", "Capture corruption to train against."
+    )
+    curriculum: Annotated[float, Ge(0), Le(1)] = 0.375
+    encoder_init: Literal["spread", "random"] = _setting(
+        "spread", "encoder-init", "Encoder start: spread (each bit drives its own variables) or random (the paper's)."
+    )
+    spatial_transformer: bool = _setting(
+        True, "spatial-transformer", "Learn a homography in front of the decoder that undoes leftover perspective."
+    )
+    readout: bool = _setting(
+        True, "readout", "Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares."
+    )
+    freeze_encoder: bool = False
+    seed: int = _setting(0, "seed")
+    device: Literal["cpu", "cuda", "auto"] = _setting("auto", "device")
+    shards: Annotated[int | None, Ge(1), Le(1024)] = _setting(
+        None,
+        "shards",
+        "Random streams the batch is drawn from, shared by torchrun's processes (default: one per process).",
+    )
+    threads: Annotated[int | None, Ge(1), Le(256)] = _setting(None, "threads")
+    checkpoint_every: Annotated[int, Ge(1)] = _setting(
+        250, "checkpoint-every", "Steps between checkpoints (a crash loses at most these)."
+    )
+    log_every: Annotated[int, Ge(1)] = 25
+
+
+#: Every setting at its default.
+DEFAULTS = TrainSettings()
+
+
+@dataclass(frozen=True)
+class Exposed:
+    """A setting as ``deepmorph train`` and :func:`deepmorph.train` take it (its default is
+    :data:`DEFAULTS`').
+
+    Attributes:
+        field: its name in :class:`TrainSettings` (and in a bundle's ``train``).
+        option: its public name: ``--{option}`` on the command line, ``{option}`` with
+            underscores as a keyword.
+        help: one line for ``--help`` (empty where the option is one that other commands share,
+            with its own help: ``--seed``, ``--device``, ``--threads``).
+        ge, gt, le: its bounds (``None``: unbounded).
+        choices: the values of a fixed choice (``None``: not one).
+        switch: on or off (``--{option}/--no-{option}``).
+    """
+
+    field: str
+    option: str
+    help: str
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    choices: tuple[str, ...] | None = None
+    switch: bool = False
+
+    @property
+    def keyword(self) -> str:
+        """Its keyword in :func:`deepmorph.train`."""
+        return self.option.replace("-", "_")
+
+
+@cache
+def exposed() -> dict[str, Exposed]:
+    """The settings ``deepmorph train`` and :func:`deepmorph.train` take, by field name, in
+    declaration order."""
+    hints = get_type_hints(TrainSettings, include_extras=True)
+    found = {}
+    for f in dataclasses.fields(TrainSettings):
+        if f.metadata.get("option") is None:
+            continue
+        hint, meta = hints[f.name], []
+        if get_origin(hint) is Annotated:
+            hint, *meta = get_args(hint)
+        found[f.name] = Exposed(
+            f.name,
+            f.metadata["option"],
+            f.metadata["help"],
+            ge=next((m.ge for m in meta if isinstance(m, Ge)), None),
+            gt=next((m.gt for m in meta if isinstance(m, Gt)), None),
+            le=next((m.le for m in meta if isinstance(m, Le)), None),
+            choices=tuple(get_args(hint)) if get_origin(hint) is Literal else None,
+            switch=hint is bool,
+        )
+    return found
+
+
+__all__ = [
+    "DEFAULTS",
+    "PAYLOAD_BITS",
+    "PHOTO_SAMPLES",
+    "RENDER_SAMPLES",
+    "SMALL_PRINT_SCALE",
+    "Exposed",
+    "TrainSettings",
+    "exposed",
+]
