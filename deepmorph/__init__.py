@@ -10,6 +10,7 @@ training) and ``deepmorph_detect`` (the photo chain)::
     code.save("code.pdf", width_mm=50)     # or .svg / .png; code.pdf(), code.png(), code.svg
     for found in model.decode("photo.jpg"):   # a path, a PIL image or an RGB array (bgr=True)
         print(found.payload.hex, found.ok, found.pose)
+    reading = model.decode_sequence("clip.mp4")   # a video or a folder of frames, readings fused
 
 Names are imported on first use, so ``import deepmorph`` (and ``python -m deepmorph --help``)
 does not wait for torch.
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     from deepmorph_core.morphable import MorphableDrawing
     from deepmorph_core.payload import Payload, PayloadLike
     from deepmorph_detect.camera import Camera
+    from deepmorph_detect.reading import SequenceReading
     from deepmorph_detect.results import Located, Pose
 
 _WHERE = {
@@ -53,6 +55,7 @@ _WHERE = {
     "Payload": "deepmorph_core.payload",
     "PayloadLike": "deepmorph_core.payload",
     "Camera": "deepmorph_detect.camera",
+    "SequenceReading": "deepmorph_detect.reading",
     "Located": "deepmorph_detect.results",
     "Pose": "deepmorph_detect.results",
 }
@@ -83,6 +86,7 @@ __all__ = [
     "PayloadLike",
     "PluginError",
     "Pose",
+    "SequenceReading",
     "SvgError",
     "UnsupportedFeatureError",
     "__version__",

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from deepmorph_core.payload import PayloadLike
     from deepmorph_detect.camera import Camera
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.reading import SequenceReading
     from deepmorph_detect.results import Located
 
 Severity = Literal["none", "easy", "medium", "hard"]
@@ -105,6 +106,60 @@ class Model:
         from deepmorph_core.image_io import image_input
 
         return self.locator.locate(image_input(image, bgr=bgr), camera=camera)
+
+    def decode_sequence(
+        self,
+        source: str | Path,
+        *,
+        camera: Camera | None = None,
+        every: int = 1,
+        hard_decision: bool = False,
+        on_frame: Callable[[], None] | None = None,
+        on_skip: Callable[[str], None] | None = None,
+    ) -> SequenceReading:
+        """Every drawing of this model in a sequence of frames, followed from frame to frame and
+        its readings fused: what ``deepmorph decode`` does with a folder or a video.
+
+        Args:
+            source: a folder of frames (its image files in name order) or a video file.
+            camera: calibrated intrinsics; without them the pose assumes a typical phone camera.
+            every: use every ``every``-th frame of a video.
+            hard_decision: hard-decision decoding only (``--hard-decision``), no soft (Chase).
+            on_frame: called once per frame taken (a progress bar).
+            on_skip: called with a message for each frame skipped: an unreadable file, or a
+                frame the chain refused.
+
+        Returns:
+            A :class:`~deepmorph_detect.reading.SequenceReading`: ``.frames`` read, the fused
+            ``.detections`` (as ``deepmorph decode --json`` gives them: ``payload``, ``ok``,
+            ``frames`` ...), the ``.skipped`` frames and the ``.last`` frame read.
+
+        Raises:
+            DeepMorphError: a missing source, a single image (:meth:`decode` reads those), a
+                folder without image files, a video that cannot be read, or not one readable
+                frame.
+        """
+        from deepmorph_core.errors import DeepMorphError
+        from deepmorph_detect.media import VIDEO_SUFFIXES, check_video, folder_frames, is_video, video_frames
+        from deepmorph_detect.reading import folder_images, read_sequence
+
+        path = Path(source)
+        if every < 1:
+            raise DeepMorphError(f"every={every}: expected a positive number of frames")
+        if path.is_dir():
+            frames = folder_images(folder_frames(path))
+        elif is_video(path):
+            check_video(path)  # a missing or unreadable video is refused before any work
+            frames = video_frames(path, every)
+        elif path.exists():
+            raise DeepMorphError(
+                f"{path}: not a folder of frames or a video ({', '.join(sorted(VIDEO_SUFFIXES))}); "
+                "Model.decode reads a single image"
+            )
+        else:
+            raise DeepMorphError(f"{path}: no such folder or video")
+        return read_sequence(self.locator, frames, camera=camera, soft=not hard_decision, on_frame=on_frame,
+                             on_skip=on_skip, name=str(path))  # fmt: skip
 
     def __repr__(self) -> str:
         return f"deepmorph.Model({self.drawing_name!r}, {self.payload_bits} payload bits)"

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import settings
 
@@ -31,6 +32,26 @@ def make_svg(body: str, root: str = 'viewBox="0 0 24 24"', style: str = "") -> b
     return (
         f'<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" {root} {style}>\n{body}\n</svg>'
     ).encode()
+
+
+def shaken_clip(image: np.ndarray, count: int, rng: np.random.Generator, folder: Path, video: Path) -> None:
+    """``count`` frames of the same photo (BGR uint8), shaken by up to 3 pixels each way and with
+    fresh sensor noise, as of a print held in front of a camera: written as the new folder
+    ``folder`` (``f00.png`` ...) and as the video ``video`` (``.mp4``, else Motion JPEG)."""
+    import cv2
+
+    h, w = image.shape[:2]
+    folder.mkdir()
+    codec = cv2.VideoWriter_fourcc(*("mp4v" if video.suffix == ".mp4" else "MJPG"))
+    writer = cv2.VideoWriter(str(video), codec, 10, (w, h))
+    assert writer.isOpened(), video
+    for i in range(count):
+        shift = np.float32([[1, 0, rng.uniform(-3, 3)], [0, 1, rng.uniform(-3, 3)]])
+        frame = cv2.warpAffine(image, shift, (w, h), borderMode=cv2.BORDER_REPLICATE)
+        frame = np.clip(frame + rng.normal(0, 6, frame.shape), 0, 255).astype(np.uint8)
+        cv2.imwrite(str(folder / f"f{i:02d}.png"), frame)
+        writer.write(frame)
+    writer.release()
 
 
 @pytest.fixture

@@ -41,6 +41,7 @@ from deepmorph_detect.refine import Alignment, ImagePyramid, refine
 from deepmorph_detect.results import Located
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
+from tests.conftest import shaken_clip
 
 app = application()  # core's commands and every installed plugin's
 
@@ -261,17 +262,7 @@ def test_cli_decode_video_and_folder_fuse_frames(model: DeepMorphModel, tmp_path
     maker = SceneMaker(model, severity="medium", seed=14)
     scene = maker.make(drawings=1)
     frames = tmp_path / "frames"
-    frames.mkdir()
-    writer = cv2.VideoWriter(str(tmp_path / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 10, (640, 480))
-    assert writer.isOpened()
-    rng = np.random.default_rng(1)
-    for i in range(5):  # the same print, shaken a little and with fresh sensor noise
-        shift = np.float32([[1, 0, rng.uniform(-3, 3)], [0, 1, rng.uniform(-3, 3)]])
-        frame = cv2.warpAffine(scene.image, shift, (640, 480), borderMode=cv2.BORDER_REPLICATE)
-        frame = np.clip(frame + rng.normal(0, 6, frame.shape), 0, 255).astype(np.uint8)
-        cv2.imwrite(str(frames / f"f{i:02d}.png"), frame)
-        writer.write(frame)
-    writer.release()
+    shaken_clip(scene.image, 5, np.random.default_rng(1), frames, tmp_path / "clip.mp4")  # the same print, shaken
     truth = "".join(map(str, scene.placements[0].payload))
     for target in (frames, tmp_path / "clip.mp4"):
         res = runner.invoke(app, ["decode", str(BUNDLED_MODEL), str(target), "--json"])

@@ -3,6 +3,7 @@ for anything else, colour order, PDFs that decode, and ``train`` as the command 
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from PIL import Image
 import deepmorph
 from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
 from deepmorph_detect.scenes import close_up_photo
+from tests.conftest import shaken_clip
 
 PAYLOAD = 0xA1B2C3
 
@@ -140,6 +142,42 @@ def test_a_wrong_image_is_one_clear_error(ghost: deepmorph.Model, image: object,
 def test_a_folder_is_not_an_image(ghost: deepmorph.Model, tmp_path: Path) -> None:
     with pytest.raises(deepmorph.DeepMorphError, match="is a folder, not an image file"):
         ghost.decode(tmp_path)
+
+
+def test_a_folder_or_a_video_is_one_sequence_read_as_decode_reads_it(ghost: deepmorph.Model, tmp_path: Path) -> None:
+    """``Model.decode_sequence``: a folder of frames and a video of the same print, shaken a
+    little, give one drawing read over the frames, as ``deepmorph decode`` gives it."""
+    from typer.testing import CliRunner
+
+    from deepmorph_core.cli import application
+    from deepmorph_detect.scenes import SceneMaker
+
+    scene = SceneMaker(ghost.bundle, severity="medium", seed=14).make(drawings=1)
+    folder = tmp_path / "frames"
+    shaken_clip(scene.image, 4, np.random.default_rng(3), folder, tmp_path / "clip.avi")
+    bits = "".join(map(str, scene.placements[0].payload))
+    for source in (folder, tmp_path / "clip.avi"):
+        taken: list[None] = []
+        reading = ghost.decode_sequence(source, on_frame=lambda taken=taken: taken.append(None))
+        assert reading.frames == len(taken) == 4 and reading.skipped == []
+        (found,) = reading.detections
+        assert found["ok"] and found["payload"]["bits"] == bits and found["frames"] >= 3, found
+    assert ghost.decode_sequence(tmp_path / "clip.avi", every=2).frames == 2
+    res = CliRunner().invoke(application(), ["decode", str(BUNDLED_MODEL), str(folder), "--json"])
+    assert res.exit_code == 0 and json.loads(res.stdout)[0]["detections"] == ghost.decode_sequence(folder).detections
+    # a frame cut short is skipped, and said; the others still count
+    whole = (folder / "f01.png").read_bytes()
+    (folder / "f01.png").write_bytes(whole[: len(whole) // 3])
+    said: list[str] = []
+    reading = ghost.decode_sequence(folder, on_skip=said.append)
+    assert reading.frames == 3 and [s["frame"] for s in reading.skipped] == ["f01.png"] and "f01.png" in said[0]
+    assert reading.detections[0]["payload"]["bits"] == bits
+    (tmp_path / "empty").mkdir()
+    for source, message in ((folder / "f00.png", "Model.decode reads a single image"),
+                            (tmp_path / "empty", "holds no image files"), (tmp_path / "gone", "no such folder"),
+                            (tmp_path / "gone.mp4", "no such video file"), (folder, "positive")):  # fmt: skip
+        with pytest.raises(deepmorph.DeepMorphError, match=message):
+            ghost.decode_sequence(source, every=0 if message == "positive" else 1)
 
 
 def test_the_pdf_is_the_print_size_and_its_raster_decodes(ghost: deepmorph.Model, tmp_path: Path) -> None:
