@@ -12,7 +12,8 @@ thread with the other core idle, then point this script at the bundles:
 
 For every bundle: the render validation its training ended with (``medium`` colour corruption),
 ``--close-ups`` fresh close-ups at ``medium`` and ``--hard`` at ``hard`` (printed through the
-colour plugins, read by today's photo chain without a detector),
+colour plugins, read by the photo chain with the model's detector, else the universal one;
+``--detector none``: whole images only),
 false accepts on ``--unrelated`` images that show none of the bundles' drawings (other icons of
 ``--icons``, rendered and photographed, noise and clutter: ``bench/capacity.py``'s set), the
 minutes and threads of its training, the capacity ``deepmorph capacity`` predicts for it, and
@@ -79,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--unrelated", type=int, default=1000, help="unrelated images for false accepts (0: none)")
     p.add_argument("--icons", type=Path, default=None, help="a folder of other drawings for the unrelated images")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--detector", help="the detector (default: the model's, else universal; none: whole images)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--out", default=str(RESULTS / "colour_reading.json"))
     args = p.parse_args(argv)
@@ -107,9 +109,13 @@ def main(argv: list[str] | None = None) -> int:
         records = {r.name: r for r in meta.validation}
         renders = records.get("renders")
         rec = meta.record
-        close = validate_close_ups(model.eval(), args.close_ups, args.seed, "medium") if args.close_ups else None
-        hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard") if args.hard else None
-        locator = Locator(model)
+        det = args.detector
+        close = hard = None
+        if args.close_ups:
+            close = validate_close_ups(model.eval(), args.close_ups, args.seed, "medium", detector=det)
+        if args.hard:
+            hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard", detector=det)
+        locator = Locator(model, detector=det)
         accepts = sum(bool(found.result.ok) for _, image in unrelated for found in locator.locate(image))
         rows.append(
             {

@@ -140,26 +140,22 @@ class Model:
                 frame.
         """
         from deepmorph_core.errors import DeepMorphError
-        from deepmorph_detect.media import VIDEO_SUFFIXES, check_video, folder_frames, is_video, video_frames
-        from deepmorph_detect.reading import folder_images, read_sequence
+        from deepmorph_detect.media import VIDEO_SUFFIXES
+        from deepmorph_detect.reading import FrameSource, read_sequence
 
         path = Path(source)
         if every < 1:
             raise DeepMorphError(f"every={every}: expected a positive number of frames")
-        if path.is_dir():
-            frames = folder_images(folder_frames(path))
-        elif is_video(path):
-            check_video(path)  # a missing or unreadable video is refused before any work
-            frames = video_frames(path, every)
-        elif path.exists():
+        sequence = FrameSource.open(path)  # a missing or unreadable video is refused before any work
+        if sequence is None and path.exists():
             raise DeepMorphError(
                 f"{path}: not a folder of frames or a video ({', '.join(sorted(VIDEO_SUFFIXES))}); "
                 "Model.decode reads a single image"
             )
-        else:
+        if sequence is None:
             raise DeepMorphError(f"{path}: no such folder or video")
-        return read_sequence(self.locator, frames, camera=camera, soft=not hard_decision, on_frame=on_frame,
-                             on_skip=on_skip, name=str(path))  # fmt: skip
+        return read_sequence(self.locator, sequence.frames(every), camera=camera, soft=not hard_decision,
+                             on_frame=on_frame, on_skip=on_skip, name=str(path))  # fmt: skip
 
     def __repr__(self) -> str:
         return f"deepmorph.Model({self.drawing_name!r}, {self.payload_bits} payload bits)"

@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 import torch
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -174,18 +174,26 @@ class BundleMeta(BaseModel):
     graphs: dict[_NAME, GraphMeta] = Field(default_factory=dict, max_length=MAX_GRAPHS)
 
 
-def _bad(path: Path | str, why: str) -> DeepMorphError:
-    return DeepMorphError(f"{path}: not a usable DeepMorph model file ({why})")
+MODEL_FILE = "DeepMorph model file"
+_Meta = TypeVar("_Meta", bound=BaseModel)
+
+
+def _bad(path: Path | str, why: str, what: str = MODEL_FILE) -> DeepMorphError:
+    return DeepMorphError(f"{path}: not a usable {what} ({why})")
 
 
 def save_bundle(path: str | Path, meta: BundleMeta, tensors: dict[str, Tensor]) -> None:
     """Write a bundle atomically: a crash or Ctrl-C never leaves a half-written file behind."""
-    path = Path(path)
+    save_tagged(path, meta, tensors)
+
+
+def save_tagged(path: str | Path, meta: BaseModel, tensors: dict[str, Tensor]) -> None:
+    """Write tensors and their JSON metadata (``meta``) as one safetensors file, atomically."""
     payload = save_bytes(
         {k: v.detach().contiguous().cpu() for k, v in tensors.items()},
         metadata={_META_KEY: meta.model_dump_json()},
     )
-    atomic_write(path, payload)
+    atomic_write(Path(path), payload)
 
 
 def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:
@@ -195,50 +203,68 @@ def load_bundle(path: str | Path) -> tuple[BundleMeta, dict[str, Tensor]]:
         DeepMorphError: missing, unreadable, truncated, corrupt or foreign files, and files from
             an incompatible format version.
     """
+    return load_tagged(path, BundleMeta, FORMAT, MODEL_FILE)
+
+
+def load_tagged(
+    path: str | Path, schema: type[_Meta], fmt_expected: str, what: str, max_bytes: int = MAX_BUNDLE_BYTES
+) -> tuple[_Meta, dict[str, Tensor]]:
+    """Read a safetensors file written by :func:`save_tagged` and validate its metadata.
+
+    Args:
+        schema: the pydantic model of the metadata; its ``format`` must be ``fmt_expected``.
+        what: what the file is, for errors ("DeepMorph model file").
+
+    Raises:
+        DeepMorphError: missing, unreadable, truncated, corrupt or foreign files, and files from
+            an incompatible format version.
+    """
     path = Path(path)
     try:
         size = path.stat().st_size
     except OSError as exc:
-        raise DeepMorphError(f"{path}: cannot read model file: {exc.strerror or exc}") from None
+        raise DeepMorphError(f"{path}: cannot read {what.removeprefix('DeepMorph ')}: {exc.strerror or exc}") from None
     if not path.is_file():
-        raise _bad(path, "not a regular file")
-    if size > MAX_BUNDLE_BYTES:
-        raise _bad(path, f"{size} bytes is larger than any model")
+        raise _bad(path, "not a regular file", what)
+    if size > max_bytes:
+        raise _bad(path, f"{size} bytes is larger than any such file", what)
     try:
         data = path.read_bytes()
     except OSError as exc:
-        raise DeepMorphError(f"{path}: cannot read model file: {exc.strerror or exc}") from None
+        raise DeepMorphError(f"{path}: cannot read {what.removeprefix('DeepMorph ')}: {exc.strerror or exc}") from None
     header_len = int.from_bytes(data[:8], "little") if len(data) >= 8 else -1
     if not 0 < header_len <= min(MAX_HEADER_BYTES, len(data) - 8):
-        raise _bad(path, "corrupt or truncated: no tensor table where one should be")
+        raise _bad(path, "corrupt or truncated: no tensor table where one should be", what)
     try:
         header = json.loads(data[8 : 8 + header_len])
         tensors = load_bytes(data)
     except RecursionError:
-        raise _bad(path, "its metadata is nested too deeply") from None
+        raise _bad(path, "its metadata is nested too deeply", what) from None
     except (SafetensorError, ValueError, UnicodeDecodeError, OverflowError) as exc:
-        raise _bad(path, f"corrupt or truncated: {str(exc).splitlines()[0][:120]}") from None
+        raise _bad(path, f"corrupt or truncated: {str(exc).splitlines()[0][:120]}", what) from None
     if not isinstance(header, dict):
-        raise _bad(path, "corrupt or truncated: the tensor table is not a table")
+        raise _bad(path, "corrupt or truncated: the tensor table is not a table", what)
     raw = (header.get("__metadata__") or {}).get(_META_KEY)
     if raw is None:
-        raise _bad(path, "a safetensors file without DeepMorph metadata")
+        raise _bad(path, "a safetensors file without DeepMorph metadata", what)
     try:
         fmt = json.loads(raw).get("format")
     except RecursionError:
-        raise _bad(path, "its metadata is nested too deeply") from None
+        raise _bad(path, "its metadata is nested too deeply", what) from None
     except (ValueError, AttributeError, TypeError):
-        raise _bad(path, "its metadata is not JSON") from None
-    if fmt != FORMAT:
-        raise _bad(path, f"format {fmt!r}, this version reads {FORMAT!r}")
+        raise _bad(path, "its metadata is not JSON", what) from None
+    if fmt != fmt_expected:
+        raise _bad(path, f"format {fmt!r}, this version reads {fmt_expected!r}", what)
     try:
-        meta = BundleMeta.model_validate_json(raw)
+        meta = schema.model_validate_json(raw)
     except ValidationError as exc:
-        raise _bad(path, format_validation_error(exc).replace("dm:", "")) from None
+        raise _bad(path, format_validation_error(exc).replace("dm:", ""), what) from None
     return meta, tensors
 
 
-def check_weights(path: str | Path, what: str, expected: Mapping[str, Tensor], given: Mapping[str, Tensor]) -> None:
+def check_weights(
+    path: str | Path, what: str, expected: Mapping[str, Tensor], given: Mapping[str, Tensor], file: str = MODEL_FILE
+) -> None:
     """Refuse weights that do not fit a network before they are loaded into it: a missing or
     unexpected tensor, another shape or type (an int8 tensor would be cast without a word),
     or a value that is not finite.
@@ -251,7 +277,7 @@ def check_weights(path: str | Path, what: str, expected: Mapping[str, Tensor], g
     if missing or extra:
         name = missing[0] if missing else extra[0]
         why = "is missing" if missing else "is not part of it"
-        raise _bad(path, f"the {what}'s weights do not fit: {name} {why}")
+        raise _bad(path, f"the {what}'s weights do not fit: {name} {why}", file)
     for name, want in expected.items():
         got = given[name]
         if tuple(got.shape) != tuple(want.shape) or got.dtype != want.dtype:
@@ -259,9 +285,10 @@ def check_weights(path: str | Path, what: str, expected: Mapping[str, Tensor], g
                 path,
                 f"the {what}'s weights do not fit: {name} is {got.dtype} {tuple(got.shape)}, "
                 f"expected {want.dtype} {tuple(want.shape)}",
+                file,
             )
         if got.is_floating_point() and not bool(torch.isfinite(got).all()):
-            raise _bad(path, f"the {what}'s weights are not finite ({name})")
+            raise _bad(path, f"the {what}'s weights are not finite ({name})", file)
 
 
 def versions() -> dict[str, str]:

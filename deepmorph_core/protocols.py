@@ -187,6 +187,8 @@ class Candidate:
         homography: ``(3, 3)`` SVG units -> pixels, when the proposer already fixes the
             drawing's frame exactly (the whole image framed by its ink); ``None`` otherwise.
         source: what proposed it (``"detector"``, ``"whole-frame"``, a detector's name ...).
+        sized: the outline's size comes from the print's own ink (the universal detector's):
+            alignment searches other turns of it, not other sizes.
     """
 
     corners: np.ndarray
@@ -194,6 +196,7 @@ class Candidate:
     bbox: tuple[int, int, int, int]
     homography: np.ndarray | None = None
     source: str = "detector"
+    sized: bool = False
 
 
 @runtime_checkable

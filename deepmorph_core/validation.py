@@ -151,7 +151,10 @@ def validation_warning(records: list[ValidationRecord], label: str) -> str | Non
     if misread >= missed or any(r.wrong for r in weak):
         advice.append("train with fewer --payload-bits (see `deepmorph capacity`), more --steps, or wider bounds")
     if missed and missed >= misread:
-        advice.append("most captures not read were not found: a detector (`deepmorph train-detector`) finds them")
+        advice.append(
+            "most captures not read were not found: a detector of the drawing's own"
+            " (`deepmorph train-detector`, about 2 minutes) may find them"
+        )
     return (
         f"{label}: validation read fewer than {TARGET_RATE:.0%} of fresh payloads ({'; '.join(parts)}); "
         + "; ".join(advice)

@@ -108,7 +108,9 @@ class Aligner:
             seen_in = pyramid
             if cand.homography is None:  # a detector's outline: its turn and size may be off, search wider
                 start = self.homography(cand.corners)
-                alignment = refine(pyramid, start, self.template, orders=4, accept=self.min_correlation)
+                alignment = refine(
+                    pyramid, start, self.template, orders=4, accept=self.min_correlation, sized=cand.sized
+                )
                 missed = not self.accepts(alignment)
                 # a shadow edge across the print can make the alignment fail, or bend it and
                 # still leave it above the bar, or leave only a wider search's start to align:
@@ -116,7 +118,9 @@ class Aligner:
                 # failed or correlates worse
                 if gray is not None and (missed or alignment.correlation < WEAK_ALIGNMENT or alignment.searched):
                     flat = self.in_flat_light(gray, cand.corners)
-                    in_flat = refine(flat, start, self.template, orders=4, accept=self.min_correlation)
+                    in_flat = refine(
+                        flat, start, self.template, orders=4, accept=self.min_correlation, sized=cand.sized
+                    )
                     if missed or (self.accepts(in_flat) and in_flat.correlation > alignment.correlation):
                         seen_in, alignment = flat, in_flat
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick

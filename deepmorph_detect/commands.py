@@ -46,7 +46,11 @@ CameraOpt = Annotated[
 ]
 DetectorOpt = Annotated[
     Optional[str],
-    typer.Option("--detector", help="The detector plugin to propose drawings (default: the one the model names)."),
+    typer.Option(
+        "--detector",
+        help="The detector plugin to propose drawings (default: the one the model names, else 'universal';"
+        " 'none': whole images only).",
+    ),
 ]
 HardOpt = Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")]
 
@@ -134,9 +138,8 @@ def decode(
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.camera import parse_camera
     from deepmorph_detect.locate import Locator
-    from deepmorph_detect.media import check_video, folder_frames, is_video, video_frame_count, video_frames
     from deepmorph_detect.overlay import draw_overlay
-    from deepmorph_detect.reading import folder_images, read_sequence
+    from deepmorph_detect.reading import FrameSource, read_sequence
 
     use_threads(threads)
     m = DeepMorphModel.load(model)
@@ -149,11 +152,11 @@ def decode(
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []
     for path in inputs:  # every input is checked before any work
-        if path.is_dir():
-            jobs.append(("folder", path, folder_frames(path)))
-        elif is_video(path):
-            _fits_camera(cam, path, check_video(path))
-            jobs.append(("video", path, None))
+        source = FrameSource.open(path)
+        if source is not None:
+            if source.frame_size is not None:
+                _fits_camera(cam, path, source.frame_size)
+            jobs.append(("sequence", path, source))
         else:
             image = read_image_bgr(path)
             _fits_camera(cam, path, (image.shape[1], image.shape[0]))
@@ -182,11 +185,9 @@ def decode(
                 if image_task is not None:
                     progress.advance(image_task)
                 continue
-            frames = folder_images(payload) if kind == "folder" else video_frames(path, every)
-            total = len(payload) if kind == "folder" else video_frame_count(path, every)
-            task = progress.add_task(path.name, total=total)
+            task = progress.add_task(path.name, total=payload.count(every))
             reading = read_sequence(
-                locator, frames, camera=cam, soft=soft, name=str(path),
+                locator, payload.frames(every), camera=cam, soft=soft, name=str(path),
                 on_frame=lambda task=task: progress.advance(task),
                 on_skip=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
             )  # fmt: skip
@@ -375,7 +376,9 @@ def bench_photos_cmd(
 def train_detector_cmd(
     model: ModelArg,
     out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Training steps.")] = 2000,
+    steps: Annotated[
+        int, typer.Option("--steps", min=1, help="Training steps (from scratch: about 2000, with --lr 2e-3).")
+    ] = 300,
     batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
     seed: SeedOpt = 0,
     threads: ThreadsOpt = None,
@@ -384,7 +387,7 @@ def train_detector_cmd(
         int,
         typer.Option("--channels", min=8, max=256, help="Channel width of the network (16: about half the time)."),
     ] = 32,
-    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 2e-3,
+    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 5e-4,
     fine_tune: Annotated[
         bool,
         typer.Option(
@@ -393,10 +396,20 @@ def train_detector_cmd(
             " use another --seed for new scenes and a lower --lr.",
         ),
     ] = False,
+    from_scratch: Annotated[
+        bool,
+        typer.Option(
+            "--from-scratch",
+            help="Start from random weights instead of the shipped universal detector"
+            " (give about --steps 2000 --lr 2e-3).",
+        ),
+    ] = False,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
     as_json: JsonOpt = False,
 ) -> None:
-    """Train the detector of a model on synthetic scenes and store it in the bundle."""
+    """Fine-tune a detector for one model, starting from the universal detector every model
+    already has (about 2 minutes), and store it in the bundle. Worth it only where
+    `bench/universal_detector.py` shows it finds more of the drawing."""
     from deepmorph_detect.detector_training import DetectorConfig, train_detector
 
     config = (
@@ -411,6 +424,7 @@ def train_detector_cmd(
             width=width,
             lr=lr,
             fine_tune=fine_tune,
+            start="scratch" if from_scratch else "universal",
         )
     )
     use_threads(threads)

@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -33,11 +33,12 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
-from deepmorph_detect.scenes import Placement, SceneMaker
+from deepmorph_detect.scenes import Placement, Scene, SceneMaker
+from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 
 
-class DetectorConfig(BaseModel):
-    """Detector training settings (stored in the bundle).
+class SceneTrainingConfig(BaseModel):
+    """Settings of a detector network trained on scenes (stored with it).
 
     Attributes:
         steps, batch, lr: optimisation (Adam, cosine decay to 5 %).
@@ -45,8 +46,6 @@ class DetectorConfig(BaseModel):
         seed: scenes and initialisation.
         threads: torch threads of the training process.
         workers: scene-making processes (0: in the training process).
-        fine_tune: start from the detector already in the bundle (same width) instead of from
-            scratch; the runs it came from are kept in the bundle (``DetectorMeta.earlier``).
         checkpoint_every, log_every: in steps.
     """
 
@@ -59,9 +58,27 @@ class DetectorConfig(BaseModel):
     seed: int = 0
     threads: int | None = Field(default=1, ge=1, le=256)
     workers: int = Field(default=1, ge=0, le=16)
-    fine_tune: bool = False
     checkpoint_every: int = Field(default=200, ge=1)
     log_every: int = Field(default=25, ge=1)
+
+
+class DetectorConfig(SceneTrainingConfig):
+    """A model's own detector's training settings (stored in the bundle).
+
+    By default a short fine-tune of the shipped universal detector (:mod:`deepmorph_detect.universal`):
+    300 steps at ``lr`` 5e-4. From scratch (``start="scratch"``) takes about 2000 steps at 2e-3.
+
+    Attributes:
+        fine_tune: start from the detector already in the bundle (same width); the runs it
+            came from are kept in the bundle (``DetectorMeta.earlier``).
+        start: without ``fine_tune``, where the network starts: the universal detector (whose
+            width it must have) or ``scratch``.
+    """
+
+    steps: int = Field(default=300, ge=1, le=10_000_000)
+    lr: float = Field(default=5e-4, gt=0, le=1)
+    fine_tune: bool = False
+    start: Literal["universal", "scratch"] = "universal"
 
 
 def targets_for(placements: list[Placement], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -119,16 +136,25 @@ class SceneBatches(torch.utils.data.IterableDataset):
     would make every step and each batch would be trained on once per worker).
     """
 
-    def __init__(self, model: DeepMorphModel, config: DetectorConfig, start: int, stop: int) -> None:
+    def __init__(self, model: DeepMorphModel | None, config: Any, start: int, stop: int) -> None:
         super().__init__()
         self.model, self.cfg, self.start, self.stop = model, config, start, stop
 
-    def __iter__(self) -> Iterator[tuple[Tensor, Tensor, Tensor, Tensor]]:
-        torch.set_num_threads(1)
-        makers = {
+    def makers(self) -> dict[str, SceneMaker]:
+        """The scene makers by severity (made in each worker)."""
+        return {
             sev: SceneMaker(self.model, INPUT_SIZE, sev, seed=self.cfg.seed, payload_pool=96, camera_width=PHOTO_SIZE)
             for sev in ("medium", "hard")
         }
+
+    def make(self, maker: SceneMaker, rng: np.random.Generator) -> Scene:
+        """One training scene: up to three of the model's prints, other icons, an ArUco marker."""
+        n = int(rng.choice([0, 1, 1, 1, 1, 2, 2, 3]))
+        return maker.make(drawings=n, distractors=int(rng.integers(0, 3)), aruco=bool(rng.random() < 0.2))
+
+    def __iter__(self) -> Iterator[tuple[Tensor, Tensor, Tensor, Tensor]]:
+        torch.set_num_threads(1)
+        makers = self.makers()
         worker = torch.utils.data.get_worker_info()
         first, every = (0, 1) if worker is None else (worker.id, worker.num_workers)
         for step in range(self.start + first, self.stop, every):
@@ -137,8 +163,7 @@ class SceneBatches(torch.utils.data.IterableDataset):
             for _ in range(self.cfg.batch):
                 maker = makers["hard" if rng.random() < 0.5 else "medium"]
                 maker.rng = np.random.default_rng(rng.integers(2**63))
-                n = int(rng.choice([0, 1, 1, 1, 1, 2, 2, 3]))
-                scene = maker.make(drawings=n, distractors=int(rng.integers(0, 3)), aruco=bool(rng.random() < 0.2))
+                scene = self.make(maker, rng)
                 gray = scene.image.astype(np.float32).mean(-1) / 255.0
                 h, c, m = targets_for(scene.placements, INPUT_SIZE)
                 imgs.append(gray[None])
@@ -177,12 +202,8 @@ class DetectorRun:
     panels = DETECTOR_PANELS
 
     def __init__(self, model: DeepMorphModel, config: DetectorConfig, out: Path):
-        self.model, self.cfg, self.out = model, config, Path(out)
-        if config.threads:
-            torch.set_num_threads(config.threads)
-        torch.manual_seed(config.seed)
-        self.net = DetectorNet(config.width)
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        self.model = model
+        self.set_up(config, out)
         meta = model.meta.detector
         resuming = meta is not None and not meta.record.finished and "dtrain.step" in model.extra_tensors
         self.record = meta.record if resuming and meta else TrainingRecord(total_steps=config.steps)
@@ -195,20 +216,34 @@ class DetectorRun:
                 raise DeepMorphError(f"--fine-tune: the model's detector has width {stored_width}, not {config.width}")
             self.net.load_state_dict(stored_weights(model.detector_state))
             self.earlier.append({"config": meta.config, "record": meta.record.model_dump()})
+        elif config.start == "universal" and not resuming:
+            universal, _, meta_u, _ = load_universal(UNIVERSAL_PATH)
+            if meta_u.width != config.width:
+                raise DeepMorphError(
+                    f"the universal detector has width {meta_u.width}, not {config.width}: "
+                    f"use --channels {meta_u.width}, or start from scratch"
+                )
+            self.net.load_state_dict(universal.state_dict())
+            self.earlier.append({"config": {"universal": meta_u.config}, "record": meta_u.record.model_dump()})
         self.record.total_steps = config.steps
         self.record.threads = torch.get_num_threads()
         if resuming:
             self.net.load_state_dict(stored_weights(model.detector_state))
-            sd = self.opt.state_dict()
-            state: dict[int, dict[str, Any]] = {}
-            for key, val in model.extra_tensors.items():
-                if key.startswith("dtrain.opt."):
-                    _, _, pid, name = key.split(".", 3)
-                    state.setdefault(int(pid), {})[name] = val
-            sd["state"] = state
-            self.opt.load_state_dict(sd)
-            torch.set_rng_state(model.extra_tensors["dtrain.rng"])
+            restore_optimiser(self.opt, model.extra_tensors)
         self._batches: Iterator[tuple[Tensor, Tensor, Tensor, Tensor]] | None = None
+
+    def set_up(self, config: SceneTrainingConfig, out: Path) -> None:
+        """Threads, seed, a fresh network and its optimiser."""
+        self.cfg, self.out = config, Path(out)
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        torch.manual_seed(config.seed)
+        self.net = DetectorNet(config.width)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+
+    def dataset(self) -> SceneBatches:
+        """The scenes of the steps still to train."""
+        return SceneBatches(self.model, self.cfg, self.record.step, self.cfg.steps)
 
     def checkpoint(self) -> None:
         """Write the bundle with the detector (and optimiser state until finished; at the end,
@@ -219,11 +254,7 @@ class DetectorRun:
         )
         extra: dict[str, Tensor] = {}
         if not self.record.finished:
-            extra["dtrain.step"] = torch.tensor([self.record.step])
-            extra["dtrain.rng"] = torch.get_rng_state()
-            for pid, st in self.opt.state_dict()["state"].items():
-                for key, val in st.items():
-                    extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+            extra = optimiser_tensors(self.opt, self.record.step)
         else:
             self.net.eval()
             try:
@@ -241,7 +272,7 @@ class DetectorRun:
         """One optimisation step on the next batch of scenes; its losses, centre recall and
         corner error (pixels at the network's input size)."""
         if self._batches is None:  # scene workers start with the first step
-            data = SceneBatches(self.model, self.cfg, self.record.step, self.cfg.steps)
+            data = self.dataset()
             workers = self.cfg.workers
             self._batches = iter(
                 torch.utils.data.DataLoader(
@@ -265,6 +296,29 @@ class DetectorRun:
         self.opt.step()
         return {"loss": loss.item(), "heat": lh.item(), "corner": lc.item() * STRIDE,
                 "recall": _peak_recall(hl.detach(), heat)}  # fmt: skip
+
+
+def optimiser_tensors(opt: torch.optim.Optimizer, step: int) -> dict[str, Tensor]:
+    """A checkpoint's resume state: the step, torch's random state and the optimiser's state,
+    as tensors named ``dtrain.*``."""
+    extra = {"dtrain.step": torch.tensor([step]), "dtrain.rng": torch.get_rng_state()}
+    for pid, st in opt.state_dict()["state"].items():
+        for key, val in st.items():
+            extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+    return extra
+
+
+def restore_optimiser(opt: torch.optim.Optimizer, tensors: dict[str, Tensor]) -> None:
+    """Put back what :func:`optimiser_tensors` saved (the optimiser's state, torch's random state)."""
+    sd = opt.state_dict()
+    state: dict[int, dict[str, Any]] = {}
+    for key, val in tensors.items():
+        if key.startswith("dtrain.opt."):
+            _, _, pid, name = key.split(".", 3)
+            state.setdefault(int(pid), {})[name] = val
+    sd["state"] = state
+    opt.load_state_dict(sd)
+    torch.set_rng_state(tensors["dtrain.rng"])
 
 
 def quad_loss(pred: Tensor, target: Tensor, mask: Tensor) -> Tensor:
@@ -353,9 +407,12 @@ def _validate_close_ups_again(out: Path, seed: int) -> None:
 
 __all__ = [
     "DetectorConfig",
+    "SceneTrainingConfig",
     "DetectorSummary",
     "DetectorRun",
     "SceneBatches",
+    "optimiser_tensors",
+    "restore_optimiser",
     "quad_loss",
     "targets_for",
     "train_detector",

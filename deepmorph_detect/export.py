@@ -24,6 +24,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_detect.network import INPUT_SIZE, STRIDE
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR
+from deepmorph_detect.universal import UniversalDetector, ink_square
 
 FORMAT = "deepmorph-export/1"
 FILES = {"decoder": "decoder.onnx", "detector": "detector.onnx"}
@@ -61,16 +62,21 @@ def model_graphs(model: DeepMorphModel, registry: Registry | None = None) -> tup
     if "decoder" not in model.graphs:
         model.graphs["decoder"] = model.decoder_graph()
     meta = model.meta.detector
-    if meta is None:
-        notes.append("no detector: the model has none (`deepmorph train-detector` adds one)")
+    if meta is None:  # the shipped universal detector's graph, not stored in the bundle (no weights there)
+        universal = UniversalDetector.graph(model)
+        graphs = {name: model.graphs[name] for name in FILES if name in model.graphs}
+        if universal is None:
+            notes.append("no detector: the universal detector's file holds no ONNX graph")
+            return graphs, notes
+        notes.append("detector: the universal one (its quadrilaterals are ink squares: manifest.json)")
+        return {**graphs, "detector": universal}, notes
+    detector = (registry or default_registry()).detector(meta.name)
+    make = getattr(detector, "graph", None)
+    graph = make(model) if make is not None else None
+    if graph is None:
+        notes.append(f"no detector: the {meta.name!r} detector has no ONNX graph")
     else:
-        detector = (registry or default_registry()).detector(meta.name)
-        make = getattr(detector, "graph", None)
-        graph = make(model) if make is not None else None
-        if graph is None:
-            notes.append(f"no detector: the {meta.name!r} detector has no ONNX graph")
-        else:
-            model.graphs["detector"] = graph
+        model.graphs["detector"] = graph
     return {name: model.graphs[name] for name in FILES if name in model.graphs}, notes
 
 
@@ -157,6 +163,16 @@ def manifest(model: DeepMorphModel, graphs: dict[str, StoredGraph]) -> dict[str,
             "max_detections": 12,
             "max_abs_diff_vs_pytorch": det.max_abs_diff,
         }
+        if model.meta.detector is None:  # the universal detector: its quadrilaterals are ink squares
+            md = model.drawing
+            square = ink_square(md.to_svg(md.neutral_values()[0]), md.drawing.viewbox)
+            out["detector"]["name"] = UniversalDetector.name
+            out["detector"]["quadrilateral"] = {
+                "corners": [[round(float(x), 4), round(float(y), 4)] for x, y in square],
+                "meaning": "a detection's quadrilateral is these points (SVG units: the square around the "
+                "drawing's ink), not the frame corners: map it to template.frame_corners through the "
+                "homography from these points to the quadrilateral",
+            }
     return out
 
 

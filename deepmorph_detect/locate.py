@@ -40,15 +40,30 @@ from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
 from deepmorph_detect.synthesis import MorphSynthesis
+from deepmorph_detect.universal import UniversalDetector
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
 # vouches for it, so another drawing aligning just above the bar is not reported
 UNREAD_MARGIN = 0.05
+#: ... and one whose proposer does not know the drawing (the universal detector's, which proposes
+#: every print, and the whole image framed by its ink) must align at least this well: other
+#: drawings align to simple ones (a bar chart) up to 0.75
+UNREAD_BLIND_CORRELATION = 0.8
+#: Proposers that do not know the drawing: their readings always take the per-bit check, since
+#: every other drawing they propose is one more chance at a CRC collision
+BLIND_SOURCES = frozenset({UniversalDetector.name})
+
+
+#: The detector of a bundle that stores none of its own (``universal``: shipped, for any drawing).
+DEFAULT_DETECTOR = "universal"
+#: The name that asks for no detector: only whole images framed by their ink are tried.
+NO_DETECTOR = "none"
 
 
 def detector_for(model: DeepMorphModel, detector: Detector | str | None, registry: Registry) -> Detector | None:
     """The detector a locator uses: ``detector`` itself, the registered detector of that name,
-    or (``None``) the one the bundle names; ``None`` when the model has no trained one.
+    or (``None``) the one the bundle names, else :data:`DEFAULT_DETECTOR`; ``None`` for
+    :data:`NO_DETECTOR`.
 
     Raises:
         PluginError: no detector of that name is installed.
@@ -56,8 +71,8 @@ def detector_for(model: DeepMorphModel, detector: Detector | str | None, registr
     """
     if detector is not None and not isinstance(detector, str):
         return detector
-    name = detector if detector is not None else (model.meta.detector.name if model.meta.detector else None)
-    if name is None:
+    name = detector if detector is not None else (model.meta.detector.name if model.meta.detector else DEFAULT_DETECTOR)
+    if name == NO_DETECTOR:
         return None
     found = registry.detector(name).from_model(model)
     if found is None and detector is not None:
@@ -71,7 +86,8 @@ class Locator:
     Args:
         model: the trained model.
         detector: a detector, the name of a registered one, or ``None`` for the one the bundle
-            names (none: only whole images framed by their ink are tried).
+            names (else the universal detector); ``"none"``: only whole images framed by their
+            ink are tried.
         min_correlation: the bar an alignment must reach to be this drawing.
         registry: where detector names are looked up (default: every installed plugin).
     """
@@ -159,13 +175,17 @@ class Locator:
 
     def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
         """Each aligned drawing decoded (:meth:`decode_drawing`); one whose payload is not read
-        only when it aligns at least :data:`UNREAD_MARGIN` above ``min_correlation``."""
+        only when it aligns at least :data:`UNREAD_MARGIN` above ``min_correlation`` (at least
+        :data:`UNREAD_BLIND_CORRELATION` when its proposer does not know the drawing)."""
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment
             located = self.decode_drawing(gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft)
             located.needs_px = float(self.model.width)  # prints narrower than the decoder's frame lose detail
-            if located.result.ok or alignment.correlation >= self.min_correlation + UNREAD_MARGIN:
+            # the universal detector's; the whole image's unless too small to read (a tiny scan)
+            blind = cand.sized or (cand.homography is not None and not located.too_small)
+            bar = UNREAD_BLIND_CORRELATION if blind else self.min_correlation + UNREAD_MARGIN
+            if located.result.ok or alignment.correlation >= bar:
                 results.append(located)
         return results
 
@@ -196,7 +216,9 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
-            attempt = self.checker.check(pyramid, H, reading.result, alignment, bitwise)
+            attempt = self.checker.check(
+                pyramid, H, reading.result, alignment, True if source in BLIND_SOURCES else bitwise
+            )
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
             if attempt.status == "passed":
@@ -229,4 +251,12 @@ class Locator:
         return f"Locator({self.model.meta.drawing_name!r}, detector={detector!r}, renderer={self.renderer_name!r})"
 
 
-__all__ = ["UNREAD_MARGIN", "Locator", "detector_for"]
+__all__ = [
+    "DEFAULT_DETECTOR",
+    "NO_DETECTOR",
+    "UNREAD_MARGIN",
+    "UNREAD_BLIND_CORRELATION",
+    "BLIND_SOURCES",
+    "Locator",
+    "detector_for",
+]

@@ -47,18 +47,24 @@ def printed(
     return colour_print(render_svg_rgb(svg, width), colours, rng)
 
 
-def validate_close_ups(
-    model: DeepMorphModel, samples: int, seed: int = 0, severity: str = SEVERITY, print_px: float | None = None
+def validate_close_ups(  # noqa: PLR0913
+    model: DeepMorphModel,
+    samples: int,
+    seed: int = 0,
+    severity: str = SEVERITY,
+    print_px: float | None = None,
+    detector: str | None = None,
 ) -> ValidationRecord:
     """Read ``samples`` fresh payloads from close-up photos through the photo chain: photos
-    :data:`PHOTO_PX` wide, or with the drawing about ``print_px`` camera pixels wide."""
+    :data:`PHOTO_PX` wide, or with the drawing about ``print_px`` camera pixels wide; with the
+    model's detector, or the one named by ``detector`` (``"none"``: whole images only)."""
     start = time.perf_counter()
     model.eval()
     codec = model.codec
     rng = np.random.default_rng(seed + 7)
     payloads = random_payloads(samples, codec.spec.payload_bits, rng)
     codes = codec.encode(payloads)
-    locator = Locator(model)
+    locator = Locator(model, detector=detector)
     colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
     added = model_added_steps(model)
     photo_px = PHOTO_PX if print_px is None else photo_for_print(print_px)

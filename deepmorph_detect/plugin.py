@@ -18,10 +18,13 @@ if TYPE_CHECKING:
 
 @hookimpl
 def deepmorph_register_detectors(register: Register) -> None:
-    """Register the built-in detector (imported here, not at load: see hookspecs)."""
+    """Register the built-in detectors: the per-drawing one and the universal one (imported
+    here, not at load: see hookspecs)."""
     from deepmorph_detect.centrenet import CentreNetDetector
+    from deepmorph_detect.universal import UniversalDetector
 
     register.detector(CentreNetDetector)
+    register.detector(UniversalDetector)
 
 
 @hookimpl

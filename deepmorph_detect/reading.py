@@ -57,6 +57,51 @@ def folder_images(files: Iterable[Path]) -> Iterator[tuple[str, np.ndarray | Dee
             yield path.name, exc
 
 
+@dataclass
+class FrameSource:
+    """A sequence on disk, checked before any work: a folder of frames or a video.
+
+    Attributes:
+        path: the folder or the video.
+        files: a folder's image files in name order; ``None`` for a video.
+        frame_size: a video's ``(width, height)``; ``None`` for a folder (its images may differ).
+    """
+
+    path: Path
+    files: list[Path] | None = None
+    frame_size: tuple[int, int] | None = None
+
+    @classmethod
+    def open(cls, path: str | Path) -> FrameSource | None:
+        """The sequence at ``path``; ``None`` when it is neither a folder nor a video (a single
+        image, read by :meth:`~deepmorph_detect.locate.Locator.locate`).
+
+        Raises:
+            DeepMorphError: a folder without image files; a missing or unreadable video.
+        """
+        from deepmorph_detect.media import check_video, folder_frames, is_video
+
+        path = Path(path)
+        if path.is_dir():
+            return cls(path, files=folder_frames(path))
+        if is_video(path):
+            return cls(path, frame_size=check_video(path))
+        return None
+
+    def frames(self, every: int = 1) -> Iterator[tuple[str, np.ndarray | DeepMorphError]]:
+        """``(label, BGR frame)`` in order (every ``every``-th frame of a video); ``(label,
+        error)`` for a folder's file that cannot be read."""
+        from deepmorph_detect.media import video_frames
+
+        return folder_images(self.files) if self.files is not None else video_frames(self.path, every)
+
+    def count(self, every: int = 1) -> int | None:
+        """How many frames :meth:`frames` gives (a video's container may not say: ``None``)."""
+        from deepmorph_detect.media import video_frame_count
+
+        return len(self.files) if self.files is not None else video_frame_count(self.path, every)
+
+
 class SequenceReader:
     """Frames read one at a time (a camera's stream, or a folder's files in order): each drawing
     read in a frame is followed into the next, and the readings of a drawing are fused over the
@@ -151,4 +196,4 @@ def read_sequence(
     return SequenceReading(reader.frames, reader.fused(), skipped, reader.last)
 
 
-__all__ = ["SequenceReader", "SequenceReading", "SkipHook", "folder_images", "read_sequence"]
+__all__ = ["FrameSource", "SequenceReader", "SequenceReading", "SkipHook", "folder_images", "read_sequence"]

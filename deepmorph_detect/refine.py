@@ -275,6 +275,7 @@ def refine(
     orders: int = 1,
     min_start: float = 0.1,
     accept: float | None = None,
+    sized: bool = False,
 ) -> Alignment | None:
     """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
     template's levels.
@@ -295,6 +296,8 @@ def refine(
             (:func:`~deepmorph_detect.inkstart.ink_starts`). What they find must reach
             ``accept`` plus :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is
             returned. ``None``: the quick path only.
+        sized: the outline's size comes from the print's own ink (the universal detector's ink
+            square): the wider searches then only turn it (no other scales, no ink starts).
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -358,9 +361,11 @@ def refine(
     if good(best):
         return searched(best)
     # the outline itself is off: turned or scaled starts
-    best = best_few(outline_sweep(homography, template), best)
+    best = best_few(outline_sweep(homography, template, scales=(1.0,) if sized else SWEEP_SCALES), best)
     if good(best):
         return searched(best)
+    if sized:
+        return quick
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
     # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
     quad = project(homography, viewbox_corners(template.viewbox))

@@ -51,6 +51,7 @@ def onnx_or_torch(
     net: Network,
     examples: Sequence[Tensor],
     export: Callable[[], StoredGraph],
+    graph: StoredGraph | None = None,
 ) -> Network:
     """The network ``name`` of ``model`` run by ONNX Runtime, or ``net`` (PyTorch) itself.
 
@@ -67,14 +68,16 @@ def onnx_or_torch(
         net: the PyTorch network (eval mode, batch norms folded), or a callable around it.
         examples: inputs the graph is checked on.
         export: makes the graph from ``net``'s weights.
+        graph: the stored graph to use for a network of no model (the universal detector's).
     """
     label = (model.source if model is not None else None) or "the model"
-    stored = model.graphs.get(name) if model is not None else None
+    stored = model.graphs.get(name) if model is not None else graph
     if stored is not None:
         fast, problem = _checked(stored, net, examples)
         if fast is not None:
             return fast
-        model.graphs.pop(name, None)  # type: ignore[union-attr]
+        if model is not None:
+            model.graphs.pop(name, None)
         _warn(f"{label}: its stored ONNX graph {name!r} is not used: {problem}")
     t0 = time.perf_counter()
     try:

@@ -151,21 +151,34 @@ class SceneMaker:
         payload_pool: int | None = None,
         camera_width: int | None = None,
     ) -> None:
-        self.severity = photo_ranges(severity)
         self.model = model
-        shrink = size[0] / camera_width if camera_width else 1.0
-        self._capture = capture_pipeline(severity, shrink, model_added_steps(model))
-        self.size = size
-        self.rng = np.random.default_rng(seed)
+        self._set_up(size, severity, seed, camera_width, model_added_steps(model), model.drawing.colour)
         self.viewbox = model.drawing.drawing.viewbox
         self._pool: list[np.ndarray] | None = None
         if payload_pool:
             bits = model.codec.spec.payload_bits
             self._pool = [self.rng.integers(0, 2, bits).astype(np.uint8) for _ in range(payload_pool)]
         self._svg_cache: dict[int, str] = {}
+
+    def _set_up(
+        self,
+        size: tuple[int, int],
+        severity: str,
+        seed: int,
+        camera_width: int | None,
+        added: list[AugmentationSpec],
+        colour: bool,
+    ) -> None:
+        """The capture, the random stream and the render cache (shared with subclasses that
+        print other drawings)."""
+        self.severity = photo_ranges(severity)
+        shrink = size[0] / camera_width if camera_width else 1.0
+        self._capture = capture_pipeline(severity, shrink, added)
+        self.size = size
+        self.rng = np.random.default_rng(seed)
         self._render_cache: dict[tuple[str, int], np.ndarray] = {}
         # a colour drawing is printed in colour through the colour plugins of the capture
-        self._colours = build_pipeline(severity, 64, colour=True) if model.drawing.colour else None
+        self._colours = build_pipeline(severity, 64, colour=True) if colour else None
 
     # -- sampling ------------------------------------------------------------------------
 
@@ -181,6 +194,21 @@ class SceneMaker:
         sv = self.severity
         framing = _Framing(sv.size, sv.tilt_deg, (0.0, 2 * math.pi), (0.1, 0.9))
         return _pose(cam, self.size, half_extent, framing, self.rng, taken)
+
+    def _next_drawing(self) -> tuple[float, float, float, float]:
+        """Choose the next drawing to print (before its pose); its viewBox. Here always the
+        model's; a subclass may choose among several."""
+        return self.viewbox
+
+    def _drawing_art(self, width: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """The drawing chosen last, printed ``width`` pixels wide: its art (1 = white), its
+        payload bits, and the corners (SVG units; TL, TR, BR, BL) its truth names: here a fresh
+        payload morph and its viewBox's corners."""
+        idx, payload = self._payload()
+        if idx >= 0 and idx not in self._svg_cache:
+            self._svg_cache[idx] = self.model.encode(payload)
+        svg = self._svg_cache[idx] if idx >= 0 else self.model.encode(payload)
+        return self._render(f"p{idx}", svg, width, idx >= 0, colour=True), payload, viewbox_corners(self.viewbox)
 
     def _payload(self) -> tuple[int, np.ndarray]:
         if self._pool is not None:
@@ -227,8 +255,6 @@ class SceneMaker:
         img = random_background(rng, self.size)
         taken: list[np.ndarray] = []
         placements: list[Placement] = []
-        _, _, vw, vh = self.viewbox
-        to_frame = viewbox_to_frame(self.viewbox)  # drawing (SVG units) -> pose frame
         jobs: list[str] = ["drawing"] * drawings + ["distractor"] * distractors
         if aruco:
             jobs.append("aruco")
@@ -236,6 +262,8 @@ class SceneMaker:
             jobs.append("qr")
         for kind in jobs:
             margin = rng.uniform(0.08, 0.3)
+            viewbox = self._next_drawing() if kind == "drawing" else self.viewbox
+            _, _, vw, vh = viewbox
             aspect = vh / vw if kind in ("drawing", "distractor") else 1.0
             pose = self._pose(cam, np.array([0.5 + margin, aspect / 2 + margin]), taken)
             if pose is None:
@@ -244,13 +272,9 @@ class SceneMaker:
             plane = homography_from_pose(cam, rvec, tvec)  # frame units -> pixels
             width_px = _projected_width(plane)
             rw = int(np.clip(2 ** math.ceil(math.log2(max(width_px * 1.2, 32))), 32, 1024))
-            payload, label = None, ""
+            payload, label, corners_src = None, "", None
             if kind == "drawing":
-                idx, payload = self._payload()
-                if idx >= 0 and idx not in self._svg_cache:
-                    self._svg_cache[idx] = self.model.encode(payload)
-                svg = self._svg_cache[idx] if idx >= 0 else self.model.encode(payload)
-                art = self._render(f"p{idx}", svg, rw, idx >= 0, colour=True)
+                art, payload, corners_src = self._drawing_art(rw)
             elif kind == "distractor":
                 icons = distractor_svgs()
                 label, svg = icons[int(rng.integers(len(icons)))]
@@ -261,13 +285,14 @@ class SceneMaker:
             # art pixels -> frame units -> image pixels
             art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
             _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng)
-            if kind == "drawing":  # truth in SVG units
-                truth = plane @ to_frame
+            if kind == "drawing":  # truth in SVG units (drawing -> pose frame -> pixels)
+                truth = plane @ viewbox_to_frame(viewbox)
             elif kind == "distractor":  # truth in the icon's art pixels
                 truth = plane @ art_to_frame
             else:  # truth on the unit square
                 truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])
-            corners_src = _frame_corners(kind, self.viewbox, art.shape)
+            if corners_src is None:
+                corners_src = _frame_corners(kind, art.shape)
             placements.append(Placement(kind, rvec, tvec, truth, project(truth, corners_src), payload, label))
         warps = [np.eye(3)]
         for _ in range(1, max(1, frames)):
@@ -425,9 +450,7 @@ def _moved(img: np.ndarray, M: np.ndarray) -> np.ndarray:
     return cv2.warpPerspective(img, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
 
 
-def _frame_corners(kind: str, viewbox: tuple[float, float, float, float], art_shape: tuple[int, int]) -> np.ndarray:
-    if kind == "drawing":
-        return viewbox_corners(viewbox)
+def _frame_corners(kind: str, art_shape: tuple[int, int]) -> np.ndarray:
     if kind == "distractor":
         h, w = art_shape
         return viewbox_corners((0, 0, w, h))

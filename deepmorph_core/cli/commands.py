@@ -603,7 +603,9 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     ]
     det = data["detector"]
     if det is None:
-        rows.append(("detector", "none (decode frames whole images; add one with `deepmorph train-detector`)"))
+        rows.append(
+            ("detector", "the shipped universal one (`deepmorph train-detector` fine-tunes one for this drawing)")
+        )
     else:
         drec = det["record"]
         rows.append(

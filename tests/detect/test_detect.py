@@ -449,9 +449,7 @@ def test_a_close_up_cut_by_a_sharp_shadow_is_framed_in_flat_light(model: DeepMor
     from deepmorph_core.payload import random_payloads
     from deepmorph_core.render import render_svg
 
-    no_detector = DeepMorphModel.load(BUNDLED_MODEL)
-    no_detector.meta.detector = None
-    locator = Locator(no_detector)
+    locator = Locator(DeepMorphModel.load(BUNDLED_MODEL), detector="none")
     assert locator.detector is None
     for seed, payload in enumerate(random_payloads(3, model.codec.spec.payload_bits, np.random.default_rng(3))):
         photo = close_up_photo(render_svg(model.encode(payload), 400), "easy", np.random.default_rng(seed), size)

@@ -76,7 +76,9 @@ def test_the_chain_uses_the_detector_asked_for_by_name(model: DeepMorphModel, re
     assert KnownCorners.calls == 1
     assert found.source == "known-corners" and found.ok
     assert np.array_equal(found.result.payload, scene.placements[0].payload)
-    with pytest.raises(PluginError, match="no detector 'nope' is installed \\(installed: centrenet, known-corners\\)"):
+    with pytest.raises(
+        PluginError, match="no detector 'nope' is installed \\(installed: centrenet, known-corners, universal\\)"
+    ):
         Locator(model, detector="nope", registry=registry)
 
 

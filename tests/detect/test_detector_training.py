@@ -79,7 +79,7 @@ def test_detector_input_is_standardised_as_the_network_was_trained() -> None:
 
 def _config(steps: int) -> DetectorConfig:
     return DetectorConfig(
-        steps=steps, batch=2, width=8, workers=0, threads=1, checkpoint_every=100, log_every=1, seed=4
+        steps=steps, batch=2, width=8, workers=0, threads=1, checkpoint_every=100, log_every=1, seed=4, start="scratch"
     )
 
 
@@ -141,7 +141,19 @@ def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_
     base = tmp_path / "base.dmm"
     train_detector(BUNDLED_MODEL, base, _config(2))
     tuned = tmp_path / "tuned.dmm"
-    args = ["train-detector", str(base), "--out", str(tuned), "--steps", "1", "--batch", "2", "--channels", "8"]
+    args = [
+        "train-detector",
+        str(base),
+        "--out",
+        str(tuned),
+        "--steps",
+        "1",
+        "--batch",
+        "2",
+        "--channels",
+        "8",
+        "--from-scratch",
+    ]
     res = runner.invoke(app, [*args, "--workers", "0", "--fine-tune", "--lr", "1e-6", "--seed", "5"])
     assert res.exit_code == 0, res.output
     before, after = DeepMorphModel.load(base), DeepMorphModel.load(tuned)
@@ -156,6 +168,27 @@ def test_fine_tuning_starts_from_the_bundles_detector_and_keeps_its_history(tmp_
     wider = ["train-detector", str(base), "--out", str(tmp_path / "wider.dmm"), "--steps", "1", "--channels", "16"]
     res = runner.invoke(app, [*wider, "--workers", "0", "--fine-tune"])
     assert res.exit_code == 1 and "width 8, not 16" in " ".join(res.output.split()), res.output
+
+
+def test_by_default_a_detector_is_a_short_fine_tune_of_the_universal_one(tmp_path: Path) -> None:
+    """Without options the network starts from the shipped universal detector, whose run the
+    bundle records; a width other than the universal detector's is a clear error."""
+    from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
+
+    assert DetectorConfig().start == "universal" and DetectorConfig().steps <= 400
+    out = tmp_path / "tuned.dmm"
+    args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--workers", "0"]
+    res = runner.invoke(app, [*args, "--lr", "1e-6"])
+    assert res.exit_code == 0, res.output
+    universal, _, meta, _ = load_universal(UNIVERSAL_PATH)
+    tuned = DeepMorphModel.load(out)
+    for key, val in universal.state_dict().items():
+        if val.is_floating_point() and "running" not in key:
+            torch.testing.assert_close(tuned.detector_state[f"detector.{key}"], val, atol=1e-4, rtol=0)
+    (earlier,) = tuned.meta.detector.earlier
+    assert earlier["record"]["step"] == meta.record.step and "universal" in earlier["config"]
+    res = runner.invoke(app, [*args[:2], "--out", str(tmp_path / "narrow.dmm"), "--steps", "1", "--channels", "8"])
+    assert res.exit_code == 1 and f"width {meta.width}, not 8" in " ".join(res.output.split()), res.output
 
 
 def test_an_existing_file_other_than_the_model_is_not_replaced(tmp_path: Path) -> None:
@@ -176,7 +209,7 @@ def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: 
     builds the network at that width from the bundle alone."""
     out = tmp_path / "slim.dmm"
     args = ["train-detector", str(BUNDLED_MODEL), "--out", str(out), "--steps", "1", "--batch", "2", "--channels", "8"]
-    res = runner.invoke(app, [*args, "--workers", "0", "--json"])
+    res = runner.invoke(app, [*args, "--workers", "0", "--from-scratch", "--json"])
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)  # one JSON object, nothing else on stdout (docs/cli.md)
     assert set(data) == {"written", "bundle", "log", "plot", "steps", "elapsed_s", "metrics"}
@@ -189,7 +222,7 @@ def test_width_option_sets_the_stored_network_and_the_locator_runs_it(tmp_path: 
     detector = CentreNetDetector.from_model(model)
     image = SceneMaker(model, (320, 240), "easy", seed=1).make(drawings=1).image
     assert isinstance(detector.detect(image), list)
-    res = runner.invoke(app, [*args[:-2], "--channels", "4"])
+    res = runner.invoke(app, [*args[:-2], "--channels", "4", "--from-scratch"])
     assert res.exit_code != 0 and "--channels" in res.output
 
 
@@ -208,3 +241,18 @@ def test_a_new_detector_replaces_the_stored_close_up_validation(tmp_path: Path) 
     records = {r.name: r for r in DeepMorphModel.load(start).meta.validation}
     assert records["renders"].description == "kept"
     assert records["close-ups"].description != "stale" and records["close-ups"].samples == 2
+
+
+def test_the_commands_defaults_are_the_configs() -> None:
+    """``train-detector``'s option defaults are :class:`DetectorConfig`'s (the command line
+    cannot import it: it must start without torch), so a default changed in one is caught."""
+    import inspect
+
+    from deepmorph_detect.commands import train_detector_cmd
+
+    params = inspect.signature(train_detector_cmd).parameters
+    config = DetectorConfig()
+    for option, field in {"steps": "steps", "batch": "batch", "lr": "lr", "width": "width", "workers": "workers",
+                          "seed": "seed", "fine_tune": "fine_tune"}.items():  # fmt: skip
+        assert params[option].default == getattr(config, field), option
+    assert (config.start == "scratch") == params["from_scratch"].default

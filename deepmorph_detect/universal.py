@@ -1,0 +1,194 @@
+"""The universal detector: one network, trained once on many drawings, that proposes the printed
+drawings in a photo for any model (registered as ``universal``).
+
+A per-drawing detector (``centrenet``, ``deepmorph train-detector``) learns the frame of one
+drawing: its viewBox, which no photo shows. The universal detector learns what every print
+shows: the **ink square**, the square around the box of a drawing's ink, centred on it, as wide
+as its longer side (:func:`ink_square`). It is :class:`~deepmorph_detect.network.DetectorNet`
+trained on scenes of the shared line and colour sets (``python -m
+deepmorph_detect.universal_training``), shipped in ``deepmorph_detect/data``. For a model, each
+proposed square is mapped to the model's viewBox through the model's own ink square; alignment,
+reading and the checks then decide which proposals are that drawing, as for any detector.
+
+The file is a safetensors file: the network's weights under ``detector.``, its ONNX graph under
+``graph.detector``, and :class:`UniversalMeta` (how it was trained) as its metadata.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import cv2
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+
+from deepmorph_core.bundle import GraphMeta, TrainingRecord, check_weights, load_tagged, save_tagged, versions
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.graphs import StoredGraph, read_graphs
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.protocols import Candidate
+from deepmorph_core.render import render_svg_rgb
+from deepmorph_detect.camera import project, viewbox_corners
+from deepmorph_detect.centrenet import MAX_WIDTH, MIN_WIDTH, CentreNetDetector, Runner, detector_runner
+from deepmorph_detect.network import DetectorNet, stored_weights
+from deepmorph_detect.propose import quad_bbox
+
+FORMAT = "deepmorph-universal-detector/1"
+DETECTOR_FILE = "DeepMorph detector file"
+MAX_DETECTOR_BYTES = 64 * 1024 * 1024
+#: The universal detector shipped with the package.
+UNIVERSAL_PATH = Path(__file__).parent / "data" / "universal-detector.safetensors"
+#: Render width at which a drawing's ink is found, and the luminance below which a pixel is ink
+#: (any colour darker or more saturated than a pale tint).
+INK_RENDER_WIDTH = 256
+INK_LEVEL = 0.9
+
+
+class UniversalMeta(BaseModel):
+    """What a universal detector file records besides its weights.
+
+    Attributes:
+        width: the network's channel width.
+        config: the training settings (:class:`~deepmorph_detect.universal_training.UniversalConfig`).
+        record: steps, time and threads of the training.
+        training_set: the drawing sets it was trained on, how many of each, and the rule that
+            held drawings out for benchmarks.
+        graphs: the stored ONNX graph (``detector``).
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    format: Literal["deepmorph-universal-detector/1"] = FORMAT
+    versions: dict[str, str] = Field(default_factory=versions)
+    width: int = Field(ge=MIN_WIDTH, le=MAX_WIDTH)
+    config: dict[str, Any]
+    record: TrainingRecord
+    training_set: dict[str, Any] = Field(default_factory=dict)
+    graphs: dict[str, GraphMeta] = Field(default_factory=dict, max_length=1)
+
+
+def save_universal(
+    path: str | Path, net: DetectorNet, meta: UniversalMeta, graph: StoredGraph | None, extra: dict[str, torch.Tensor]
+) -> None:
+    """Write a universal detector file atomically (``extra``: a checkpoint's optimiser state)."""
+    tensors = {f"detector.{k}": v for k, v in net.state_dict().items()}
+    meta = meta.model_copy(update={"graphs": {"detector": graph.meta} if graph is not None else {}})
+    if graph is not None:
+        tensors["graph.detector"] = torch.frombuffer(bytearray(graph.data), dtype=torch.uint8)
+    save_tagged(path, meta, {**tensors, **extra})
+
+
+def load_universal(path: str | Path) -> tuple[DetectorNet, StoredGraph | None, UniversalMeta, dict[str, torch.Tensor]]:
+    """The network (eval mode), its stored graph when whole, the metadata, and every tensor of
+    the file (a checkpoint's optimiser state among them).
+
+    Raises:
+        DeepMorphError: a missing, corrupt or foreign file, or weights that do not fit.
+    """
+    meta, tensors = load_tagged(path, UniversalMeta, FORMAT, DETECTOR_FILE, MAX_DETECTOR_BYTES)
+    net = DetectorNet(meta.width)
+    weights = stored_weights({k: v for k, v in tensors.items() if k.startswith("detector.")})
+    check_weights(path, "detector", net.state_dict(), weights, DETECTOR_FILE)
+    net.load_state_dict(weights)
+    graphs = read_graphs(path, meta.graphs, tensors)
+    return net.eval(), graphs.get("detector"), meta, tensors
+
+
+@functools.lru_cache(maxsize=4)
+def shared_runner(path: str = str(UNIVERSAL_PATH)) -> Runner:
+    """The universal network of ``path``, loaded once per process and run as the per-drawing
+    detector runs (ONNX Runtime from its stored graph, else PyTorch)."""
+    net, graph, _, _ = load_universal(path)
+    return detector_runner(net, None, graph)
+
+
+def ink_square(svg: str, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """``(4, 2)`` corners (TL, TR, BR, BL, in SVG units) of the square around the box of the
+    drawing's ink, centred on the box, as wide as its longer side: what the universal detector
+    finds. A drawing with no ink gets its viewBox's corners.
+
+    Ink is any pixel of the render on white whose darkest channel is below :data:`INK_LEVEL`.
+    """
+    x0, y0, vw, vh = viewbox
+    rgb = render_svg_rgb(svg, INK_RENDER_WIDTH)
+    ys, xs = np.nonzero(rgb.min(-1) < INK_LEVEL)
+    if len(xs) == 0:
+        return viewbox_corners(viewbox)
+    h, w = rgb.shape[:2]
+    sx, sy = vw / w, vh / h
+    left, right = x0 + xs.min() * sx, x0 + (xs.max() + 1) * sx
+    top, bottom = y0 + ys.min() * sy, y0 + (ys.max() + 1) * sy
+    cx, cy, half = (left + right) / 2, (top + bottom) / 2, max(right - left, bottom - top) / 2
+    return np.array([[cx - half, cy - half], [cx + half, cy - half], [cx + half, cy + half], [cx - half, cy + half]])
+
+
+class UniversalDetector(CentreNetDetector):
+    """The universal detector for one model: its ink squares, mapped to the model's viewBox.
+
+    Args:
+        square: the model's :func:`ink_square` (SVG units).
+        viewbox: the model's viewBox.
+        runner: the shared network (:func:`shared_runner`).
+    """
+
+    name: ClassVar[str] = "universal"
+
+    def __init__(  # noqa: PLR0913
+        self,
+        square: np.ndarray,
+        viewbox: tuple[float, float, float, float],
+        runner: Runner,
+        threshold: float = 0.3,
+        max_detections: int = 12,
+    ) -> None:
+        self.net = runner
+        self.threshold = threshold
+        self.max_detections = max_detections
+        self.square = np.asarray(square, dtype=np.float64)
+        self.frame = viewbox_corners(viewbox)
+
+    @classmethod
+    def from_model(cls, model: DeepMorphModel) -> UniversalDetector:
+        """The universal detector for ``model`` (every model has one).
+
+        Raises:
+            DeepMorphError: the shipped detector file is missing or damaged.
+        """
+        if not UNIVERSAL_PATH.is_file():
+            raise DeepMorphError(
+                f"{UNIVERSAL_PATH}: the universal detector is not installed with this copy of DeepMorph"
+                " (reinstall it, or train one: python -m deepmorph_detect.universal_training)"
+            )
+        md = model.drawing
+        viewbox = md.drawing.viewbox
+        return cls(ink_square(md.to_svg(md.neutral_values()[0]), viewbox), viewbox, shared_runner())
+
+    @classmethod
+    def graph(cls, model: DeepMorphModel) -> StoredGraph | None:
+        """The shipped network's ONNX graph (the same for every model)."""
+        return load_universal(UNIVERSAL_PATH)[1]
+
+    def detect(self, image: np.ndarray) -> list[Candidate]:
+        """The network's ink squares mapped to the model's viewBox corners (TL, TR, BR, BL as
+        far as the square's order tells; alignment tries the other cyclic orders)."""
+        h, w = np.asarray(image).shape[:2]
+        out = []
+        for found in super().detect(image):
+            to_image = cv2.getPerspectiveTransform(self.square.astype(np.float32), found.corners.astype(np.float32))
+            corners = project(to_image, self.frame)
+            out.append(Candidate(corners, found.score, quad_bbox(corners, w, h), source="universal", sized=True))
+        return out
+
+
+__all__ = [
+    "UNIVERSAL_PATH",
+    "UniversalDetector",
+    "UniversalMeta",
+    "ink_square",
+    "load_universal",
+    "save_universal",
+    "shared_runner",
+]

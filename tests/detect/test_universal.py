@@ -1,0 +1,181 @@
+"""The universal detector: ink squares, the held-out rule, its file, training and resume, and the
+shipped network finding drawings it was never trained on."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.loop import Interrupted
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.plugins import default_registry
+from deepmorph_detect.centrenet import CentreNetDetector
+from deepmorph_detect.locate import Locator, detector_for
+from deepmorph_detect.metrics import corner_error
+from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.universal import (
+    UNIVERSAL_PATH,
+    UniversalDetector,
+    ink_square,
+    load_universal,
+    shared_runner,
+)
+from deepmorph_detect.universal_training import (
+    PANEL_DRAWINGS,
+    PoolSceneMaker,
+    UniversalConfig,
+    held_out,
+    load_pool,
+    train_universal,
+)
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+FOLDERS = [DATA / "feather", DATA / "flat-color-icons"]
+
+
+def test_ink_square_is_centred_on_the_ink_box_and_as_wide_as_its_longer_side() -> None:
+    svg = '<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 50"><rect x="60" y="10" width="30" height="20"/></svg>'
+    square = ink_square(svg, (0, 0, 100, 50))
+    # ink box x 60..90, y 10..30: centre (75, 20), side 30
+    np.testing.assert_allclose(square, [[60, 5], [90, 5], [90, 35], [60, 35]], atol=0.5)
+
+
+def test_ink_square_of_a_blank_drawing_is_its_viewbox() -> None:
+    svg = '<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 10 20"><rect width="1" height="1" fill="#fff"/></svg>'
+    np.testing.assert_allclose(ink_square(svg, (0, 0, 10, 20)), [[0, 0], [10, 0], [10, 20], [0, 20]])
+
+
+def test_held_out_drawings_are_the_panels_and_one_in_eight_by_name() -> None:
+    assert all(held_out(name) for name in PANEL_DRAWINGS)
+    names = [f"icon-{i}" for i in range(4000)]
+    share = sum(held_out(n) for n in names) / len(names)
+    assert 0.10 < share < 0.15  # 32 / 256 = 0.125
+    by_hash = next(n for n in names if hashlib.sha256(n.encode()).digest()[0] < 32)
+    assert held_out(by_hash)
+    pool = load_pool(FOLDERS)
+    trained = {d.name for drawings in pool.sets.values() for d in drawings}
+    assert trained and not any(held_out(n) for n in trained)
+
+
+def test_pool_scenes_mark_each_print_by_its_ink_square() -> None:
+    pool = load_pool(FOLDERS, limit=6)
+    scene = PoolSceneMaker(pool, (320, 240), "easy", seed=3, camera_width=None).make(drawings=2)
+    drawings = [p for p in scene.placements if p.kind == "drawing"]
+    assert drawings
+    gray = scene.image.astype(np.float32).mean(-1) / 255
+    for p in drawings:
+        x0, y0 = np.floor(p.corners.min(0)).astype(int)
+        x1, y1 = np.ceil(p.corners.max(0)).astype(int)
+        inside = gray[max(y0, 0) : y1, max(x0, 0) : x1]
+        # the square holds ink: its darkest pixels are darker than the paper around them
+        assert inside.min() < np.percentile(inside, 90) - 0.2
+
+
+def _config(steps: int) -> UniversalConfig:
+    return UniversalConfig(steps=steps, batch=2, workers=0, checkpoint_every=2, log_every=1, seed=5)
+
+
+def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
+    straight = tmp_path / "straight.safetensors"
+    train_universal(FOLDERS, straight, _config(4), limit=5)
+    cut = tmp_path / "cut.safetensors"
+
+    def stop_at_2(m: dict) -> None:
+        if m["step"] == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match="--resume"):
+        train_universal(FOLDERS, cut, _config(4), limit=5, on_log=stop_at_2)
+    _, graph, meta, _ = load_universal(cut)
+    assert meta.record.step == 2 and not meta.record.finished and graph is None
+    train_universal(FOLDERS, cut, _config(4), resume=True, limit=5)
+    a, b = load_universal(straight), load_universal(cut)
+    assert b[2].record.finished and b[2].record.step == 4
+    assert a[1] is not None and b[1] is not None and a[1].data == b[1].data
+    for key, val in a[0].state_dict().items():
+        assert torch.equal(val, b[0].state_dict()[key]), key
+    usable = {f.name: min(5, sum(not held_out(svg.stem) for svg in f.glob("*.svg"))) for f in FOLDERS}
+    assert b[2].training_set["sets"] == usable
+    with pytest.raises(DeepMorphError, match="already exists"):
+        train_universal(FOLDERS, cut, _config(4), limit=5)
+    with pytest.raises(DeepMorphError, match="no interrupted training"):
+        train_universal(FOLDERS, cut, _config(4), resume=True, limit=5)
+
+
+def test_a_damaged_detector_file_is_one_clear_error(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.safetensors"
+    bad.write_bytes(UNIVERSAL_PATH.read_bytes()[:5000])
+    with pytest.raises(DeepMorphError, match="not a usable DeepMorph detector file"):
+        load_universal(bad)
+    with pytest.raises(DeepMorphError, match="cannot read detector file"):
+        load_universal(tmp_path / "missing.safetensors")
+    with pytest.raises(DeepMorphError, match="format 'deepmorph-model/1'"):
+        load_universal(BUNDLED_MODEL)
+
+
+def test_the_shipped_detector_is_whole_and_was_not_trained_on_the_benchmarked_drawings() -> None:
+    _, graph, meta, tensors = load_universal(UNIVERSAL_PATH)
+    assert graph is not None and meta.record.finished
+    assert not any(k.startswith("dtrain.") for k in tensors)  # no optimiser state shipped
+    assert set(meta.training_set["sets"]) == {"feather", "flat-color-icons", "fluent-emoji-flat"}
+    assert "panel" in meta.training_set["held_out_rule"]
+
+
+def test_a_model_without_its_own_detector_uses_the_universal_one() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    registry = default_registry()
+    assert isinstance(detector_for(model, None, registry), CentreNetDetector)  # the ghost has its own
+    assert not isinstance(detector_for(model, None, registry), UniversalDetector)
+    model.meta.detector = None
+    assert isinstance(detector_for(model, None, registry), UniversalDetector)
+    assert detector_for(model, "none", registry) is None
+
+
+def test_the_universal_detector_finds_the_held_out_ghost_and_the_chain_reads_it() -> None:
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    locator = Locator(model, detector="universal")
+    found = read = 0
+    for seed in range(6):
+        scene = SceneMaker(model, severity="medium", seed=100 + seed).make(drawings=1, distractors=1)
+        truth = next(p for p in scene.placements if p.kind == "drawing")
+        candidates = locator.detector.detect(scene.image.astype(np.float32).mean(-1) / 255)
+        # the corners in any cyclic order: alignment settles the turn
+        errors = [min(corner_error(np.roll(c.corners, k, 0), truth.corners) for k in range(4)) for c in candidates]
+        found += bool(errors) and min(errors) < 0.08 * np.ptp(truth.corners[:, 0])
+        results = locator.locate(scene.image)
+        read += any(r.result.ok and np.array_equal(r.result.payload, truth.payload) for r in results)
+    assert found >= 5 and read >= 5
+
+
+def test_the_network_is_loaded_once_per_process() -> None:
+    assert shared_runner() is shared_runner()
+
+
+def test_a_model_without_its_own_detector_exports_the_universal_one(tmp_path: Path) -> None:
+    import json
+
+    from deepmorph_detect.export import export_model
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    model.meta.detector = None
+    model.detector_state = {}
+    model.graphs.pop("detector", None)
+    bare = tmp_path / "bare.dmm"
+    model.save(bare)
+    summary = export_model(bare, tmp_path / "onnx", bundle=tmp_path / "stored.dmm")
+    assert set(summary.graphs) == {"decoder", "detector"} and any("universal" in n for n in summary.notes)
+    manifest = json.loads((tmp_path / "onnx" / "manifest.json").read_text())
+    det = manifest["detector"]
+    assert det["name"] == "universal" and det["sha256"] == load_universal(UNIVERSAL_PATH)[1].meta.sha256
+    md = model.drawing
+    np.testing.assert_allclose(
+        det["quadrilateral"]["corners"], ink_square(md.to_svg(md.neutral_values()[0]), md.drawing.viewbox), atol=1e-3
+    )
+    # the universal graph is not stored in the bundle, which holds no detector weights
+    assert set(DeepMorphModel.load(tmp_path / "stored.dmm").graphs) == {"decoder"}
