@@ -45,9 +45,8 @@ from deepmorph_detect.universal import UniversalDetector
 # a drawing whose payload is not read must align this much better to be reported: no payload
 # vouches for it, so another drawing aligning just above the bar is not reported
 UNREAD_MARGIN = 0.05
-#: ... and one whose proposer does not know the drawing (the universal detector's, which proposes
-#: every print, and the whole image framed by its ink) must align at least this well: other
-#: drawings align to simple ones (a bar chart) up to 0.75
+#: ... and one from the whole image framed by its ink (which does not know the drawing) at least
+#: this well: other drawings align to simple ones (a bar chart) up to 0.75
 UNREAD_BLIND_CORRELATION = 0.8
 #: Proposers that do not know the drawing: their readings always take the per-bit check, since
 #: every other drawing they propose is one more chance at a CRC collision
@@ -176,16 +175,17 @@ class Locator:
     def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
         """Each aligned drawing decoded (:meth:`decode_drawing`); one whose payload is not read
         only when it aligns at least :data:`UNREAD_MARGIN` above ``min_correlation`` (at least
-        :data:`UNREAD_BLIND_CORRELATION` when its proposer does not know the drawing)."""
+        :data:`UNREAD_BLIND_CORRELATION` from the whole image; never from the universal detector)."""
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment
             located = self.decode_drawing(gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft)
             located.needs_px = float(self.model.width)  # prints narrower than the decoder's frame lose detail
-            # the universal detector's; the whole image's unless too small to read (a tiny scan)
-            blind = cand.sized or (cand.homography is not None and not located.too_small)
+            # the whole image's unless too small to read (a tiny scan); the universal detector's
+            # never: it proposes every drawing, and other ones align to complex drawings above 0.8
+            blind = cand.homography is not None and not located.too_small
             bar = UNREAD_BLIND_CORRELATION if blind else self.min_correlation + UNREAD_MARGIN
-            if located.result.ok or alignment.correlation >= bar:
+            if located.result.ok or (not cand.sized and alignment.correlation >= bar):
                 results.append(located)
         return results
 
