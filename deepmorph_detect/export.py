@@ -62,22 +62,23 @@ def model_graphs(model: DeepMorphModel, registry: Registry | None = None) -> tup
     if "decoder" not in model.graphs:
         model.graphs["decoder"] = model.decoder_graph()
     meta = model.meta.detector
-    if meta is None:  # the shipped universal detector's graph, not stored in the bundle (no weights there)
+    shipped: dict[str, StoredGraph] = {}  # the universal detector's: not stored in the bundle (no weights there)
+    if meta is None:
         universal = UniversalDetector.graph(model)
-        graphs = {name: model.graphs[name] for name in FILES if name in model.graphs}
         if universal is None:
             notes.append("no detector: the universal detector's file holds no ONNX graph")
-            return graphs, notes
-        notes.append("detector: the universal one (its quadrilaterals are ink squares: manifest.json)")
-        return {**graphs, "detector": universal}, notes
-    detector = (registry or default_registry()).detector(meta.name)
-    make = getattr(detector, "graph", None)
-    graph = make(model) if make is not None else None
-    if graph is None:
-        notes.append(f"no detector: the {meta.name!r} detector has no ONNX graph")
+        else:
+            notes.append("detector: the universal one (its quadrilaterals are ink squares: manifest.json)")
+            shipped["detector"] = universal
     else:
-        model.graphs["detector"] = graph
-    return {name: model.graphs[name] for name in FILES if name in model.graphs}, notes
+        detector = (registry or default_registry()).detector(meta.name)
+        make = getattr(detector, "graph", None)
+        graph = make(model) if make is not None else None
+        if graph is None:
+            notes.append(f"no detector: the {meta.name!r} detector has no ONNX graph")
+        else:
+            model.graphs["detector"] = graph
+    return {**{name: model.graphs[name] for name in FILES if name in model.graphs}, **shipped}, notes
 
 
 def manifest(model: DeepMorphModel, graphs: dict[str, StoredGraph]) -> dict[str, Any]:

@@ -112,8 +112,12 @@ def ink_square(svg: str, viewbox: tuple[float, float, float, float]) -> np.ndarr
 
     Ink is any pixel of the render on white whose darkest channel is below :data:`INK_LEVEL`.
     """
+    return ink_square_of(render_svg_rgb(svg, INK_RENDER_WIDTH), viewbox)
+
+
+def ink_square_of(rgb: np.ndarray, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    """:func:`ink_square` from the drawing's render ``(H, W, 3)`` on white, in ``[0, 1]``."""
     x0, y0, vw, vh = viewbox
-    rgb = render_svg_rgb(svg, INK_RENDER_WIDTH)
     ys, xs = np.nonzero(rgb.min(-1) < INK_LEVEL)
     if len(xs) == 0:
         return viewbox_corners(viewbox)
@@ -188,6 +192,7 @@ __all__ = [
     "UniversalDetector",
     "UniversalMeta",
     "ink_square",
+    "ink_square_of",
     "load_universal",
     "save_universal",
     "shared_runner",

@@ -52,7 +52,14 @@ from deepmorph_detect.detector_training import (
 )
 from deepmorph_detect.network import INPUT_SIZE
 from deepmorph_detect.scenes import Scene, SceneMaker
-from deepmorph_detect.universal import UniversalMeta, ink_square, load_universal, save_universal
+from deepmorph_detect.universal import (
+    INK_LEVEL,
+    INK_RENDER_WIDTH,
+    UniversalMeta,
+    ink_square_of,
+    load_universal,
+    save_universal,
+)
 
 #: Drawings named by benchmark panels (``bench/colour.py``, ``bench/capacity.py``), never trained on.
 PANEL_DRAWINGS = frozenset(
@@ -134,14 +141,13 @@ def load_drawing(path: Path) -> PoolDrawing:
         raise DeepMorphError(f"{path}: {exc}") from None
     svg = data.decode("utf-8", errors="replace").replace("currentColor", "#000")
     try:
-        square = ink_square(svg, viewbox)
-        rgb = render_svg_rgb(svg, 64)
+        rgb = render_svg_rgb(svg, INK_RENDER_WIDTH)  # one render: the ink, its square, its colour
     except Exception as exc:  # noqa: BLE001 - any renderer failure leaves the drawing out
         raise DeepMorphError(f"{path}: not rendered ({exc})") from None
-    if rgb.min() > 0.9:
+    if rgb.min() >= INK_LEVEL:
         raise DeepMorphError(f"{path}: no ink")
     colour = bool((rgb.max(-1) - rgb.min(-1)).max() > 0.1)
-    return PoolDrawing(path.stem, svg, viewbox, colour, square)
+    return PoolDrawing(path.stem, svg, viewbox, colour, ink_square_of(rgb, viewbox))
 
 
 def load_pool(folders: list[Path], limit: int = 0) -> DrawingPool:
@@ -174,7 +180,7 @@ class PoolSceneMaker(SceneMaker):
         self, pool: DrawingPool, size: tuple[int, int], severity: str, seed: int, camera_width: int | None
     ) -> None:
         self._set_up(size, severity, seed, camera_width, [], colour=True)
-        self.pool = [drawings for drawings in pool.sets.values()]
+        self.pool = list(pool.sets.values())
         self.viewbox = (0.0, 0.0, 1.0, 1.0)
         self._chosen: PoolDrawing | None = None
 
