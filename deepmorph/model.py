@@ -189,6 +189,7 @@ def train(
     encoder_init: Literal["spread", "random"] = DEFAULTS.encoder_init,
     spatial_transformer: bool = DEFAULTS.spatial_transformer,
     readout: bool = DEFAULTS.readout,
+    early_stop: bool = DEFAULTS.early_stop,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
     threads: int | None = DEFAULTS.threads,
@@ -220,6 +221,8 @@ def train(
         small_prints: share of each batch captured as a small print.
         seed, encoder_init, spatial_transformer, readout, device, threads: the run and its networks
             (``device="auto"``: CUDA where present).
+        early_stop: end before ``steps`` once the batches at full corruption read their
+            payloads well enough (:class:`~deepmorph_core.train_settings.TrainSettings`).
         shards: random streams the batch is drawn from (default: one per torchrun process).
         resume: continue the checkpoint at ``out``.
         checkpoint_every: steps between checkpoints.
@@ -265,6 +268,7 @@ def train(
             "encoder_init": encoder_init,
             "spatial_transformer": spatial_transformer,
             "readout": readout,
+            "early_stop": early_stop,
             "device": device,
             "shards": shards,
             "threads": threads,

@@ -7,6 +7,7 @@ its own. See ``docs/bounds.md`` for the reference.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -104,16 +105,20 @@ class BoundSpec(BaseModel):
         return not self.model_dump(exclude_none=True)
 
 
-def format_validation_error(exc: ValidationError) -> str:
-    """One readable ``dm:field: problem`` line per problem."""
+def format_validation_error(
+    exc: ValidationError, prefix: str = "dm:", known: Iterable[str] | None = ATTRIBUTES, kind: str = "attribute"
+) -> str:
+    """One readable ``{prefix}field: problem`` line per problem (``dm:move: ...`` for bounds);
+    an unknown field is named as an unknown ``kind``, with the ``known`` ones where given."""
     lines = []
     for err in exc.errors():
         loc = ".".join(str(x) for x in err["loc"])
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
-            lines.append(f"unknown attribute dm:{loc} (known: {', '.join('dm:' + a for a in ATTRIBUTES)})")
+            listed = f" (known: {', '.join(prefix + a for a in known)})" if known is not None else ""
+            lines.append(f"unknown {kind} {prefix}{loc}{listed}")
         elif loc:
-            lines.append(f"dm:{loc}: {msg}")
+            lines.append(f"{prefix}{loc}: {msg}")
         else:
             lines.append(msg)
     return "; ".join(lines)

@@ -50,6 +50,8 @@ class TrainingRecord(BaseModel):
         world_size: processes that trained it together (torchrun), when last run; ``None`` in
             bundles written before it was recorded.
         global_batch: perturbations per step over all processes; ``None`` where not recorded.
+        stopped_early: training ended before its planned steps (``total_steps`` is then the
+            step it ended at) because its batches read well enough (``TrainConfig.early_stop``).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -64,6 +66,7 @@ class TrainingRecord(BaseModel):
     threads: int = 1
     world_size: int | None = Field(default=None, ge=1)
     global_batch: int | None = Field(default=None, ge=1)
+    stopped_early: bool = False
     metrics: dict[str, float] = Field(default_factory=dict)
 
 
@@ -258,7 +261,7 @@ def load_tagged(
     try:
         meta = schema.model_validate_json(raw)
     except ValidationError as exc:
-        raise _bad(path, format_validation_error(exc).replace("dm:", ""), what) from None
+        raise _bad(path, format_validation_error(exc, prefix="", known=None, kind="field"), what) from None
     return meta, tensors
 
 

@@ -26,10 +26,10 @@ from deepmorph_core.svg import policy
 from deepmorph_core.svg.css import Stylesheet, StylesheetError
 from deepmorph_core.svg.gradients import GRADIENT_TAGS, STOP_ATTRIBUTES, GradientError, Gradients
 from deepmorph_core.svg.policy import DM_NS
-from deepmorph_core.svg.reader import GEOMETRY_VERSION, GEOMETRY_VERSIONS, ElementReader
+from deepmorph_core.svg.reader import GEOMETRY_VERSION, GEOMETRY_VERSIONS, ElementReader, viewbox_of
 from deepmorph_core.svg.secure import SVG_NS, parse_svg_bytes, read_svg_bytes
 from deepmorph_core.svg.style import Paint, Style, compute_style, style_declarations
-from deepmorph_core.svg.values import parse_numbers, parse_transform
+from deepmorph_core.svg.values import parse_transform
 
 #: The largest ratio of a viewBox's longer side to its shorter: what renders at a sane size.
 MAX_ASPECT = 20.0
@@ -237,7 +237,7 @@ class _Walker:
         return SvgError(message, self.source, element.sourceline)
 
     def run(self, root: etree._Element) -> Drawing:
-        drawing = Drawing(self.source, root, self._viewbox(root), geometry=self.geometry)
+        drawing = Drawing(self.source, root, viewbox_of(root, self.source), geometry=self.geometry)
         try:
             self.sheet = Stylesheet.from_root(root)
         except StylesheetError as exc:
@@ -263,23 +263,6 @@ class _Walker:
                     if kept:
                         drawing.styles[stop] = "; ".join(f"{k}: {v}" for k, v in kept.items())
         return drawing
-
-    def _viewbox(self, root: etree._Element) -> tuple[float, float, float, float]:
-        raw = root.get("viewBox")
-        try:
-            if raw is not None:
-                nums = parse_numbers(raw)
-                if len(nums) != 4 or nums[2] <= 0 or nums[3] <= 0:
-                    raise ValueError("needs four numbers with positive width and height")
-                return nums[0], nums[1], nums[2], nums[3]
-            w, h = self.reader.length(root, "width", None), self.reader.length(root, "height", None)
-        except ValueError as exc:
-            raise self.error(root, f"viewBox={raw!r}: {exc}") from None
-        except SvgError:
-            raise self.error(root, "<svg> needs a viewBox, or numeric width and height") from None
-        if w <= 0 or h <= 0:
-            raise self.error(root, "<svg> width and height must be positive")
-        return 0.0, 0.0, w, h
 
     def _frame(self, root: etree._Element, viewbox: tuple[float, float, float, float]) -> None:
         """Refuse a frame no render can hold: one side over :data:`MAX_ASPECT` times the other."""

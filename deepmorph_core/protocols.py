@@ -189,6 +189,10 @@ class Candidate:
         source: what proposed it (``"detector"``, ``"whole-frame"``, a detector's name ...).
         sized: the outline's size comes from the print's own ink (the universal detector's):
             alignment searches other turns of it, not other sizes.
+        blind: the proposer does not know the drawing: it proposes every printed drawing (the
+            universal detector). Each other drawing it proposes is one more chance at a CRC
+            collision, so its readings always take the per-bit check, and one whose payload is
+            not read is never reported.
     """
 
     corners: np.ndarray
@@ -197,6 +201,7 @@ class Candidate:
     homography: np.ndarray | None = None
     source: str = "detector"
     sized: bool = False
+    blind: bool = False
 
 
 @runtime_checkable

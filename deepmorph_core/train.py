@@ -82,7 +82,7 @@ class TrainConfig(BaseModel, TrainSettings):
 #: The plot of a codec training log.
 CODEC_PANELS = (
     Panel("loss", ("loss",), log_scale=True),
-    Panel("accuracy (training batches)", ("bit_acc", "word_acc"), unit_range=True),
+    Panel("accuracy (training batches)", ("bit_acc", "word_acc", "read"), unit_range=True),
 )
 
 
@@ -216,6 +216,7 @@ class CodecRun:
         self.record.global_batch = config.batch
         self._window: list[float] = []
         self._prev_window: float | None = None
+        self._reads: list[float] = []  # the early stop's window: code words read, per step at full corruption
         self._restore(model.extra_tensors)
         if model.decoder.readout is not None:  # dormant (all zero, untrained) until the CNN stalls
             model.decoder.readout.requires_grad_(readout_fitted(model.decoder))
@@ -235,6 +236,7 @@ class CodecRun:
                 for key, val in st.items():
                     out[f"{name}.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
         out["window"] = torch.tensor(self._window, dtype=torch.float64)
+        out["reads"] = torch.tensor(self._reads, dtype=torch.float64)
         if self._prev_window is not None:
             out["prev_window"] = torch.tensor([self._prev_window], dtype=torch.float64)
         return out
@@ -255,6 +257,7 @@ class CodecRun:
             sd["state"] = state
             opt.load_state_dict(sd)
         self._window = extra["window"].tolist() if "window" in extra else []
+        self._reads = extra["reads"].tolist() if "reads" in extra else []
         self._prev_window = float(extra["prev_window"][0]) if "prev_window" in extra else None
 
     def checkpoint(self) -> None:
@@ -320,17 +323,21 @@ class CodecRun:
         return rungs[min(len(rungs) - 1, int(self.record.step / ramp * (len(rungs) - 1)))]
 
     def step(self) -> dict[str, float]:
-        """One optimisation step; its loss, bit accuracy and whole-word accuracy over the global
-        batch (every shard, on every rank)."""
+        """One optimisation step; its loss, bit accuracy, whole-word accuracy and code words read
+        (no more bit errors than the code corrects) over the global batch (every shard, on
+        every rank), each measured before the step learns from the batch."""
         cfg, rec = self.cfg, self.record
         stage2 = rec.stage == 2
+        full_corruption = self._rung() == cfg.severity
         self.model.encoder.train(stage2)
         self.model.decoder.train()
         self.opt_dec.zero_grad(set_to_none=True)
         self.opt_enc.zero_grad(set_to_none=True)
         sizes = shard_sizes(cfg.batch, self.shards)
         norms = BatchNormShards(self.model.decoder) if self.shards > 1 else None
-        totals = torch.zeros(3, dtype=torch.float64, device=self.device)  # loss x rows, right bits, right words
+        # loss x rows, right bits, right words, words read
+        totals = torch.zeros(4, dtype=torch.float64, device=self.device)
+        correctable = self.model.codec.spec.bch_t
         for shard in self.mine:
             self.gen = self._gens[shard]
             bits = torch.randint(0, 2, (sizes[shard], self.model.codec.spec.code_bits), generator=self.gen).float()
@@ -345,7 +352,8 @@ class CodecRun:
                 norms.add()
             with torch.no_grad():
                 right = (logits > 0) == (bits > 0.5)
-                totals += torch.stack([loss.detach().double() * sizes[shard], right.sum(), right.all(1).sum()])
+                read = ((~right).sum(1) <= correctable).sum()
+                totals += torch.stack([loss.detach().double() * sizes[shard], right.sum(), right.all(1).sum(), read])
         if norms:
             norms.finish(self.shards, self.world)
         sum_gradients([*self.model.decoder.parameters(), *self.model.encoder.parameters()], self.world)
@@ -354,11 +362,13 @@ class CodecRun:
         self.opt_dec.step()
         if stage2:
             self.opt_enc.step()
-        loss_sum, right_bits, right_words = totals.tolist()
+        loss_sum, right_bits, right_words, words_read = totals.tolist()
         bit_acc = right_bits / (cfg.batch * self.model.codec.spec.code_bits)
         word_acc = right_words / cfg.batch
+        read = words_read / cfg.batch
         self._update_stage(bit_acc, rec.step + 1)  # the loop counts this step once it returns
-        return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc}
+        self._update_early_stop(read, full_corruption)
+        return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc, "read": read}
 
     def _set_learning_rates(self) -> None:
         """Full rates in stage 1; in stage 2 a cosine decay to 10 % by the last step (over every
@@ -376,6 +386,21 @@ class CodecRun:
         for opt, base in ((self.opt_dec, cfg.lr), (self.opt_enc, cfg.encoder_lr)):
             for group in opt.param_groups:
                 group["lr"] = base * factor
+
+    def _update_early_stop(self, read: float, full_corruption: bool) -> None:
+        """End the run at this step when the last ``early_stop_window`` steps, all at full
+        corruption, read at least ``early_stop_rate`` of their code words (the same on every
+        rank: the shares are over the global batch)."""
+        cfg, rec = self.cfg, self.record
+        if not cfg.early_stop or cfg.freeze_encoder:
+            return
+        if not full_corruption:
+            self._reads = []
+            return
+        self._reads = [*self._reads, read][-cfg.early_stop_window :]
+        if len(self._reads) == cfg.early_stop_window and float(np.mean(self._reads)) >= cfg.early_stop_rate:
+            rec.total_steps = rec.step + 1  # the loop counts this step once it returns, then finishes
+            rec.stopped_early = True
 
     def _update_stage(self, bit_acc: float, step: int) -> None:
         rec, cfg = self.record, self.cfg
@@ -412,10 +437,12 @@ class TrainingSummary:
     stage2_start: int | None
     elapsed_s: float
     validation: list[ValidationRecord] = field(default_factory=list)
+    stopped_early: bool = False
 
 
 def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
-    return DeepMorphError(f"{what}: {format_validation_error(exc).replace('dm:', '--')}")
+    problems = format_validation_error(exc, prefix="", known=TrainConfig.model_fields, kind="setting")
+    return DeepMorphError(f"{what}: {problems}")
 
 
 def train_model(
@@ -492,13 +519,17 @@ def train_model(
     model.encoder.cpu()  # validated (and used after training) on the CPU, as the photo chain runs
     model.decoder.cpu()
     if not world.main:
-        return TrainingSummary(out, summary.log, None, summary.steps, run.record.stage2_start, summary.elapsed_s)
+        return TrainingSummary(
+            out, summary.log, None, summary.steps, run.record.stage2_start, summary.elapsed_s,
+            stopped_early=run.record.stopped_early,
+        )  # fmt: skip
     records = _validate_and_store(
         model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
     )
     return TrainingSummary(
-        out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records
-    )
+        out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
+        run.record.stopped_early,
+    )  # fmt: skip
 
 
 def open_model(

@@ -70,6 +70,13 @@ class TrainSettings:
             (:func:`~deepmorph_core.train.fit_readout`) and then trained with the CNN where the
             CNN alone stalls in stage 1 (below :data:`~deepmorph_core.train.READOUT_STALL` of
             bits); left out of the bundle where it does not (``docs/training.md``).
+        early_stop: end training before ``steps`` once it reads well enough: when, over the last
+            ``early_stop_window`` steps, all at ``severity`` (the curriculum's ramp done), at
+            least ``early_stop_rate`` of the batches' code words had no more bit errors than the
+            code corrects. Each batch is scored before the step learns from it, so the share is
+            measured on captures the decoder had not seen. The learning-rate schedule still runs
+            over ``steps``: a run stopped at step N is the full run's model at step N.
+        early_stop_window, early_stop_rate: see ``early_stop``.
         freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
             :func:`~deepmorph_core.train.tune_decoder` runs on a trained bundle.
@@ -115,6 +122,14 @@ class TrainSettings:
     readout: bool = _setting(
         True, "readout", "Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares."
     )
+    early_stop: bool = _setting(
+        True,
+        "early-stop",
+        "Stop before --steps once the last batches at full corruption read their payloads "
+        "(bit errors the code corrects) at the early-stop rate.",
+    )
+    early_stop_window: Annotated[int, Ge(10)] = 250
+    early_stop_rate: Annotated[float, Gt(0), Le(1)] = 0.995
     freeze_encoder: bool = False
     seed: int = _setting(0, "seed")
     device: Literal["cpu", "cuda", "auto"] = _setting("auto", "device")

@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,6 @@ from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
 from deepmorph_detect.synthesis import MorphSynthesis
-from deepmorph_detect.universal import UniversalDetector
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
 # vouches for it, so another drawing aligning just above the bar is not reported
@@ -48,9 +48,6 @@ UNREAD_MARGIN = 0.05
 #: ... and one from the whole image framed by its ink (which does not know the drawing) at least
 #: this well: other drawings align to simple ones (a bar chart) up to 0.75
 UNREAD_BLIND_CORRELATION = 0.8
-#: Proposers that do not know the drawing: their readings always take the per-bit check, since
-#: every other drawing they propose is one more chance at a CRC collision
-BLIND_SOURCES = frozenset({UniversalDetector.name})
 
 
 #: The detector of a bundle that stores none of its own (``universal``: shipped, for any drawing).
@@ -175,17 +172,20 @@ class Locator:
     def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
         """Each aligned drawing decoded (:meth:`decode_drawing`); one whose payload is not read
         only when it aligns at least :data:`UNREAD_MARGIN` above ``min_correlation`` (at least
-        :data:`UNREAD_BLIND_CORRELATION` from the whole image; never from the universal detector)."""
+        :data:`UNREAD_BLIND_CORRELATION` from the whole image; never from a blind proposer such
+        as the universal detector: ``Candidate.blind``)."""
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment
-            located = self.decode_drawing(gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft)
+            located = self.decode_drawing(
+                gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft, blind=cand.blind
+            )
             located.needs_px = float(self.model.width)  # prints narrower than the decoder's frame lose detail
-            # the whole image's unless too small to read (a tiny scan); the universal detector's
-            # never: it proposes every drawing, and other ones align to complex drawings above 0.8
-            blind = cand.homography is not None and not located.too_small
-            bar = UNREAD_BLIND_CORRELATION if blind else self.min_correlation + UNREAD_MARGIN
-            if located.result.ok or (not cand.sized and alignment.correlation >= bar):
+            # the whole image's unless too small to read (a tiny scan); a blind proposer's never:
+            # it proposes every drawing, and other ones align to complex drawings above 0.8
+            whole_image = cand.homography is not None and not located.too_small
+            bar = UNREAD_BLIND_CORRELATION if whole_image else self.min_correlation + UNREAD_MARGIN
+            if located.result.ok or (not cand.blind and alignment.correlation >= bar):
                 results.append(located)
         return results
 
@@ -198,10 +198,34 @@ class Locator:
         cam: Camera,
         source: str,
         soft: bool,
+        blind: bool = False,
     ) -> Located:
         """Read and check one aligned drawing, and place it: the first reading whose payload
         passes every check wins; without one, the first that passed the CRC (its ``ok``
-        withdrawn by its check), else the most confident reading."""
+        withdrawn by its check), else the most confident reading. ``blind``: proposed by a
+        detector that does not know the drawing (``Candidate.blind``): every reading takes the
+        per-bit check.
+
+        A drawing that looks the same turned (``Template.symmetric_turns``: a print aligns as
+        well at each of those turns, and which one the alignment ended at is chance) is read
+        again at each such turn until a reading passes; the turn that reads also gives the pose.
+        """
+        H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind)
+        for turn in self.template.symmetric_turns:
+            if checked.result.ok:
+                break
+            turned = replace(alignment, homography=alignment.homography @ turn)
+            other = self._read_and_check(gray, pyramid, turned, source, soft, blind)
+            if other[1].result.ok:
+                H, checked, probs = other
+        return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
+
+    def _read_and_check(
+        self, gray: np.ndarray, pyramid: ImagePyramid, alignment: Alignment, source: str, soft: bool, blind: bool
+    ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
+        """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
+        place the drawing by (the passed payload's morph fit, else the alignment's), the
+        verdict, and the code bits' probabilities."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
         if source == "whole-frame":
@@ -216,9 +240,7 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
-            attempt = self.checker.check(
-                pyramid, H, reading.result, alignment, True if source in BLIND_SOURCES else bitwise
-            )
+            attempt = self.checker.check(pyramid, H, reading.result, alignment, blind or bitwise)
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
             if attempt.status == "passed":
@@ -231,7 +253,7 @@ class Locator:
             else:
                 result = self.model.codec.decode(probs, soft=soft)
             checked = PayloadCheck(result, None, "not run")
-        return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
+        return H, checked, probs
 
     def check_payload(
         self,
@@ -256,7 +278,6 @@ __all__ = [
     "NO_DETECTOR",
     "UNREAD_MARGIN",
     "UNREAD_BLIND_CORRELATION",
-    "BLIND_SOURCES",
     "Locator",
     "detector_for",
 ]

@@ -183,7 +183,8 @@ class UniversalDetector(CentreNetDetector):
         for found in super().detect(image):
             to_image = cv2.getPerspectiveTransform(self.square.astype(np.float32), found.corners.astype(np.float32))
             corners = project(to_image, self.frame)
-            out.append(Candidate(corners, found.score, quad_bbox(corners, w, h), source="universal", sized=True))
+            box = quad_bbox(corners, w, h)
+            out.append(Candidate(corners, found.score, box, source=self.name, sized=True, blind=True))
         return out
 
 

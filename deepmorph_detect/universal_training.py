@@ -40,8 +40,8 @@ from deepmorph_core.graphs import GraphError
 from deepmorph_core.loop import TrainingLoop
 from deepmorph_core.render import render_svg_rgb
 from deepmorph_core.severity import PHOTO_SIZE
+from deepmorph_core.svg.reader import viewbox_of
 from deepmorph_core.svg.secure import SvgError, parse_svg_bytes, read_svg_bytes
-from deepmorph_core.svg.values import parse_numbers
 from deepmorph_detect.centrenet import detector_graph
 from deepmorph_detect.detector_training import (
     DetectorRun,
@@ -115,18 +115,6 @@ class DrawingPool:
         }
 
 
-def _viewbox(root: Any) -> tuple[float, float, float, float]:
-    raw = root.get("viewBox")
-    if raw is not None:
-        nums = parse_numbers(raw)
-        if len(nums) == 4 and nums[2] > 0 and nums[3] > 0:
-            return nums[0], nums[1], nums[2], nums[3]
-    w, h = parse_numbers(root.get("width") or "")[:1], parse_numbers(root.get("height") or "")[:1]
-    if w and h and w[0] > 0 and h[0] > 0:
-        return 0.0, 0.0, w[0], h[0]
-    raise ValueError("no viewBox and no numeric width and height")
-
-
 def load_drawing(path: Path) -> PoolDrawing:
     """One drawing for the pool (``currentColor`` drawn black).
 
@@ -136,8 +124,8 @@ def load_drawing(path: Path) -> PoolDrawing:
     try:
         data = read_svg_bytes(path)
         root = parse_svg_bytes(data, str(path))
-        viewbox = _viewbox(root)
-    except (SvgError, ValueError) as exc:
+        viewbox = viewbox_of(root, str(path))
+    except SvgError as exc:
         raise DeepMorphError(f"{path}: {exc}") from None
     svg = data.decode("utf-8", errors="replace").replace("currentColor", "#000")
     try:

@@ -364,6 +364,7 @@ def train(
     encoder_init: Annotated[Literal["spread", "random"], setting_option("encoder_init")] = DEFAULTS.encoder_init,
     spatial_transformer: Annotated[bool, setting_option("spatial_transformer")] = DEFAULTS.spatial_transformer,
     readout: Annotated[bool, setting_option("readout")] = DEFAULTS.readout,
+    early_stop: Annotated[bool, setting_option("early_stop")] = DEFAULTS.early_stop,
     device: DeviceOpt = DEFAULTS.device,
     shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
     threads: ThreadsOpt = DEFAULTS.threads,
@@ -388,7 +389,10 @@ def train(
     from deepmorph_core.train import train_model
 
     def describe(m: dict[str, Any]) -> str:
-        return f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
+        return (
+            f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
+            f" read {m.get('read', 0.0):.2f}"
+        )
 
     use_threads(threads)
     world = world_from_env()
@@ -415,6 +419,7 @@ def train(
                 "encoder_init": encoder_init,
                 "spatial_transformer": spatial_transformer,
                 "readout": readout,
+                "early_stop": early_stop,
                 "device": device,
                 "shards": shards,
                 "threads": threads,
@@ -432,12 +437,15 @@ def train(
     if not world.main:
         return
     if as_json:
-        result = training_result(summary, on_start.last, stage2_start=summary.stage2_start)
+        result = training_result(
+            summary, on_start.last, stage2_start=summary.stage2_start, stopped_early=summary.stopped_early
+        )
         print_json({**result, "validation": [r.model_dump() for r in summary.validation]})
         return
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
-        f"{summary.stage2_start}); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
+        f"{summary.stage2_start}{', stopped early: its batches read well enough' if summary.stopped_early else ''}"
+        f"); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
     _print_validation([r.model_dump() for r in summary.validation])
 
@@ -595,7 +603,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
             "training",
             f"{rec['step']}/{rec['total_steps']} steps, {rec['elapsed_s']:.0f} s on {rec['device']} "
             f"({rec['threads']} threads), stage 2 from {rec['stage2_start']}, "
-            f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}",
+            f"{'finished' if rec['finished'] else 'checkpoint (resume to finish)'}"
+            + (" early: its batches read well enough" if rec.get("stopped_early") else ""),
         ),
         ("trained on", ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in data["trained_on"].items())),
         ("last metrics", json.dumps(rec["metrics"])),

@@ -28,6 +28,30 @@ GEOMETRY_VERSION = 2
 GEOMETRY_VERSIONS = (1, 2)
 
 
+def viewbox_of(root: etree._Element, source: str) -> tuple[float, float, float, float]:
+    """The drawing's frame in user units: ``<svg viewBox>``, else ``(0, 0, width, height)``.
+
+    Raises:
+        SvgError: at the ``<svg>`` line of ``source``, saying which attribute is wrong.
+    """
+    raw = root.get("viewBox")
+    try:
+        if raw is not None:
+            nums = values.parse_numbers(raw)
+            if len(nums) != 4 or nums[2] <= 0 or nums[3] <= 0:
+                raise ValueError("needs four numbers with positive width and height")
+            return nums[0], nums[1], nums[2], nums[3]
+    except ValueError as exc:
+        raise SvgError(f"viewBox={raw!r}: {exc}", source, root.sourceline) from None
+    try:
+        w, h = (values.parse_length(root.get(name) or "") for name in ("width", "height"))
+    except ValueError:
+        raise SvgError("<svg> needs a viewBox, or numeric width and height", source, root.sourceline) from None
+    if w <= 0 or h <= 0:
+        raise SvgError("<svg> width and height must be positive", source, root.sourceline)
+    return 0.0, 0.0, w, h
+
+
 @dataclass
 class ElementReader:
     """What a primitive gets to read its element: typed attribute access and error reporting.

@@ -222,6 +222,67 @@ def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_pat
         assert ("spatial transformer, then CNN" in shown) is expected, shown
 
 
+def _interrupt_at(step: int):
+    """An ``on_start`` whose log callback stops the run (as Ctrl-C does) once ``step`` is logged."""
+
+    def on_start(total: int, done: int):
+        def on_log(line):
+            if line["step"] == step:
+                raise KeyboardInterrupt
+
+        return on_log
+
+    return on_start
+
+
+def test_early_stop_ends_where_the_full_corruption_batches_read_and_is_the_planned_runs_model(
+    tiny_svg: Path, tmp_path: Path
+) -> None:
+    """The early stop's window counts only steps at the training severity (from step 20 here,
+    when the curriculum's ramp ends), survives an interrupt, and a stopped run is the planned
+    run's model at that step: the learning-rate schedule runs over the planned steps."""
+    cfg = {**FAST, "severity": "easy", "curriculum": 0.5, "steps": 40, "log_every": 5, "checkpoint_every": 5,
+           "seed": 5, "early_stop_window": 10, "early_stop_rate": 1e-6}  # fmt: skip
+    code = {"payload_bits": 4, "crc_bits": 8, "ecc_t": 0, "validation_samples": (0, 0)}
+    early = tmp_path / "early.dmm"
+    summary = train_model(tiny_svg, early, **code, train=cfg)
+    assert summary.steps == 30 and summary.stopped_early
+    model = DeepMorphModel.load(early)
+    rec = model.meta.record
+    assert rec.finished and rec.stopped_early and rec.step == rec.total_steps == 30
+    assert model.meta.train["steps"] == 40
+    assert [line["step"] for line in map(json.loads, summary.log.read_text().splitlines())][-1] == 30
+    shown = " ".join(runner.invoke(app, ["info", str(early)]).stdout.split())
+    assert "30/30 steps" in shown and "finished early" in shown, shown
+
+    resumed = tmp_path / "resumed.dmm"  # five full-corruption reads in its window when interrupted
+    with pytest.raises(Interrupted, match="interrupted at step 25/40"):
+        train_model(tiny_svg, resumed, **code, train=cfg, on_start=_interrupt_at(25))
+    assert train_model(tiny_svg, resumed, resume=True, validation_samples=(0, 0)).steps == 30
+
+    planned = tmp_path / "planned.dmm"
+    with pytest.raises(Interrupted, match="interrupted at step 30/40"):
+        train_model(tiny_svg, planned, **code, train={**cfg, "early_stop": False}, on_start=_interrupt_at(30))
+    for other in (DeepMorphModel.load(resumed), DeepMorphModel.load(planned)):
+        theirs = other.decoder.state_dict()
+        for key, value in model.decoder.state_dict().items():
+            torch.testing.assert_close(value, theirs[key], msg=key)
+        torch.testing.assert_close(model.encoder.linear.weight, other.encoder.linear.weight)
+
+    never = tmp_path / "never.dmm"  # off, or a rate its batches do not reach: the planned steps
+    assert train_model(tiny_svg, never, **code, train={**cfg, "early_stop_rate": 1.0}).steps == 40
+
+
+def test_an_unknown_or_bad_training_setting_is_named_with_the_known_ones(tiny_svg: Path, tmp_path: Path) -> None:
+    with pytest.raises(DeepMorphError, match=r"training settings: unknown setting validation \(known: steps, batch,"):
+        train_model(tiny_svg, tmp_path / "m.dmm", payload_bits=4, train={"validation": 5})
+    with pytest.raises(
+        DeepMorphError, match="training settings: early_stop_rate: Input should be less than or equal to 1"
+    ):
+        train_model(tiny_svg, tmp_path / "m.dmm", payload_bits=4, train={"early_stop_rate": 2.0})
+    assert not (tmp_path / "m.dmm").exists()
+
+
 #: A code without error correction and a run without the validation (the readout tests' runs).
 UNCHECKED = {"crc_bits": 8, "ecc_t": 0, "validation_samples": (0, 0)}
 
@@ -594,7 +655,8 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
-    keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "elapsed_s", "metrics", "validation"}
+    keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "stopped_early", "elapsed_s", "metrics",
+            "validation"}  # fmt: skip
     assert set(data) == keys and [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
     assert data["bundle"] == str(out) and data["steps"] == 2 and str(out) in data["written"]
     assert {"step", "loss", "bit_acc"} <= set(data["metrics"]) and data["metrics"]["step"] == 2

@@ -37,7 +37,7 @@ from deepmorph_detect.camera import (
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
-from deepmorph_detect.refine import Alignment, ImagePyramid, refine
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
 from deepmorph_detect.results import Located
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
@@ -478,8 +478,9 @@ class DetectorUnread(Locator):
         cam: Camera,
         source: str,
         soft: bool,
+        blind: bool = False,
     ) -> Located:
-        located = super().decode_drawing(gray, pyramid, alignment, score, cam, source, soft)
+        located = super().decode_drawing(gray, pyramid, alignment, score, cam, source, soft, blind)
         if source == "detector":
             located.result = replace(located.result, ok=False)
             located.morph_check = "failed"
@@ -787,3 +788,46 @@ def test_qr_clock_times_qr_decoding_real_codes_frame_by_frame() -> None:
         assert clock.tick() > 0
     assert seen == [0, 0, 1, 2, 0] and len(clock.times) == 4
     assert clock.median_ms() == round(1000 * float(np.median(clock.times)), 2)
+
+
+def _template_of(name: str) -> Template:
+    from deepmorph_core.morphable import MorphableDrawing
+
+    md = MorphableDrawing.load(Path(__file__).parents[1] / "data" / "feather" / f"{name}.svg", move=0.5)
+    return Template.from_svg(md.to_svg(md.neutral_values()[0]), md.drawing.viewbox)
+
+
+def _half_turn(viewbox: tuple[float, float, float, float]) -> np.ndarray:
+    x, y, w, h = viewbox
+    return np.array([[-1.0, 0.0, 2 * x + w], [0.0, -1.0, 2 * y + h], [0.0, 0.0, 1.0]])
+
+
+def test_turns_that_map_a_drawing_onto_itself_are_found() -> None:
+    """Feather icons: the codepen diamond looks the same half turned, the plus sign at every
+    quarter turn, a battery at none."""
+    turns = {name: _template_of(name).symmetric_turns for name in ("codepen", "plus", "battery-charging")}
+    assert {name: len(found) for name, found in turns.items()} == {"codepen": 1, "plus": 3, "battery-charging": 0}
+    np.testing.assert_allclose(turns["codepen"][0], _half_turn(_template_of("codepen").viewbox), atol=1e-9)
+
+
+def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
+    model: DeepMorphModel, locator: Locator
+) -> None:
+    """A print of a drawing that looks the same half turned aligns as well at either turn. Read
+    at the wrong one it gives no payload; read again at the turn the drawing maps onto itself by
+    (the ghost is given one here), its payload and its true outline come back."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, cam, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None and right.correlation > 0.7
+    half = _half_turn(locator.viewbox)
+    wrong = replace(right, homography=right.homography @ half)
+    as_it_was = locator.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
+    assert not as_it_was.result.ok
+
+    symmetric = Locator(model)
+    symmetric.template.__dict__["symmetric_turns"] = (half,)  # as if the ghost looked the same half turned
+    read = symmetric.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
+    assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
+    assert np.abs(read.corners - placed.corners).max() < 3.0

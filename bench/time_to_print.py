@@ -1,0 +1,193 @@
+"""Time from a drawing to a print that reads in photos, on this machine's CPU, with no
+per-drawing detector step.
+
+**Drawings**, by rule: the first ``--drawings`` (3) Feather icons, alphabetically, with 30 to 60
+variables at the capacity panel's move (2 % of the viewBox width) that the universal detector
+never saw in training (``held_out`` in ``deepmorph_detect/universal_training.py``). Each is
+trained as the README says (``--payload-bits auto``, every other setting at its default, or
+``--steps``/``--set KEY=VALUE`` where given) on ``--threads`` (2) threads, with the bundle's
+validation (1000 renders, 200 close-ups) counted in the time, as a user waits for it.
+
+**Reading**: ``--n`` scenes (640x480: one or two prints of fresh payloads, one other drawing, an
+ArUco marker in every other scene) at ``medium`` and at ``hard`` are located with the universal
+detector, the drawing's own bundle otherwise untouched: **read** is the share of prints whose
+payload was read whole and vouched for, **wrong** counts payloads vouched for that are not the
+print's. The same scenes (seeded) for every run, so settings compare side by side.
+
+With ``--curve K``, a copy of the checkpoint is kept every ``K`` steps and each copy is read on
+the same scenes after training (not counted in the time): how many steps a drawing needs.
+
+    .venv/bin/python bench/time_to_print.py /work/shared/data/drawings/feather --n 100
+    .venv/bin/python bench/time_to_print.py ../shared/data/drawings/feather --curve 500 --tag curve
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+
+MOVE_SHARE = 0.02  # the capacity panel's default move (bench/capacity.py)
+VARIABLES = (30, 60)
+
+
+def pick_drawings(folder: Path, count: int) -> list[tuple[Path, float, int]]:
+    """The rule in the module docstring: ``(svg, move, variables)`` of each drawing."""
+    from deepmorph_core.errors import DeepMorphError
+    from deepmorph_core.morphable import MorphableDrawing
+    from deepmorph_detect.universal_training import held_out
+
+    picked = []
+    for path in sorted(folder.glob("*.svg")):
+        if not held_out(path.stem):
+            continue
+        try:
+            move = round(MOVE_SHARE * MorphableDrawing.load(path, move=1.0).drawing.viewbox[2], 4)
+            n = MorphableDrawing.load(path, move=move).n_variables
+        except DeepMorphError:
+            continue
+        if VARIABLES[0] <= n <= VARIABLES[1]:
+            picked.append((path, move, n))
+        if len(picked) == count:
+            return picked
+    raise SystemExit(f"only {len(picked)} held-out icons in {folder} have {VARIABLES[0]}-{VARIABLES[1]} variables")
+
+
+def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: int) -> dict[str, Any]:
+    """Train and validate one drawing as ``deepmorph train`` does; its times and record."""
+    from deepmorph_core.train import train_model
+
+    keep: list[Path] = []
+    phases: dict[str, float] = {}
+
+    def on_start(total: int, done: int) -> Any:
+        def on_log(line: dict[str, Any]) -> None:
+            # the loop checkpoints after it logs: at a multiple of ``curve`` plus one log, the
+            # file holds the checkpoint of that multiple
+            step = line["step"] - settings.get("log_every", 25)
+            if curve and step > 0 and step % curve == 0 and out.is_file():
+                copy = out.with_name(f"{out.stem}.step{step:05d}.dmm")
+                shutil.copyfile(out, copy)
+                keep.append(copy)
+
+        return on_log
+
+    def on_validation() -> None:
+        phases["validation_start"] = time.perf_counter()
+
+    t0 = time.perf_counter()
+    summary = train_model(
+        svg,
+        out,
+        payload_bits="auto",
+        bounds={"move": move},
+        train={**settings, **({"checkpoint_every": curve} if curve else {})},
+        overwrite=True,
+        on_start=on_start,
+        on_warning=lambda text: print(f"  warning: {text}", flush=True),
+        on_validation=on_validation,
+    )
+    total = time.perf_counter() - t0
+    validation_s = total - (phases.get("validation_start", time.perf_counter()) - t0)
+    return {
+        "total_s": total,
+        "steps": summary.steps,
+        "stage2_start": summary.stage2_start,
+        "steps_s": summary.elapsed_s,
+        "step_ms": summary.elapsed_s / max(1, summary.steps) * 1000,
+        "validation_s": validation_s,
+        "validation": [r.model_dump() for r in summary.validation],
+        "curve_files": [str(p) for p in keep],
+    }
+
+
+def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
+    """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector."""
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.metrics import matched_detections
+    from deepmorph_detect.scenes import SceneMaker
+
+    model = DeepMorphModel.load(bundle)
+    locator = Locator(model, detector="universal")
+    out: dict[str, Any] = {}
+    for sev in ("medium", "hard"):
+        maker = SceneMaker(model, (640, 480), sev, seed=seed)
+        counts = {"prints": 0, "read": 0, "wrong": 0}
+        times = []
+        for i in range(n):
+            scene = maker.make(drawings=1 + i % 2, distractors=1, aruco=i % 2 == 0)
+            t0 = time.perf_counter()
+            dets = locator.locate(scene.image)
+            times.append(time.perf_counter() - t0)
+            counts["prints"] += sum(p.kind == "drawing" for p in scene.placements)
+            for det, p, right in matched_detections(dets, [q for q in scene.placements if q.kind == "drawing"]):
+                counts["read"] += bool(p is not None and det.result.ok and right)
+                counts["wrong"] += bool(det.result.ok and (p is None or not right))
+        out[sev] = {**counts, "read_share": counts["read"] / max(1, counts["prints"]),
+                    "frame_s_median": statistics.median(times)}  # fmt: skip
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("feather", type=Path, help="the Feather icons folder (../shared/data/drawings/feather)")
+    ap.add_argument("--drawings", type=int, default=3)
+    ap.add_argument("--n", type=int, default=100, help="scenes per drawing and severity")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--steps", type=int, help="training steps (default: TrainConfig's)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="another TrainConfig field")
+    ap.add_argument("--curve", type=int, default=0, help="read a checkpoint copy every this many steps")
+    ap.add_argument("--seed", type=int, default=0, help="scene seed")
+    ap.add_argument("--work", type=Path, default=RESULTS / "time_to_print")
+    ap.add_argument("--tag", default="default", help="names the bundles folder and the JSON")
+    args = ap.parse_args()
+    threads = set_threads(args.threads)
+    settings: dict[str, Any] = {"threads": threads}
+    if args.steps:
+        settings["steps"] = args.steps
+    for item in args.set:
+        key, _, value = item.partition("=")
+        settings[key] = json.loads(value) if value[:1] in "0123456789-[{tf" else value
+    work = args.work / args.tag
+    work.mkdir(parents=True, exist_ok=True)
+    results: dict[str, Any] = {}
+    rows = []
+    for svg, move, variables in pick_drawings(args.feather, args.drawings):
+        name = svg.stem
+        print(f"{name}: {variables} variables, move {move}", flush=True)
+        run = train(svg, move, work / f"{name}.dmm", settings, args.curve)
+        run["variables"] = variables
+        run["reading"] = read_scenes(work / f"{name}.dmm", args.n, args.seed)
+        run["curve"] = {Path(p).stem.rsplit(".step", 1)[1]: read_scenes(Path(p), args.n, args.seed)
+                        for p in run.pop("curve_files")}  # fmt: skip
+        results[name] = run
+        med, hard = run["reading"]["medium"], run["reading"]["hard"]
+        rows.append([
+            name, variables, run["steps"], f"{run['step_ms']:.0f}", f"{run['steps_s'] / 60:.1f}",
+            f"{run['validation_s'] / 60:.1f}", f"{run['total_s'] / 60:.1f}",
+            f"{med['read_share']:.1%}", f"{hard['read_share']:.1%}", med["wrong"] + hard["wrong"],
+        ])  # fmt: skip
+        for step, reading in run["curve"].items():
+            print(f"  step {int(step)}: medium {reading['medium']['read_share']:.1%}, "
+                  f"hard {reading['hard']['read_share']:.1%}, wrong "
+                  f"{reading['medium']['wrong'] + reading['hard']['wrong']}", flush=True)  # fmt: skip
+        write_json(args.work.parent / f"time_to_print_{args.tag}.json", {"environment": environment(),
+                   "settings": settings, "n": args.n, "drawings": results})  # fmt: skip
+    print(f"\nTime to print-ready ({threads} threads; {args.n} scenes per severity, universal detector):")
+    print(table(["drawing", "variables", "steps", "ms/step", "steps min", "validation min", "total min",
+                 "medium read", "hard read", "wrong"], rows))  # fmt: skip
+    totals = [r["total_s"] / 60 for r in results.values()]
+    print(f"total minutes: median {statistics.median(totals):.1f}, worst {max(totals):.1f}")
+
+
+if __name__ == "__main__":
+    main()
