@@ -95,7 +95,7 @@ def variable_effects(model: DeepMorphModel) -> Tensor:
 #: Renders :func:`fit_readout` fits to, the ridge of its least squares, and the logit it aims at.
 READOUT_SAMPLES, READOUT_RIDGE, READOUT_MARGIN = 2048, 10.0, 3.0
 #: Stage 1 ending below this bit accuracy means the CNN has stalled: the readout is fitted then.
-READOUT_STALL = 0.85
+READOUT_STALL = 0.9
 
 
 def readout_fitted(decoder: Decoder) -> bool:

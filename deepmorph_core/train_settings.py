@@ -25,6 +25,8 @@ PAYLOAD_BITS = 24
 #: Fresh payloads read back after training unless told: from renders and from close-up photos
 #: (``--validation``, ``validation=``; :mod:`deepmorph_core.validation`).
 RENDER_SAMPLES, PHOTO_SAMPLES = 1000, 200
+#: The early stop's window (steps at full corruption) and the share of code words they must read.
+EARLY_STOP_WINDOW, EARLY_STOP_RATE = 250, 0.995
 #: Small prints are shrunk to this share of the decoder's width (``small_prints``).
 SMALL_PRINT_SCALE = (0.55, 0.95)
 
@@ -125,11 +127,11 @@ class TrainSettings:
     early_stop: bool = _setting(
         True,
         "early-stop",
-        "Stop before --steps once the last batches at full corruption read their payloads "
-        "(bit errors the code corrects) at the early-stop rate.",
+        f"Stop before --steps once {EARLY_STOP_WINDOW} steps at full corruption have read "
+        f"{EARLY_STOP_RATE:.1%} of their code words.",
     )
-    early_stop_window: Annotated[int, Ge(10)] = 250
-    early_stop_rate: Annotated[float, Gt(0), Le(1)] = 0.995
+    early_stop_window: Annotated[int, Ge(10)] = EARLY_STOP_WINDOW
+    early_stop_rate: Annotated[float, Gt(0), Le(1)] = EARLY_STOP_RATE
     freeze_encoder: bool = False
     seed: int = _setting(0, "seed")
     device: Literal["cpu", "cuda", "auto"] = _setting("auto", "device")
@@ -207,6 +209,8 @@ def exposed() -> dict[str, Exposed]:
 
 __all__ = [
     "DEFAULTS",
+    "EARLY_STOP_RATE",
+    "EARLY_STOP_WINDOW",
     "PAYLOAD_BITS",
     "PHOTO_SAMPLES",
     "RENDER_SAMPLES",
