@@ -64,6 +64,7 @@ def pick_drawings(folder: Path, count: int) -> list[tuple[Path, float, int]]:
 def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: int) -> dict[str, Any]:
     """Train and validate one drawing as ``deepmorph train`` does; its times and record."""
     from deepmorph_core.train import train_model
+    from deepmorph_core.train_settings import DEFAULTS
 
     keep: list[Path] = []
     phases: dict[str, float] = {}
@@ -72,7 +73,7 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
         def on_log(line: dict[str, Any]) -> None:
             # the loop checkpoints after it logs: at a multiple of ``curve`` plus one log, the
             # file holds the checkpoint of that multiple
-            step = line["step"] - settings.get("log_every", 25)
+            step = line["step"] - settings.get("log_every", DEFAULTS.log_every)
             if curve and step > 0 and step % curve == 0 and out.is_file():
                 copy = out.with_name(f"{out.stem}.step{step:05d}.dmm")
                 shutil.copyfile(out, copy)
@@ -110,10 +111,12 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
 
 
 def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
-    """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector."""
+    """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector, each
+    scored as ``bench/universal_detector.py`` scores its scenes."""
+    from universal_detector import score
+
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
-    from deepmorph_detect.metrics import matched_detections
     from deepmorph_detect.scenes import SceneMaker
 
     model = DeepMorphModel.load(bundle)
@@ -125,13 +128,10 @@ def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
         times = []
         for i in range(n):
             scene = maker.make(drawings=1 + i % 2, distractors=1, aruco=i % 2 == 0)
-            t0 = time.perf_counter()
-            dets = locator.locate(scene.image)
-            times.append(time.perf_counter() - t0)
-            counts["prints"] += sum(p.kind == "drawing" for p in scene.placements)
-            for det, p, right in matched_detections(dets, [q for q in scene.placements if q.kind == "drawing"]):
-                counts["read"] += bool(p is not None and det.result.ok and right)
-                counts["wrong"] += bool(det.result.ok and (p is None or not right))
+            scored, _, seconds = score("universal", locator, scene)
+            times.append(seconds)
+            for key in counts:
+                counts[key] += scored[key]
         out[sev] = {**counts, "read_share": counts["read"] / max(1, counts["prints"]),
                     "frame_s_median": statistics.median(times)}  # fmt: skip
     return out

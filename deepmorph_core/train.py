@@ -518,14 +518,11 @@ def train_model(
             leave()
     model.encoder.cpu()  # validated (and used after training) on the CPU, as the photo chain runs
     model.decoder.cpu()
-    if not world.main:
-        return TrainingSummary(
-            out, summary.log, None, summary.steps, run.record.stage2_start, summary.elapsed_s,
-            stopped_early=run.record.stopped_early,
-        )  # fmt: skip
-    records = _validate_and_store(
-        model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
-    )
+    records: list[ValidationRecord] = []
+    if world.main:  # rank 0 alone validates (the others have no plot either)
+        records = _validate_and_store(
+            model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
+        )
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
         run.record.stopped_early,

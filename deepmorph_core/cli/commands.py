@@ -391,7 +391,7 @@ def train(
     def describe(m: dict[str, Any]) -> str:
         return (
             f"stage {m['stage']} loss {m['loss']:.3f} bit acc {m['bit_acc']:.3f} all-bits {m['word_acc']:.2f}"
-            f" read {m.get('read', 0.0):.2f}"
+            f" read {m['read']:.2f}"
         )
 
     use_threads(threads)
