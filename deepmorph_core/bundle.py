@@ -42,6 +42,35 @@ _NAME = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
 _SHAPE = Annotated[list[Annotated[int, Field(ge=1, le=1 << 20)]], Field(min_length=1, max_length=8)]
 
 
+class AutoPayload(BaseModel):
+    """A payload sized by ``--payload-bits auto``: what the user fixed of its code (``None``:
+    the codec's choice), kept when training shrinks it (:mod:`deepmorph_core.code_shrink`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    crc_bits: int | None = None
+    ecc_t: int | None = None
+
+
+class CodeShrink(BaseModel):
+    """Training made the code smaller (:mod:`deepmorph_core.code_shrink`).
+
+    Attributes:
+        step: the step it happened after.
+        payload_bits, code_bits: ``(before, after)``.
+        read: the share of code words read over the last window at full corruption, before.
+        information: the bits of information the code's bits carried over that window.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    step: int = Field(ge=0)
+    payload_bits: tuple[int, int]
+    code_bits: tuple[int, int]
+    read: float
+    information: float
+
+
 class TrainingRecord(BaseModel):
     """What training did: steps, stages, time, and the last measured accuracies.
 
@@ -52,6 +81,8 @@ class TrainingRecord(BaseModel):
         global_batch: perturbations per step over all processes; ``None`` where not recorded.
         stopped_early: training ended before its planned steps (``total_steps`` is then the
             step it ended at) because its batches read well enough (``TrainConfig.early_stop``).
+        payload_auto: the payload was sized by ``--payload-bits auto`` (``None``: the user's size),
+            so training may shrink its code; ``shrunk`` says when it did.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -67,6 +98,8 @@ class TrainingRecord(BaseModel):
     world_size: int | None = Field(default=None, ge=1)
     global_batch: int | None = Field(default=None, ge=1)
     stopped_early: bool = False
+    payload_auto: AutoPayload | None = None
+    shrunk: list[CodeShrink] = Field(default_factory=list, max_length=64)
     metrics: dict[str, float] = Field(default_factory=dict)
 
 

@@ -36,8 +36,9 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from torch import Tensor, nn
 
 from deepmorph_core.bounds import format_validation_error
-from deepmorph_core.bundle import TrainingRecord, ValidationRecord
+from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, ValidationRecord
 from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
+from deepmorph_core.code_shrink import SHRINK_BELOW, describe, read_share, shrink_networks, smaller_code
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.distributed import (
@@ -67,7 +68,7 @@ from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
-from deepmorph_core.train_settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TrainSettings
+from deepmorph_core.train_settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TUNE_DEFAULTS, TrainSettings
 from deepmorph_core.validation import default_samples, validate, validation_warning
 
 
@@ -217,6 +218,10 @@ class CodecRun:
         self._window: list[float] = []
         self._prev_window: float | None = None
         self._reads: list[float] = []  # the early stop's window: code words read, per step at full corruption
+        # an auto-sized code's window (deepmorph_core.code_shrink): per step at full corruption, the
+        # code bits each capture of this rank's shards got wrong; and the steps since it was last sized
+        self._errors: list[Tensor] = []
+        self._settled = 0
         self._restore(model.extra_tensors)
         if model.decoder.readout is not None:  # dormant (all zero, untrained) until the CNN stalls
             model.decoder.readout.requires_grad_(readout_fitted(model.decoder))
@@ -237,6 +242,10 @@ class CodecRun:
                     out[f"{name}.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
         out["window"] = torch.tensor(self._window, dtype=torch.float64)
         out["reads"] = torch.tensor(self._reads, dtype=torch.float64)
+        if self.record.payload_auto is not None:
+            out["code_settled"] = torch.tensor([self._settled], dtype=torch.int64)
+            if self._errors:
+                out["code_errors"] = torch.stack(self._errors).to(torch.uint8)
         if self._prev_window is not None:
             out["prev_window"] = torch.tensor([self._prev_window], dtype=torch.float64)
         return out
@@ -258,6 +267,8 @@ class CodecRun:
             opt.load_state_dict(sd)
         self._window = extra["window"].tolist() if "window" in extra else []
         self._reads = extra["reads"].tolist() if "reads" in extra else []
+        self._errors = list(extra["code_errors"].bool()) if "code_errors" in extra else []
+        self._settled = int(extra["code_settled"][0]) if "code_settled" in extra else 0
         self._prev_window = float(extra["prev_window"][0]) if "prev_window" in extra else None
 
     def checkpoint(self) -> None:
@@ -338,6 +349,7 @@ class CodecRun:
         # loss x rows, right bits, right words, words read
         totals = torch.zeros(4, dtype=torch.float64, device=self.device)
         correctable = self.model.codec.spec.bch_t
+        wrong_bits: list[Tensor] = []
         for shard in self.mine:
             self.gen = self._gens[shard]
             bits = torch.randint(0, 2, (sizes[shard], self.model.codec.spec.code_bits), generator=self.gen).float()
@@ -353,6 +365,7 @@ class CodecRun:
             with torch.no_grad():
                 right = (logits > 0) == (bits > 0.5)
                 read = ((~right).sum(1) <= correctable).sum()
+                wrong_bits.append((~right).cpu())
                 totals += torch.stack([loss.detach().double() * sizes[shard], right.sum(), right.all(1).sum(), read])
         if norms:
             norms.finish(self.shards, self.world)
@@ -368,6 +381,7 @@ class CodecRun:
         read = words_read / cfg.batch
         self._update_stage(bit_acc, rec.step + 1)  # the loop counts this step once it returns
         self._update_early_stop(read, full_corruption)
+        self._update_code(torch.cat(wrong_bits), full_corruption)
         return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc, "read": read}
 
     def _set_learning_rates(self) -> None:
@@ -401,6 +415,48 @@ class CodecRun:
         if len(self._reads) == cfg.early_stop_window and float(np.mean(self._reads)) >= cfg.early_stop_rate:
             rec.total_steps = rec.step + 1  # the loop counts this step once it returns, then finishes
             rec.stopped_early = True
+
+    def _update_code(self, wrong: Tensor, full_corruption: bool) -> None:
+        """Shrink an auto-sized code that does not read (:mod:`deepmorph_core.code_shrink`):
+        after a settling window at full corruption, when the next window's captures (every
+        rank's) read fewer than :data:`~deepmorph_core.code_shrink.SHRINK_BELOW` of their code
+        words, with a window's steps still to train. ``wrong``: this step's ``(rows, N_b)``
+        code bits read wrong."""
+        cfg, rec = self.cfg, self.record
+        if rec.payload_auto is None or cfg.freeze_encoder:
+            return
+        if not full_corruption:
+            self._errors, self._settled = [], 0
+            return
+        window = cfg.early_stop_window
+        self._settled += 1
+        self._errors = [*self._errors, wrong][-window:]
+        if self._settled < 2 * window or rec.stopped_early or rec.step + 1 + window > cfg.steps:
+            return
+        errors = torch.cat([torch.cat(part) for part in gather_objects(self._errors, self.world)])
+        spec = self.model.codec.spec
+        read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
+        if read >= SHRINK_BELOW:
+            return
+        smaller = smaller_code(errors, spec, rec.payload_auto)
+        if smaller is None:
+            return
+        new, keep, carried = smaller
+        shrink_networks(self.model, keep, new)
+        # fresh optimisers for the smaller networks (the step's learning rates are set each step)
+        self.opt_dec = torch.optim.Adam(self.model.decoder.parameters(), lr=cfg.lr)
+        self.opt_enc = torch.optim.Adam(self.model.encoder.parameters(), lr=cfg.encoder_lr)
+        rec.shrunk = [
+            *rec.shrunk,
+            CodeShrink(
+                step=rec.step + 1,
+                payload_bits=(spec.payload_bits, new.payload_bits),
+                code_bits=(spec.code_bits, new.code_bits),
+                read=round(read, 4),
+                information=round(carried, 2),
+            ),
+        ]
+        self._errors, self._settled, self._reads = [], 0, []
 
     def _update_stage(self, bit_acc: float, step: int) -> None:
         rec, cfg = self.record, self.cfg
@@ -438,6 +494,8 @@ class TrainingSummary:
     elapsed_s: float
     validation: list[ValidationRecord] = field(default_factory=list)
     stopped_early: bool = False
+    payload_bits: int = 0
+    shrunk: list[CodeShrink] = field(default_factory=list)
 
 
 def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
@@ -512,7 +570,10 @@ def train_model(
             checkpoint_on_interrupt=not world.distributed,
         )
         on_log = on_start(config.steps, model.meta.record.step) if on_start else None
+        shrunk_before = len(model.meta.record.shrunk)
         summary: LoopSummary = loop.run(run, on_log)
+        for shrink in run.record.shrunk[shrunk_before:]:
+            warn(f"{label}: {describe(shrink)}")
     finally:
         if joined:
             leave()
@@ -525,7 +586,7 @@ def train_model(
         )
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
-        run.record.stopped_early,
+        run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk),
     )  # fmt: skip
 
 
@@ -602,6 +663,8 @@ def open_model(
                 decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer, readout=config.readout),
                 label=label,
             )
+            if payload_bits == "auto":  # training may make the code smaller (deepmorph_core.code_shrink)
+                model.meta.record.payload_auto = AutoPayload(crc_bits=crc_bits, ecc_t=ecc_t)
     except ValidationError as exc:
         raise _settings_error("training settings", exc) from None
     return model, config, label
@@ -716,9 +779,9 @@ def tune_decoder(
     model_path: str | Path,
     out: str | Path,
     *,
-    steps: int = 800,
-    small_prints: float = 0.5,
-    lr: float = 3e-4,
+    steps: int = TUNE_DEFAULTS.steps,
+    small_prints: float = TUNE_DEFAULTS.small_prints,
+    lr: float = TUNE_DEFAULTS.lr,
     seed: int = 0,
     threads: int | None = None,
     device: str = "auto",

@@ -152,6 +152,29 @@ DEFAULTS = TrainSettings()
 
 
 @dataclass(frozen=True)
+class TuneSettings:
+    """What a decoder tuning (:func:`deepmorph_core.train.tune_decoder`, ``deepmorph
+    tune-decoder``) sets for itself; everything else is the bundle's own training settings.
+
+    Attributes:
+        steps: tuning steps, at full corruption from the first.
+        small_prints: share of each batch captured as a small print (as
+            :attr:`TrainSettings.small_prints`).
+        lr: the decoder's start learning rate, decaying by a cosine to 10 %.
+    """
+
+    steps: Annotated[int, Ge(1), Le(10_000_000)] = _setting(800, "steps", "Tuning steps.")
+    small_prints: Annotated[float, Ge(0), Le(1)] = _setting(
+        0.5, "small-prints", "Share of each batch captured as a small print."
+    )
+    lr: Annotated[float, Ge(1e-6), Le(1e-1)] = _setting(3e-4, "lr", "Start learning rate (cosine to 10 %).")
+
+
+#: Every tuning setting at its default.
+TUNE_DEFAULTS = TuneSettings()
+
+
+@dataclass(frozen=True)
 class Exposed:
     """A setting as ``deepmorph train`` and :func:`deepmorph.train` take it (its default is
     :data:`DEFAULTS`').
@@ -183,12 +206,13 @@ class Exposed:
 
 
 @cache
-def exposed() -> dict[str, Exposed]:
-    """The settings ``deepmorph train`` and :func:`deepmorph.train` take, by field name, in
+def exposed(settings: type = TrainSettings) -> dict[str, Exposed]:
+    """The settings ``deepmorph train`` and :func:`deepmorph.train` take (with ``settings``
+    :class:`TuneSettings`: those ``deepmorph tune-decoder`` takes), by field name, in
     declaration order."""
-    hints = get_type_hints(TrainSettings, include_extras=True)
+    hints = get_type_hints(settings, include_extras=True)
     found = {}
-    for f in dataclasses.fields(TrainSettings):
+    for f in dataclasses.fields(settings):
         if f.metadata.get("option") is None:
             continue
         hint, meta = hints[f.name], []
@@ -215,7 +239,9 @@ __all__ = [
     "PHOTO_SAMPLES",
     "RENDER_SAMPLES",
     "SMALL_PRINT_SCALE",
+    "TUNE_DEFAULTS",
     "Exposed",
     "TrainSettings",
+    "TuneSettings",
     "exposed",
 ]

@@ -28,10 +28,9 @@ def draw_overlay(image: np.ndarray, detections: list[Located]) -> np.ndarray:
             cv2.polylines(out, [np.round(det.corners).astype(np.int32)], True, colour, thick, cv2.LINE_AA)
         for name, (x, y) in det.keypoints.items():
             cv2.circle(out, (round(x), round(y)), max(2, thick + 1), (0, 220, 255) if name != "centre" else colour, -1)
-        if det.rvec is not None and det.tvec is not None and det.camera is not None:
+        if det.pose is not None:
             axes = np.array([[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0], [0, 0, -0.5]], dtype=np.float64)
-            pts, _ = cv2.projectPoints(axes, det.rvec, det.tvec, det.camera.matrix, det.camera.dist_coeffs)
-            p = np.round(pts.reshape(-1, 2)).astype(int)
+            p = np.round(det.pose.project(axes)).astype(int)
             if np.abs(p).max() < 1e6:
                 for end, c in ((1, (0, 0, 255)), (2, (0, 255, 0)), (3, (255, 0, 0))):
                     cv2.arrowedLine(out, tuple(p[0]), tuple(p[end]), c, thick, cv2.LINE_AA, tipLength=0.15)

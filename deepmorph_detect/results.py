@@ -20,6 +20,10 @@ def measure_width(corners: np.ndarray) -> float:
     return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
 
 
+#: The side of :meth:`Pose.cube` in drawing widths.
+CUBE_SIDE = 0.3
+
+
 @dataclass(frozen=True)
 class Pose:
     """Where the camera is, in the drawing's own frame (:mod:`deepmorph_detect.camera`): origin
@@ -45,6 +49,22 @@ class Pose:
     def distance(self) -> float:
         """How far the drawing's centre is from the camera, in drawing widths."""
         return float(np.linalg.norm(self.tvec))
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` image pixels of ``(N, 3)`` points in the drawing's frame (drawing widths),
+        through the camera's lens distortion."""
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 1, 3)
+        image, _ = cv2.projectPoints(pts, self.rvec, self.tvec, self.camera.matrix, self.camera.dist_coeffs)
+        return image.reshape(-1, 2)
+
+    def cube(self, side: float = CUBE_SIDE) -> np.ndarray:
+        """``(8, 2)`` image pixels of the corners of a cube ``side`` drawing widths wide standing
+        on the drawing's centre: its base on the paper (0-3, clockwise from top-left as the
+        drawing is seen), then its top towards the camera (4-7, above 0-3). What AR shows."""
+        h = side / 2
+        base = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+        top = base + np.array([0.0, 0.0, -side])  # z points into the paper
+        return self.project(np.vstack([base, top]))
 
     def to_json(self) -> dict[str, Any]:
         return {

@@ -676,6 +676,9 @@ def read_photo(
         row = d.to_json()
         entry = registry.get(key, row["payload"]["hex"]) if key is not None and row["ok"] else None
         row["registry"] = entry.to_json() if entry else None
+        cube = [[float(x), float(y)] for x, y in d.pose.cube()] if d.pose is not None else []
+        if cube and all(math.isfinite(v) and abs(v) < 1e6 for point in cube for v in point):  # drawn over the photo
+            row["cube"] = [[round(x, 1), round(y, 1)] for x, y in cube]
         found.append(row)
     height, width = image.shape[:2]
     note = ""

@@ -42,7 +42,16 @@ from deepmorph_core.cli.frame import (
 )
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import refuse_to_overwrite
-from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, PHOTO_SAMPLES, RENDER_SAMPLES, exposed
+from deepmorph_core.train_settings import (
+    DEFAULTS,
+    PAYLOAD_BITS,
+    PHOTO_SAMPLES,
+    RENDER_SAMPLES,
+    TUNE_DEFAULTS,
+    TrainSettings,
+    TuneSettings,
+    exposed,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -57,11 +66,12 @@ DeviceOpt = Annotated[
 ]
 
 
-def setting_option(field: str, help: str | None = None) -> Any:  # noqa: A002 - the option's help
+def setting_option(field: str, help: str | None = None, settings: type = TrainSettings) -> Any:  # noqa: A002 - the option's help
     """The option of training setting ``field``: its flag, help and bounds as
-    :class:`~deepmorph_core.train_settings.TrainSettings` declares them (``help`` replaces its
-    line; a flag on or off is ``--x/--no-x``). Its default is :data:`~deepmorph_core.train_settings.DEFAULTS`'."""
-    setting = exposed()[field]
+    :class:`~deepmorph_core.train_settings.TrainSettings` (or ``settings``, such as
+    :class:`~deepmorph_core.train_settings.TuneSettings`) declares them (``help`` replaces its
+    line; a flag on or off is ``--x/--no-x``). Its default is the class's own."""
+    setting = exposed(settings)[field]
     flag = f"--{setting.option}" + (f"/--no-{setting.option}" if setting.switch else "")
     return typer.Option(flag, min=setting.ge, max=setting.le, help=help or setting.help)
 
@@ -438,7 +448,12 @@ def train(
         return
     if as_json:
         result = training_result(
-            summary, on_start.last, stage2_start=summary.stage2_start, stopped_early=summary.stopped_early
+            summary,
+            on_start.last,
+            stage2_start=summary.stage2_start,
+            stopped_early=summary.stopped_early,
+            payload_bits=summary.payload_bits,
+            shrunk=[s.model_dump() for s in summary.shrunk],
         )
         print_json({**result, "validation": [r.model_dump() for r in summary.validation]})
         return
@@ -563,6 +578,21 @@ def _print_validation(records: list[dict[str, Any]]) -> None:
         out.print(f"validation: {safe(line)}")
 
 
+def _payload_sizing(record: dict[str, Any]) -> str:
+    """How the payload's size was chosen, after its number in ``info``."""
+    if record.get("payload_auto") is None:
+        return ""
+    shrunk = record.get("shrunk") or []
+    if not shrunk:
+        return " (auto)"
+    steps = "; then ".join(
+        f"{s['payload_bits'][0]} -> {s['payload_bits'][1]} at step {s['step']} (its batches read {s['read']:.0%} "
+        f"of code words; its code bits carried about {s['information']:.0f} bits)"
+        for s in shrunk
+    )
+    return f" (auto, sized by training: {steps})"
+
+
 def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     """Describe a model bundle: payload and code bits, codec, image size, bounds, training record."""
     from deepmorph_core.model import DeepMorphModel
@@ -580,7 +610,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
     dec = data["decoder"]
     rows = [
         ("drawing", data["drawing"]),
-        ("payload bits", str(data["payload_bits"])),
+        ("payload bits", str(data["payload_bits"]) + _payload_sizing(rec)),
         (
             "code bits",
             f"{data['code_bits']} (CRC {codec['crc_bits']}, BCH t={codec['bch_t']}: {codec['ecc_bits']} ECC bits)",
@@ -663,12 +693,9 @@ def _trained_on(record: dict[str, Any]) -> dict[str, Any]:
 def tune_decoder(
     model: ModelArg,
     out_path: Annotated[Path, typer.Option("--out", help="Bundle to write (may be the same file).")],
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Tuning steps.")] = 800,
-    small_prints: Annotated[
-        float,
-        typer.Option("--small-prints", min=0, max=1, help="Share of each batch captured as a small print."),
-    ] = 0.5,
-    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1e-1, help="Start learning rate (cosine to 10 %).")] = 3e-4,
+    steps: Annotated[int, setting_option("steps", settings=TuneSettings)] = TUNE_DEFAULTS.steps,
+    small_prints: Annotated[float, setting_option("small_prints", settings=TuneSettings)] = TUNE_DEFAULTS.small_prints,
+    lr: Annotated[float, setting_option("lr", settings=TuneSettings)] = TUNE_DEFAULTS.lr,
     seed: SeedOpt = 0,
     threads: ThreadsOpt = None,
     validation: ValidationOpt = None,

@@ -174,6 +174,34 @@ def test_a_checkpoint_of_two_processes_resumes_on_one(drawing: Path) -> None:
     assert_same_networks(straight, broken)
 
 
+#: A torchrun of this script trains an auto-sized code that does not read at once at ``hard``:
+#: both processes must shrink it the same way, from both ranks' captures.
+AUTO_SHRINK = """
+from deepmorph_core.train import train_model
+train_model("tiny.svg", "auto2.dmm", payload_bits="auto", train={train!r}, validation_samples=(0, 0))
+"""
+
+
+def test_two_processes_shrink_an_auto_code_as_one_process_does(drawing: Path) -> None:
+    """An ``auto`` code shrunk under torchrun (:mod:`deepmorph_core.code_shrink`) is shrunk at
+    the same step to the same bits as by one process drawing the same two shards: the decision
+    is made on every rank from every rank's captures."""
+    train = {**CFG, "steps": 32, "shards": 2, "severity": "hard", "curriculum": 0.0, "early_stop_window": 10,
+             "checkpoint_every": 32}  # fmt: skip
+    one = drawing.parent / "auto1.dmm"
+    train_model(drawing, one, payload_bits="auto", train=train, validation_samples=(0, 0))
+    script = drawing.parent / "auto.py"
+    script.write_text(AUTO_SHRINK.format(train=train))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
+    done = subprocess.run(command, cwd=drawing.parent, env=env, capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0, done.stderr[-3000:]
+    a, b = DeepMorphModel.load(one), DeepMorphModel.load(drawing.parent / "auto2.dmm")
+    assert a.meta.record.shrunk and a.meta.record.shrunk == b.meta.record.shrunk
+    assert a.codec.spec == b.codec.spec
+    assert_same_networks(one, drawing.parent / "auto2.dmm")
+
+
 def test_shards_split_the_batch_and_the_ranks_share_them() -> None:
     assert shard_sizes(8, 2) == [4, 4] and shard_sizes(10, 4) == [3, 3, 2, 2] and shard_sizes(5, 1) == [5]
     assert rank_shards(4, World(1, 2)) == [1, 3] and rank_shards(3, World(0, 2)) == [0, 2]

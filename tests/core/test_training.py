@@ -655,9 +655,10 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
-    keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "stopped_early", "elapsed_s", "metrics",
-            "validation"}  # fmt: skip
+    keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "stopped_early", "payload_bits", "shrunk",
+            "elapsed_s", "metrics", "validation"}  # fmt: skip
     assert set(data) == keys and [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
+    assert data["payload_bits"] == 4 and data["shrunk"] == []
     assert data["bundle"] == str(out) and data["steps"] == 2 and str(out) in data["written"]
     assert {"step", "loss", "bit_acc"} <= set(data["metrics"]) and data["metrics"]["step"] == 2
     tuned = tmp_path / "t.dmm"

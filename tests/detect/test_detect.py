@@ -38,7 +38,7 @@ from deepmorph_detect.locate import Locator
 from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
 from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
-from deepmorph_detect.results import Located
+from deepmorph_detect.results import Located, Pose
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
 from tests.conftest import shaken_clip
@@ -94,6 +94,20 @@ def test_pnp_recovers_a_known_pose() -> None:
     pixels = project(homography_from_pose(cam, rvec, tvec), grid[:, :2])
     r, t = solve_pose(cam, grid, pixels)
     assert rotation_error_deg(r, rvec) < 1e-3 and translation_error(t, tvec) < 1e-5
+
+
+def test_the_pose_cube_stands_on_the_drawing() -> None:
+    """:meth:`Pose.cube`'s base is the square half a drawing wide around the drawing's centre,
+    where the plane's homography puts it, and its top is nearer the camera."""
+    cam = Camera(700, 700, 320, 240)
+    rvec, tvec = np.array([0.5, -0.2, 0.3]), np.array([0.1, 0.05, 2.5])
+    cube = Pose(rvec, tvec, cam).cube(0.5)
+    base = np.array([[-0.25, -0.25], [0.25, -0.25], [0.25, 0.25], [-0.25, 0.25]])
+    assert cube.shape == (8, 2)
+    np.testing.assert_allclose(cube[:4], project(homography_from_pose(cam, rvec, tvec), base), atol=1e-6)
+    rotation, _ = cv2.Rodrigues(rvec)
+    depth = lambda z: (rotation @ np.array([0.25, 0.25, z]) + tvec)[2]  # noqa: E731
+    assert depth(-0.5) < depth(0.0)  # the top (z = -0.5, out of the paper) is nearer the camera
 
 
 # -- scenes ---------------------------------------------------------------------------------

@@ -23,8 +23,8 @@ from deepmorph_core.bundled import BUNDLED_DRAWING
 from deepmorph_core.cli import application
 from deepmorph_core.cli import commands as cli
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.train import TrainConfig
-from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, TrainSettings, exposed
+from deepmorph_core.train import TrainConfig, tune_decoder
+from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, TUNE_DEFAULTS, TrainSettings, TuneSettings, exposed
 
 ROOT = Path(__file__).resolve().parents[2]
 #: ``deepmorph train``'s options that are not training settings, with their keyword in
@@ -208,3 +208,32 @@ def test_the_studio_form_says_the_settings_bounds() -> None:
         setting = exposed()[field]
         assert form[name]["default"] == getattr(DEFAULTS, field) and form[name]["min"] == setting.ge
         assert form[name]["max"] <= setting.le
+
+
+TUNE_CHANGED = """
+import dataclasses, inspect, json, sys
+import deepmorph_core.train_settings as settings
+settings.TUNE_DEFAULTS = dataclasses.replace(settings.TUNE_DEFAULTS, steps=801, small_prints=0.25, lr=1e-3)
+from tests.project.test_train_settings import declared
+from deepmorph_core.cli import commands
+from deepmorph_core.train import tune_decoder
+cli = {n: o.default for n, o in declared(commands.tune_decoder).items()}
+api = {n: p.default for n, p in inspect.signature(tune_decoder).parameters.items()}
+print(json.dumps({"cli": [cli[k] for k in ("steps", "small_prints", "lr")],
+                  "api": [api[k] for k in ("steps", "small_prints", "lr")]}))
+"""
+
+
+def test_tuning_settings_are_declared_once() -> None:
+    """``deepmorph tune-decoder`` and :func:`~deepmorph_core.train.tune_decoder` take their defaults,
+    bounds and help from :class:`TuneSettings`, and a changed default reaches both."""
+    options, signature = declared(cli.tune_decoder), inspect.signature(tune_decoder).parameters
+    for field, setting in exposed(TuneSettings).items():
+        default = getattr(TUNE_DEFAULTS, field)
+        assert options[field].default == signature[field].default == default, field
+        assert options[field].flags == (f"--{setting.option}",) and options[field].help == setting.help
+        assert (options[field].min, options[field].max) == (setting.ge, setting.le), field
+    done = subprocess.run([sys.executable, "-c", TUNE_CHANGED], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == {"cli": [801, 0.25, 1e-3], "api": [801, 0.25, 1e-3]}

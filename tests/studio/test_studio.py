@@ -269,6 +269,14 @@ def test_a_registry_entry_appears_when_an_uploaded_photo_is_decoded(page, server
     page.wait_for_function("() => document.querySelector('#scan-result').textContent.length > 0")
     text = page.text_content("#scan-result")
     assert f"{payload} read" in text and target in text, text
+    # the pose is drawn as a cube over the photo: its top's edges in blue, its uprights in green
+    blue = page.evaluate(
+        """() => { const c = document.querySelector('#scan-canvas');
+                   const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                   let n = 0; for (let i = 0; i < d.length; i += 4) n += d[i] < 40 && d[i + 1] < 40 && d[i + 2] > 200;
+                   return n; }"""
+    )
+    assert blue > 50, blue
     screenshot(page, "scan-photo")
 
 

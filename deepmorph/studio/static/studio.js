@@ -488,6 +488,11 @@ document.querySelectorAll("#sheet-form [data-sheet]").forEach((button) =>
   }));
 
 // -- scan -------------------------------------------------------------------------------------
+// the pose cube's corners as the server sends them (deepmorph_detect.results.Pose.cube): base on
+// the paper 0-3, top towards the camera 4-7
+const CUBE_BASE = [[0, 1], [1, 2], [2, 3], [3, 0]];
+const CUBE_TOP = [[4, 5], [5, 6], [6, 7], [7, 4]];
+const CUBE_UPRIGHTS = [[0, 4], [1, 5], [2, 6], [3, 7]];
 function showScan(result, image) {
   const canvas = $("#scan-canvas");
   canvas.width = result.width;
@@ -504,12 +509,18 @@ function showScan(result, image) {
       c.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
       ctx.closePath();
       ctx.stroke();
-      // the drawing's axes at its top-left corner: x along its top edge (red), y down its side (blue)
-      for (const [to, colour] of [[c[1], "#e00"], [c[3], "#00e"]]) {
+    }
+    if (d.cube) {
+      // the camera's pose: a cube standing on the drawing's centre
+      const q = d.cube;
+      ctx.lineWidth = Math.max(2, result.width / 250);
+      for (const [edges, colour] of [[CUBE_BASE, "#e00"], [CUBE_TOP, "#00e"], [CUBE_UPRIGHTS, "#0a0"]]) {
         ctx.strokeStyle = colour;
         ctx.beginPath();
-        ctx.moveTo(c[0][0], c[0][1]);
-        ctx.lineTo(c[0][0] + 0.4 * (to[0] - c[0][0]), c[0][1] + 0.4 * (to[1] - c[0][1]));
+        for (const [a, b] of edges) {
+          ctx.moveTo(q[a][0], q[a][1]);
+          ctx.lineTo(q[b][0], q[b][1]);
+        }
         ctx.stroke();
       }
     }

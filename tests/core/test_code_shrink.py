@@ -1,0 +1,127 @@
+"""Training shrinks a ``--payload-bits auto`` code its drawing does not carry
+(:mod:`deepmorph_core.code_shrink`), and never a size the user gave."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from deepmorph_core.bundle import AutoPayload
+from deepmorph_core.cli import application
+from deepmorph_core.code_shrink import information, read_share, shrink_networks, smaller_code
+from deepmorph_core.codec import choose_codec
+from deepmorph_core.loop import Interrupted
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.payload import random_payloads
+from deepmorph_core.train import train_model
+from tests.core.test_training import FAST, TINY, _interrupt_at
+
+#: Full corruption from the first step at ``hard``, a short window: an untrained decoder reads
+#: almost no code word of the first windows, so an auto-sized code is shrunk at step 20.
+HARD_AT_ONCE = {**FAST, "steps": 60, "severity": "hard", "curriculum": 0.0, "early_stop_window": 10,
+                "checkpoint_every": 5, "log_every": 5, "seed": 2}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny_svg(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("d") / "tiny.svg"
+    path.write_bytes(TINY)
+    return path
+
+
+def test_the_smaller_code_is_halfway_to_the_information_its_bits_carried() -> None:
+    """Of a code's bits, 14 read always and the rest at chance (no information): the code
+    kept is the largest payload's that fits halfway between the code (less one bit) and 14
+    bits, on the best-read bits; the user's CRC and BCH stay; below the smallest code, nothing."""
+    spec = choose_codec(20, 8, 2)
+    gen = torch.Generator().manual_seed(0)
+    errors = torch.rand(4000, spec.code_bits, generator=gen) < 0.5
+    good = torch.randperm(spec.code_bits, generator=gen)[:14]
+    errors[:, good] = False
+    assert information(errors) == pytest.approx(14, abs=0.2)
+    assert information(torch.zeros(10, 7, dtype=torch.bool)) == 7.0
+    new, keep, carried = smaller_code(errors, spec, AutoPayload())
+    size = math.ceil((carried + spec.code_bits - 1) / 2)
+    assert (
+        new.code_bits <= size < min(c.code_bits for c in (choose_codec(new.payload_bits + 1, None, t) for t in (1, 2)))
+    )
+    assert len(keep) == new.code_bits and set(good.tolist()) <= set(keep)
+    assert read_share(errors, good, 0) == 1.0 > read_share(errors, torch.tensor(keep), new.bch_t)
+    fixed, _, _ = smaller_code(errors, spec, AutoPayload(crc_bits=16, ecc_t=1))
+    assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
+    # nothing carried: halfway is below the smallest code, which is taken; below it, nothing
+    noise = torch.rand(4000, 24, generator=gen) < 0.5
+    small = choose_codec(4, None, 1)
+    smallest, _, _ = smaller_code(noise[:, : small.code_bits], small, AutoPayload())
+    assert smallest == min((choose_codec(1, None, t) for t in (1, 2)), key=lambda c: c.code_bits)
+    assert smaller_code(noise[:, : smallest.code_bits], smallest, AutoPayload()) is None
+
+
+def test_shrunk_networks_are_the_kept_bits_of_the_old_ones(tiny_svg: Path, tmp_path: Path) -> None:
+    """The smaller networks compute what the old ones did on the kept bits: the decoder's
+    logits are the old logits of those bits, and the encoder drives the variables with the kept
+    bits' columns."""
+    out = tmp_path / "m.dmm"
+    train_model(
+        tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=1, train={**FAST, "steps": 5}, validation_samples=(0, 0)
+    )
+    model = DeepMorphModel.load(out).eval()
+    images = torch.rand(3, 1, *model.image_size, generator=torch.Generator().manual_seed(1))
+    old_weight = model.encoder.linear.weight.detach().clone()
+    with torch.no_grad():
+        before = model.decoder(images)
+    new = choose_codec(2, 8, 1)
+    keep = list(range(1, 1 + new.code_bits))
+    shrink_networks(model, keep, new)
+    with torch.no_grad():
+        torch.testing.assert_close(model.decoder(images), before[:, keep])
+    torch.testing.assert_close(model.encoder.linear.weight, old_weight[:, keep])
+    assert model.codec.spec == model.meta.codec == new and not model.graphs
+    model.save(tmp_path / "small.dmm")
+    again = DeepMorphModel.load(tmp_path / "small.dmm")
+    payload = random_payloads(1, 2, np.random.default_rng(0))[0]
+    assert again.encode(payload) == model.encode(payload)
+
+
+def test_an_auto_code_that_does_not_read_is_shrunk_and_a_given_one_is_not(tiny_svg: Path, tmp_path: Path) -> None:
+    """At auto, the code its batches do not read is made smaller at step 20 (after a settling
+    window and a watched one), the user is told, the bundle records it and ``info`` shows it;
+    the run resumed across it is the same run; a size the user gave stays."""
+    warnings: list[str] = []
+    auto = tmp_path / "auto.dmm"
+    summary = train_model(tiny_svg, auto, payload_bits="auto", train=HARD_AT_ONCE, validation_samples=(0, 0),
+                          on_warning=warnings.append)  # fmt: skip
+    model = DeepMorphModel.load(auto)
+    rec = model.meta.record
+    assert summary.shrunk == rec.shrunk and summary.payload_bits == model.codec.spec.payload_bits
+    assert rec.payload_auto == AutoPayload() and rec.finished
+    first = rec.shrunk[0]
+    assert first.step == 20 and first.read < 0.9 and first.payload_bits[1] < first.payload_bits[0]
+    last = rec.shrunk[-1]
+    assert model.codec.spec.payload_bits == last.payload_bits[1] and model.codec.spec.code_bits == last.code_bits[1]
+    assert model.encoder.linear.weight.shape[1] == model.decoder.head[-1].out_features == last.code_bits[1]
+    assert any(f"{first.payload_bits[0]}-bit payload read" in w and "training went on with" in w for w in warnings)
+    shown = " ".join(CliRunner().invoke(application(), ["info", str(auto)]).stdout.split())
+    assert f"sized by training: {first.payload_bits[0]} -> " in shown, shown
+
+    resumed = tmp_path / "resumed.dmm"  # interrupted after the first shrink, with a window half full
+    with pytest.raises(Interrupted, match="interrupted at step 25/60"):
+        train_model(tiny_svg, resumed, payload_bits="auto", train=HARD_AT_ONCE, validation_samples=(0, 0),
+                    on_start=_interrupt_at(25))  # fmt: skip
+    train_model(tiny_svg, resumed, resume=True, validation_samples=(0, 0))
+    again = DeepMorphModel.load(resumed)
+    assert again.meta.record.shrunk == rec.shrunk
+    for key, value in model.decoder.state_dict().items():
+        torch.testing.assert_close(value, again.decoder.state_dict()[key], msg=key)
+    torch.testing.assert_close(model.encoder.linear.weight, again.encoder.linear.weight)
+
+    given = tmp_path / "given.dmm"
+    train_model(tiny_svg, given, payload_bits=first.payload_bits[0], train=HARD_AT_ONCE, validation_samples=(0, 0))
+    kept = DeepMorphModel.load(given)
+    assert kept.codec.spec.payload_bits == first.payload_bits[0] and not kept.meta.record.shrunk
+    assert kept.meta.record.payload_auto is None
