@@ -40,7 +40,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
     import numpy as np
 
     from deepmorph_detect.baselines import QrClock
-    from deepmorph_detect.metrics import corner_error, matched_detections
+    from deepmorph_detect.metrics import SceneTally, corner_error
     from deepmorph_detect.scenes import SceneMaker
 
     qr = QrClock(model, (640, 480), frames=20)  # the QR frames bench-scenes times too
@@ -55,7 +55,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
     rows: list[tuple] = []
     for sev in args.severities.split(","):
         maker = SceneMaker(model, (640, 480), sev, seed=args.seed)
-        stats = {k: {"found": 0, "read": 0, "wrong_ok": 0, "ms": [], "corner": []} for k in CHAINS}
+        stats = {k: {"tally": SceneTally(), "ms": [], "corner": []} for k in CHAINS}
         differ = 0
         qr.times.clear()  # this severity's series, from the first QR frame again
         for i in range(args.n):
@@ -67,10 +67,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
                 s = stats[k]
                 s["ms"].append(ms)
                 seen = []
-                for d, p, right in matched_detections(found, truth):
-                    s["found"] += p is not None
-                    s["read"] += bool(d.result.ok and right)
-                    s["wrong_ok"] += bool(d.result.ok and not right)
+                for d, p, right in s["tally"].add(found, truth):
                     if d.result.ok and right:
                         s["corner"].append(corner_error(d.corners, p.corners))
                     seen.append((p is not None, bool(d.result.ok), bytes(np.asarray(d.result.payload, np.uint8))))
@@ -83,18 +80,19 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
         for k, s in stats.items():
             med, mean = float(np.median(s["ms"])), float(np.mean(s["ms"]))
             corner = round(float(np.median(s["corner"])), 3) if s["corner"] else None
+            tally = s["tally"]
             sev_report[k] = {
-                "found": s["found"],
-                "read": s["read"],
-                "wrong_ok": s["wrong_ok"],
+                "found": tally.found,
+                "read": tally.read,
+                "wrong_ok": tally.wrong,
                 "corner_px_median": corner,
                 "ms_median": round(med, 2),
                 "ms_mean": round(mean, 2),
                 "x_qr": round(med / qr_med, 3),
                 "x_a": round(med / a_med, 3),
             }
-            found, read = f"{s['found']}/{args.n}", f"{s['read']}/{args.n}"
-            rows.append((sev, k, found, read, s["wrong_ok"], corner, round(med, 2), round(mean, 1), round(qr_med, 2),
+            found, read = f"{tally.found}/{args.n}", f"{tally.read}/{args.n}"
+            rows.append((sev, k, found, read, tally.wrong, corner, round(med, 2), round(mean, 1), round(qr_med, 2),
                          f"{med / qr_med:.2f}x", f"{med / a_med:.2f}x", differ if k == "b" else ""))  # fmt: skip
         report["severities"][sev] = sev_report
         print(f"{sev}: done", flush=True)

@@ -54,26 +54,21 @@ UNREAD: list[tuple[str, float, bool]] = []
 
 def score(kind: str, locator: Any, scene: Any) -> tuple[dict[str, int], list[float], float]:
     """Counts, corner errors and the seconds ``locator`` took on one scene."""
-    from deepmorph_detect.metrics import corner_error, matched_detections
+    from deepmorph_detect.metrics import SceneTally, corner_error
 
     drawings = [p for p in scene.placements if p.kind == "drawing"]
     t0 = time.perf_counter()
     dets = locator.locate(scene.image)
     seconds = time.perf_counter() - t0
-    counts = {"prints": len(drawings), "found": 0, "read": 0, "wrong": 0, "false": 0, "unread_true": 0}
+    tally = SceneTally()
     errors = []
-    for det, p, right in matched_detections(dets, drawings):
+    for det, p, _ in tally.add(dets, drawings):
         if not det.result.ok:
-            counts["unread_true"] += p is not None
             UNREAD.append((kind, round(float(det.correlation), 4), p is not None))
-        if p is None:
-            counts["false"] += 1
-            counts["wrong"] += bool(det.result.ok)
-            continue
-        counts["found"] += 1
-        counts["read"] += bool(det.result.ok and right)
-        counts["wrong"] += bool(det.result.ok and not right)
-        errors.append(corner_error(det.corners, p.corners))
+        if p is not None:
+            errors.append(corner_error(det.corners, p.corners))
+    counts = {"prints": tally.prints, "found": tally.found, "read": tally.read, "wrong": tally.wrong,
+              "false": tally.false, "unread_true": tally.unread}  # fmt: skip
     return counts, errors, seconds
 
 

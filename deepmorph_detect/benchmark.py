@@ -29,7 +29,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.baselines import QrClock, aruco_detector
 from deepmorph_detect.camera import Camera, rotation_error_deg, solve_pose, translation_error
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.metrics import corner_error, match_placement, matched_detections
+from deepmorph_detect.metrics import SceneTally, corner_error, match_placement
 from deepmorph_detect.results import Located
 from deepmorph_detect.scene_folders import read_scenes
 from deepmorph_detect.scenes import SceneMaker
@@ -41,8 +41,8 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
     locator = Locator(model)
     aruco = aruco_detector()
     square = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], dtype=np.float64)
-    stats: dict[str, Any] = {"drawings": 0, "found": 0, "decoded": 0, "false_detections": 0, "wrong_ok": 0,
-                             "detections": 0, "negative_images": 0, "aruco_markers": 0, "aruco_found": 0}  # fmt: skip
+    tally = SceneTally()
+    stats: dict[str, Any] = {"detections": 0, "negative_images": 0, "aruco_markers": 0, "aruco_found": 0}
     rot, trans, corner, a_rot, a_trans, a_corner = [], [], [], [], [], []
     t_ours, t_aruco = [], []
     qr = QrClock(model, tuple(index.get("size", (640, 480))), frames=min(30, max(5, len(scenes))))
@@ -55,20 +55,14 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
         cam = Camera(c["fx"], c["fy"], c["cx"], c["cy"])
         drawings = [p for p in truth["placements"] if p.kind == "drawing"]
         markers = [p for p in truth["placements"] if p.kind == "aruco"]
-        stats["drawings"] += len(drawings)
         stats["negative_images"] += not drawings
         t0 = time.perf_counter()
         dets: list[Located] = locator.locate(image, camera=cam)
         t_ours.append(time.perf_counter() - t0)
         stats["detections"] += len(dets)
-        for det, p, right in matched_detections(dets, drawings):
+        for det, p, _ in tally.add(dets, drawings):
             if p is None:
-                stats["false_detections"] += 1
-                stats["wrong_ok"] += bool(det.result.ok)
                 continue
-            stats["found"] += 1
-            stats["decoded"] += bool(det.result.ok and right)
-            stats["wrong_ok"] += bool(det.result.ok and not right)
             rot.append(rotation_error_deg(det.rvec, p.rvec))
             trans.append(translation_error(det.tvec, p.tvec))
             corner.append(corner_error(det.corners, p.corners))
@@ -95,14 +89,19 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
     def med(v: list[float]) -> float | None:
         return round(float(np.median(v)), 4) if v else None
 
-    n_dr = max(stats["drawings"], 1)
+    n_dr = max(tally.prints, 1)
     report = {
         "scenes": len(scenes),
         "severity": index.get("severity"),
+        "drawings": tally.prints,
+        "found": tally.found,
+        "decoded": tally.read,
+        "false_detections": tally.false,
+        "wrong_ok": tally.wrong,
         **stats,
-        "recall": round(stats["found"] / n_dr, 4),
-        "precision": round(stats["found"] / max(stats["detections"], 1), 4),
-        "payload_success": round(stats["decoded"] / n_dr, 4),
+        "recall": round(tally.found / n_dr, 4),
+        "precision": round(tally.found / max(stats["detections"], 1), 4),
+        "payload_success": round(tally.read / n_dr, 4),
         "pose": {
             "deepmorph": {
                 "rotation_deg_median": med(rot),

@@ -8,6 +8,7 @@ Pose errors (rotation, translation) are :mod:`deepmorph_detect.camera`'s
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,4 +44,42 @@ def matched_detections(dets: list[Any], drawings: list[Placement]) -> Iterator[t
         yield det, p, p.payload is not None and np.array_equal(det.result.payload, p.payload)
 
 
-__all__ = ["corner_error", "match_placement", "matched_detections"]
+@dataclass
+class SceneTally:
+    """Detections scored against their scenes' truth, added up over scenes (:meth:`add`).
+
+    Attributes:
+        prints: drawings placed in the scenes.
+        found: detections of a placed drawing (the first of each).
+        read: of those, payloads read (``ok``) and right.
+        unread: of those, payloads not read.
+        wrong: payloads reported ``ok`` that are not the drawing's, on a placed drawing or not.
+        false: detections of nothing placed, or a second one of a drawing.
+    """
+
+    prints: int = 0
+    found: int = 0
+    read: int = 0
+    unread: int = 0
+    wrong: int = 0
+    false: int = 0
+
+    def add(self, dets: list[Any], drawings: list[Placement]) -> list[tuple[Any, Placement | None, bool]]:
+        """Score one scene's detections against its drawings; each detection with the drawing it
+        found and whether its payload is that drawing's (:func:`matched_detections`)."""
+        self.prints += len(drawings)
+        scored = list(matched_detections(dets, drawings))
+        for det, p, right in scored:
+            ok = bool(det.result.ok)
+            if p is None:
+                self.false += 1
+                self.wrong += ok
+                continue
+            self.found += 1
+            self.read += ok and right
+            self.unread += not ok
+            self.wrong += ok and not right
+        return scored
+
+
+__all__ = ["SceneTally", "corner_error", "match_placement", "matched_detections"]

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -35,6 +36,7 @@ from deepmorph_detect.camera import (
     viewbox_corners,
 )
 from deepmorph_detect.locate import Locator
+from deepmorph_detect.metrics import SceneTally
 from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
 from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
@@ -108,6 +110,28 @@ def test_the_pose_cube_stands_on_the_drawing() -> None:
     rotation, _ = cv2.Rodrigues(rvec)
     depth = lambda z: (rotation @ np.array([0.25, 0.25, z]) + tvec)[2]  # noqa: E731
     assert depth(-0.5) < depth(0.0)  # the top (z = -0.5, out of the paper) is nearer the camera
+
+
+def test_a_scene_tally_counts_what_the_benchmarks_count() -> None:
+    """:class:`SceneTally`, the one count of the scene benchmarks: a right read, an unread
+    print, a wrong payload on a print, a second detection of a print, and one of nothing."""
+    square = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], dtype=np.float64)
+
+    def placed(dx: float, payload: list[int]) -> Placement:
+        return Placement("drawing", np.zeros(3), np.zeros(3), np.eye(3), square + dx, np.array(payload))
+
+    def found(dx: float, ok: bool, payload: list[int]) -> SimpleNamespace:
+        return SimpleNamespace(corners=square + dx, result=SimpleNamespace(ok=ok, payload=np.array(payload)))
+
+    a, b, c = placed(0, [1, 0]), placed(300, [0, 1]), placed(600, [1, 1])
+    tally = SceneTally()
+    scored = tally.add([found(0, True, [1, 0]), found(300, False, [0, 0]), found(600, True, [0, 0]),
+                        found(2, True, [1, 0]), found(900, True, [1, 1])], [a, b, c])  # fmt: skip
+    assert [(p is not None, right) for _, p, right in scored] == [(True, True), (True, False), (True, False),
+                                                                   (False, False), (False, False)]  # fmt: skip
+    assert tally == SceneTally(prints=3, found=3, read=1, unread=1, wrong=3, false=2)
+    tally.add([], [a])
+    assert tally.prints == 4 and tally.found == 3
 
 
 # -- scenes ---------------------------------------------------------------------------------
