@@ -31,9 +31,10 @@ EARLY_STOP_WINDOW, EARLY_STOP_RATE = 250, 0.995
 SMALL_PRINT_SCALE = (0.55, 0.95)
 
 
-def _setting(default: Any, option: str | None = None, help: str = "") -> Any:  # noqa: A002 - the option's help
-    """A field of :class:`TrainSettings`: ``option`` is its public name (``--image-width`` on the
-    command line, ``image_width=`` in Python) where training exposes it, ``help`` its one line."""
+def setting(default: Any, option: str | None = None, help: str = "") -> Any:  # noqa: A002 - the option's help
+    """A field of a settings dataclass (:class:`TrainSettings`, :class:`TuneSettings`, the
+    detector's): ``option`` is its public name (``--image-width`` on the command line,
+    ``image_width=`` in Python) where a command exposes it, ``help`` its one line."""
     return dataclasses.field(default=default, metadata={"option": option, "help": help})
 
 
@@ -92,9 +93,9 @@ class TrainSettings:
         checkpoint_every, log_every: in steps.
     """
 
-    steps: Annotated[int, Ge(1), Le(10_000_000)] = _setting(4000, "steps", "Training steps (both stages).")
-    batch: Annotated[int, Ge(2), Le(4096)] = _setting(32, "batch", "Morphs per step.")
-    width: Annotated[int, Ge(32), Le(512)] = _setting(
+    steps: Annotated[int, Ge(1), Le(10_000_000)] = setting(4000, "steps", "Training steps (both stages).")
+    batch: Annotated[int, Ge(2), Le(4096)] = setting(32, "batch", "Morphs per step.")
+    width: Annotated[int, Ge(32), Le(512)] = setting(
         96, "image-width", "Width in pixels of the image the decoder reads."
     )
     lr: Annotated[float, Gt(0), Le(1)] = 2e-3
@@ -102,29 +103,29 @@ class TrainSettings:
     stage1_max_fraction: Annotated[float, Ge(0), Le(1)] = 0.35
     plateau_window: Annotated[int, Ge(10)] = 150
     plateau_gain: Annotated[float, Ge(0)] = 0.004
-    hard_fraction: Annotated[float, Ge(0), Le(1)] = _setting(
+    hard_fraction: Annotated[float, Ge(0), Le(1)] = setting(
         0.25, "real-render-share", "Share of each batch drawn by resvg."
     )
-    small_prints: Annotated[float, Ge(0), Le(1)] = _setting(
+    small_prints: Annotated[float, Ge(0), Le(1)] = setting(
         0.0,
         "small-prints",
         "Share of each batch captured as a small print (corrupted at "
         f"{SMALL_PRINT_SCALE[0] * 100:.0f}-{SMALL_PRINT_SCALE[1] * 100:.0f} % of the width, enlarged).",
     )
-    severity: Literal["none", "easy", "medium", "hard"] = _setting(
+    severity: Literal["none", "easy", "medium", "hard"] = setting(
         "medium", "severity", "Capture corruption to train against."
     )
     curriculum: Annotated[float, Ge(0), Le(1)] = 0.375
-    encoder_init: Literal["spread", "random"] = _setting(
+    encoder_init: Literal["spread", "random"] = setting(
         "spread", "encoder-init", "Encoder start: spread (each bit drives its own variables) or random (the paper's)."
     )
-    spatial_transformer: bool = _setting(
+    spatial_transformer: bool = setting(
         True, "spatial-transformer", "Learn a homography in front of the decoder that undoes leftover perspective."
     )
-    readout: bool = _setting(
+    readout: bool = setting(
         True, "readout", "Where the CNN stalls in stage 1, add a linear readout of the pixels fitted by least squares."
     )
-    early_stop: bool = _setting(
+    early_stop: bool = setting(
         True,
         "early-stop",
         f"Stop before --steps once {EARLY_STOP_WINDOW} steps at full corruption have read "
@@ -133,15 +134,15 @@ class TrainSettings:
     early_stop_window: Annotated[int, Ge(10)] = EARLY_STOP_WINDOW
     early_stop_rate: Annotated[float, Gt(0), Le(1)] = EARLY_STOP_RATE
     freeze_encoder: bool = False
-    seed: int = _setting(0, "seed")
-    device: Literal["cpu", "cuda", "auto"] = _setting("auto", "device")
-    shards: Annotated[int | None, Ge(1), Le(1024)] = _setting(
+    seed: int = setting(0, "seed")
+    device: Literal["cpu", "cuda", "auto"] = setting("auto", "device")
+    shards: Annotated[int | None, Ge(1), Le(1024)] = setting(
         None,
         "shards",
         "Random streams the batch is drawn from, shared by torchrun's processes (default: one per process).",
     )
-    threads: Annotated[int | None, Ge(1), Le(256)] = _setting(None, "threads")
-    checkpoint_every: Annotated[int, Ge(1)] = _setting(
+    threads: Annotated[int | None, Ge(1), Le(256)] = setting(None, "threads")
+    checkpoint_every: Annotated[int, Ge(1)] = setting(
         250, "checkpoint-every", "Steps between checkpoints (a crash loses at most these)."
     )
     log_every: Annotated[int, Ge(1)] = 25
@@ -163,11 +164,11 @@ class TuneSettings:
         lr: the decoder's start learning rate, decaying by a cosine to 10 %.
     """
 
-    steps: Annotated[int, Ge(1), Le(10_000_000)] = _setting(800, "steps", "Tuning steps.")
-    small_prints: Annotated[float, Ge(0), Le(1)] = _setting(
+    steps: Annotated[int, Ge(1), Le(10_000_000)] = setting(800, "steps", "Tuning steps.")
+    small_prints: Annotated[float, Ge(0), Le(1)] = setting(
         0.5, "small-prints", "Share of each batch captured as a small print."
     )
-    lr: Annotated[float, Ge(1e-6), Le(1e-1)] = _setting(3e-4, "lr", "Start learning rate (cosine to 10 %).")
+    lr: Annotated[float, Ge(1e-6), Le(1e-1)] = setting(3e-4, "lr", "Start learning rate (cosine to 10 %).")
 
 
 #: Every tuning setting at its default.
@@ -244,4 +245,5 @@ __all__ = [
     "TrainSettings",
     "TuneSettings",
     "exposed",
+    "setting",
 ]

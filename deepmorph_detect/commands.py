@@ -27,6 +27,7 @@ from deepmorph_core.cli.frame import (
     out,
     print_json,
     progress_bar,
+    setting_option,
     step_progress,
     training_result,
     use_threads,
@@ -34,6 +35,7 @@ from deepmorph_core.cli.frame import (
 )
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, check_target, refuse_non_folder, refuse_to_overwrite
+from deepmorph_detect.detector_settings import DETECTOR_DEFAULTS, DetectorSettings
 
 
 def _progress(name: str):  # noqa: ANN202 - a rich Progress
@@ -376,18 +378,13 @@ def bench_photos_cmd(
 def train_detector_cmd(
     model: ModelArg,
     out_path: Annotated[Path, typer.Option("--out", help="Bundle to write with the detector (also the checkpoint).")],
-    steps: Annotated[
-        int, typer.Option("--steps", min=1, help="Training steps (from scratch: about 2000, with --lr 2e-3).")
-    ] = 300,
-    batch: Annotated[int, typer.Option("--batch", min=1, help="Scenes per step.")] = 16,
-    seed: SeedOpt = 0,
+    steps: Annotated[int, setting_option("steps", settings=DetectorSettings)] = DETECTOR_DEFAULTS.steps,
+    batch: Annotated[int, setting_option("batch", settings=DetectorSettings)] = DETECTOR_DEFAULTS.batch,
+    seed: SeedOpt = DETECTOR_DEFAULTS.seed,
     threads: ThreadsOpt = None,
-    workers: Annotated[int, typer.Option("--workers", min=0, max=16, help="Scene-making processes.")] = 1,
-    width: Annotated[
-        int,
-        typer.Option("--channels", min=8, max=256, help="Channel width of the network (16: about half the time)."),
-    ] = 32,
-    lr: Annotated[float, typer.Option("--lr", min=1e-6, max=1.0, help="Start learning rate (cosine to 5 %).")] = 5e-4,
+    workers: Annotated[int, setting_option("workers", settings=DetectorSettings)] = DETECTOR_DEFAULTS.workers,
+    width: Annotated[int, setting_option("width", settings=DetectorSettings)] = DETECTOR_DEFAULTS.width,
+    lr: Annotated[float, setting_option("lr", settings=DetectorSettings)] = DETECTOR_DEFAULTS.lr,
     fine_tune: Annotated[
         bool,
         typer.Option(
@@ -395,7 +392,7 @@ def train_detector_cmd(
             help="Start from the model's trained detector (same --channels) instead of from scratch;"
             " use another --seed for new scenes and a lower --lr.",
         ),
-    ] = False,
+    ] = DETECTOR_DEFAULTS.fine_tune,
     from_scratch: Annotated[
         bool,
         typer.Option(
@@ -403,7 +400,7 @@ def train_detector_cmd(
             help="Start from random weights instead of the shipped universal detector"
             " (give about --steps 2000 --lr 2e-3).",
         ),
-    ] = False,
+    ] = DETECTOR_DEFAULTS.start == "scratch",
     resume: Annotated[bool, typer.Option("--resume", help="Continue the checkpoint at --out.")] = False,
     as_json: JsonOpt = False,
 ) -> None:

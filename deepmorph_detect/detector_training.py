@@ -17,11 +17,11 @@ import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
@@ -32,53 +32,25 @@ from deepmorph_core.loop import Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
+from deepmorph_detect.detector_settings import DetectorSettings, SceneSettings
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, Scene, SceneMaker
 from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 
 
-class SceneTrainingConfig(BaseModel):
-    """Settings of a detector network trained on scenes (stored with it).
-
-    Attributes:
-        steps, batch, lr: optimisation (Adam, cosine decay to 5 %).
-        width: channel width of the network.
-        seed: scenes and initialisation.
-        threads: torch threads of the training process.
-        workers: scene-making processes (0: in the training process).
-        checkpoint_every, log_every: in steps.
-    """
+class SceneTrainingConfig(BaseModel, SceneSettings):
+    """Settings of a detector network trained on scenes, validated (stored with it): the fields,
+    defaults and bounds are :class:`~deepmorph_detect.detector_settings.SceneSettings`'."""
 
     model_config = ConfigDict(extra="forbid")
 
-    steps: int = Field(default=2000, ge=1, le=10_000_000)
-    batch: int = Field(default=16, ge=1, le=1024)
-    lr: float = Field(default=2e-3, gt=0, le=1)
-    width: int = Field(default=32, ge=8, le=256)
-    seed: int = 0
-    threads: int | None = Field(default=1, ge=1, le=256)
-    workers: int = Field(default=1, ge=0, le=16)
-    checkpoint_every: int = Field(default=200, ge=1)
-    log_every: int = Field(default=25, ge=1)
 
+class DetectorConfig(BaseModel, DetectorSettings):
+    """A model's own detector's training settings, validated (stored in the bundle): the
+    fields, defaults and bounds are :class:`~deepmorph_detect.detector_settings.DetectorSettings`',
+    which ``deepmorph train-detector`` reads too."""
 
-class DetectorConfig(SceneTrainingConfig):
-    """A model's own detector's training settings (stored in the bundle).
-
-    By default a short fine-tune of the shipped universal detector (:mod:`deepmorph_detect.universal`):
-    300 steps at ``lr`` 5e-4. From scratch (``start="scratch"``) takes about 2000 steps at 2e-3.
-
-    Attributes:
-        fine_tune: start from the detector already in the bundle (same width); the runs it
-            came from are kept in the bundle (``DetectorMeta.earlier``).
-        start: without ``fine_tune``, where the network starts: the universal detector (whose
-            width it must have) or ``scratch``.
-    """
-
-    steps: int = Field(default=300, ge=1, le=10_000_000)
-    lr: float = Field(default=5e-4, gt=0, le=1)
-    fine_tune: bool = False
-    start: Literal["universal", "scratch"] = "universal"
+    model_config = ConfigDict(extra="forbid")
 
 
 def targets_for(placements: list[Placement], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -232,7 +204,7 @@ class DetectorRun:
             restore_optimiser(self.opt, model.extra_tensors)
         self._batches: Iterator[tuple[Tensor, Tensor, Tensor, Tensor]] | None = None
 
-    def set_up(self, config: SceneTrainingConfig, out: Path) -> None:
+    def set_up(self, config: SceneSettings, out: Path) -> None:
         """Threads, seed, a fresh network and its optimiser."""
         self.cfg, self.out = config, Path(out)
         if config.threads:

@@ -34,6 +34,7 @@ from deepmorph_core.cli.frame import (
     parse_pair,
     print_json,
     safe,
+    setting_option,
     step_progress,
     training_result,
     use_threads,
@@ -48,9 +49,7 @@ from deepmorph_core.train_settings import (
     PHOTO_SAMPLES,
     RENDER_SAMPLES,
     TUNE_DEFAULTS,
-    TrainSettings,
     TuneSettings,
-    exposed,
 )
 
 if TYPE_CHECKING:
@@ -64,16 +63,6 @@ DeviceOpt = Annotated[
     Literal["auto", "cpu", "cuda"],
     typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
 ]
-
-
-def setting_option(field: str, help: str | None = None, settings: type = TrainSettings) -> Any:  # noqa: A002 - the option's help
-    """The option of training setting ``field``: its flag, help and bounds as
-    :class:`~deepmorph_core.train_settings.TrainSettings` (or ``settings``, such as
-    :class:`~deepmorph_core.train_settings.TuneSettings`) declares them (``help`` replaces its
-    line; a flag on or off is ``--x/--no-x``). Its default is the class's own."""
-    setting = exposed(settings)[field]
-    flag = f"--{setting.option}" + (f"/--no-{setting.option}" if setting.switch else "")
-    return typer.Option(flag, min=setting.ge, max=setting.le, help=help or setting.help)
 
 
 BatchOpt = Annotated[int, setting_option("batch")]

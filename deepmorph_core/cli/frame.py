@@ -20,7 +20,7 @@ from rich.text import Text
 
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import atomic_write
-from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES
+from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES, TrainSettings, exposed
 
 _UNPRINTABLE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069]")
 
@@ -288,3 +288,13 @@ ValidationOpt = Annotated[
         f"(default {RENDER_SAMPLES},{PHOTO_SAMPLES}; 0: none).",
     ),
 ]
+
+
+def setting_option(field: str, help: str | None = None, settings: type = TrainSettings) -> Any:  # noqa: A002 - the option's help
+    """The option of training setting ``field``: its flag, help and bounds as
+    :class:`~deepmorph_core.train_settings.TrainSettings` (or ``settings``, such as
+    :class:`~deepmorph_core.train_settings.TuneSettings`) declares them (``help`` replaces its
+    line; a flag on or off is ``--x/--no-x``). Its default is the class's own."""
+    setting = exposed(settings)[field]
+    flag = f"--{setting.option}" + (f"/--no-{setting.option}" if setting.switch else "")
+    return typer.Option(flag, min=setting.ge, max=setting.le, help=help or setting.help)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -243,16 +245,39 @@ def test_a_new_detector_replaces_the_stored_close_up_validation(tmp_path: Path) 
     assert records["close-ups"].description != "stale" and records["close-ups"].samples == 2
 
 
-def test_the_commands_defaults_are_the_configs() -> None:
-    """``train-detector``'s option defaults are :class:`DetectorConfig`'s (the command line
-    cannot import it: it must start without torch), so a default changed in one is caught."""
+def test_the_commands_options_are_the_declared_settings() -> None:
+    """``train-detector``'s options take their defaults, bounds and help from
+    :class:`DetectorSettings`, which :class:`DetectorConfig` inherits; the command has no
+    literal default of its own (a changed one, in a fresh process, reaches it)."""
     import inspect
 
+    from deepmorph_core.train_settings import exposed
     from deepmorph_detect.commands import train_detector_cmd
+    from deepmorph_detect.detector_settings import DetectorSettings
+    from tests.project.test_train_settings import declared
 
+    options, config = declared(train_detector_cmd), DetectorConfig()
+    for field, setting in exposed(DetectorSettings).items():
+        if setting.option in ("seed", "threads"):  # the options every command shares, with their own help
+            continue
+        assert options[field].default == getattr(config, field), field
+        assert options[field].flags == (f"--{setting.option}",) and options[field].help == setting.help
+        assert (options[field].min, options[field].max) == (setting.ge, setting.le), field
     params = inspect.signature(train_detector_cmd).parameters
-    config = DetectorConfig()
-    for option, field in {"steps": "steps", "batch": "batch", "lr": "lr", "width": "width", "workers": "workers",
-                          "seed": "seed", "fine_tune": "fine_tune"}.items():  # fmt: skip
-        assert params[option].default == getattr(config, field), option
+    assert params["seed"].default == config.seed and params["fine_tune"].default == config.fine_tune
     assert (config.start == "scratch") == params["from_scratch"].default
+    changed = subprocess.run([sys.executable, "-c", DETECTOR_CHANGED], cwd=Path(__file__).resolve().parents[2],
+                             capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert changed.returncode == 0, changed.stderr
+    assert json.loads(changed.stdout) == [301, 7e-4]  # no literal default of its own
+
+
+DETECTOR_CHANGED = """
+import dataclasses, json
+import deepmorph_detect.detector_settings as settings
+settings.DETECTOR_DEFAULTS = dataclasses.replace(settings.DETECTOR_DEFAULTS, steps=301, lr=7e-4)
+from tests.project.test_train_settings import declared
+from deepmorph_detect.commands import train_detector_cmd
+cli = declared(train_detector_cmd)
+print(json.dumps([cli["steps"].default, cli["lr"].default]))
+"""
