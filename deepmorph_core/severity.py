@@ -32,6 +32,10 @@ PRESET_SIZE = 96
 #: The width of the simulated camera's scenes (a VGA frame, what the photo chain's detector sees
 #: shrunk): a scene made smaller stands for this frame shrunk (its pixel parameters scaled).
 PHOTO_SIZE = 640
+#: A close-up photo's width in camera pixels and the share of it a print spans (the middle of the
+#: photo simulator's 60-80 %): what a camera's pixel parameters are scaled from when the decoder's
+#: frame meets them (:func:`camera_shadow`).
+CLOSE_UP_PHOTO_PX, SHADOW_FRAME_SHARE = 240, 0.7
 #: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``, or by a photo's shrink).
 PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length"), ("shadow", "softness")}
 
@@ -209,10 +213,29 @@ def photo_ranges(name: str) -> PhotoRanges:
 
 def residual_steps(name: str, size: int | None = None, *, colour: bool = False) -> list[Step]:
     """The residual corruption steps of a severity, pixel parameters scaled to ``size``-pixel
-    images (:data:`PRESET_SIZE` when ``None``), followed by its colour steps when ``colour``
-    (for RGB renders; the pipeline skips them on gray ones)."""
+    images (:data:`PRESET_SIZE` when ``None``); when ``colour`` (a colour drawing's training),
+    with the camera's shadow after the light (:func:`camera_shadow`) and followed by the colour
+    steps (for RGB renders; the pipeline skips them on gray ones)."""
     level = severity(name)
-    return scaled_steps(level.residual + (level.colour if colour else ()), (size or PRESET_SIZE) / PRESET_SIZE)
+    steps = level.residual
+    if colour:
+        after_light = next((i + 1 for i, (step, _, _) in enumerate(steps) if step == "lighting"), len(steps))
+        steps = steps[:after_light] + camera_shadow(level) + steps[after_light:] + level.colour
+    return scaled_steps(steps, (size or PRESET_SIZE) / PRESET_SIZE)
+
+
+def camera_shadow(level: Severity) -> tuple[Step, ...]:
+    """The camera's shadow step of a severity (:attr:`Severity.capture`) as the decoder's frame
+    sees it: a close-up's print, :data:`SHADOW_FRAME_SHARE` of the photo's width, fills the
+    frame, so its softness is scaled from the photo's pixels to the frame's.
+
+    Why a colour drawing trains with it: a shadow as dark as a light ink is an edge the
+    decoder never met in training renders. Framed by the alignment and read, shadowed medium
+    close-ups of ``face-without-mouth`` that its decoder read at chance read whole once it had
+    trained with shadows (``docs/design-notes.md``). Black ink stays far darker than any
+    shadow; black-and-white training is unchanged."""
+    shadows = [step for step in level.capture if step[0] == "shadow"]
+    return tuple(scaled_steps(tuple(shadows), PRESET_SIZE / (SHADOW_FRAME_SHARE * CLOSE_UP_PHOTO_PX)))
 
 
 def capture_steps(name: str, shrink: float = 1.0) -> list[Step]:

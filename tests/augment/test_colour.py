@@ -27,7 +27,7 @@ from deepmorph_core.corruption import AugmentConfig, AugmentConfigError, Augment
 from deepmorph_core.luminance import to_luminance
 from deepmorph_core.plugins import Registry, default_registry, load_registry
 from deepmorph_core.protocols import STAGES, Augmentation
-from deepmorph_core.severity import SEVERITIES, residual_steps
+from deepmorph_core.severity import CLOSE_UP_PHOTO_PX, SEVERITIES, SHADOW_FRAME_SHARE, residual_steps
 
 torch.set_num_threads(1)
 
@@ -279,10 +279,14 @@ def test_pipeline_runs_colour_steps_first_then_gray_ones(registry: Registry) -> 
 
 
 @pytest.mark.parametrize("severity", ["none", "easy", "medium", "hard"])
-def test_gray_pipelines_are_the_same_with_colour_steps(registry: Registry, severity: str) -> None:
+def test_gray_pipelines_skip_the_colour_steps(registry: Registry, severity: str) -> None:
+    """A colour preset run on gray images is its steps without the colour ones."""
     gray = colour_drawing(batch=6)[:, :1]
-    plain = AugmentPipeline(AugmentConfig.preset(severity), registry)(gray, seeded(5))
-    coloured = AugmentPipeline(AugmentConfig.preset(severity, colour=True), registry)(gray, seeded(5))
+    preset = AugmentConfig.preset(severity, colour=True)
+    colour_names = {name for name, _, _ in SEVERITIES[severity].colour}
+    without = AugmentConfig(steps=[step for step in preset.steps if step.name not in colour_names])
+    plain = AugmentPipeline(without, registry)(gray, seeded(5))
+    coloured = AugmentPipeline(preset, registry)(gray, seeded(5))
     assert torch.equal(plain, coloured)
 
 
@@ -308,17 +312,31 @@ def test_colour_steps_grow_with_severity(registry: Registry) -> None:
     assert errors == sorted(errors) and errors[0] == 0.0 and errors[1] > 1e-3
 
 
-def test_presets_only_gain_colour_steps_when_asked() -> None:
+def test_presets_only_gain_colour_steps_and_the_cameras_shadow_when_asked() -> None:
+    """A colour drawing's training meets the camera's shadow (its chance and strength, softness
+    in the decoder frame's pixels) after the light, then the colour steps; black and white
+    training is the residual alone."""
     for severity in ("none", "easy", "medium", "hard"):
         plain = residual_steps(severity, 192)
         assert [n for n, _, _ in plain] == [n for n, _, _ in SEVERITIES[severity].residual]
         coloured = residual_steps(severity, 192, colour=True)
-        assert coloured[: len(plain)] == plain
-        assert [n for n, _, _ in coloured[len(plain) :]] == (
+        shadow = [] if severity == "none" else ["shadow"]
+        assert [n for n, _, _ in coloured if n != "shadow"][: len(plain)] == [n for n, _, _ in plain]
+        assert [n for n, _, _ in coloured[len(plain) + len(shadow) :]] == (
             [] if severity == "none" else ["ink_fade", "paper_tint", "white_balance", "chroma_subsampling"]
         )
+        if shadow:
+            names = [n for n, _, _ in coloured]
+            assert names.index("shadow") == names.index("lighting") + 1
+            camera = next(step for step in SEVERITIES[severity].capture if step[0] == "shadow")
+            _, p, params = coloured[names.index("shadow")]
+            assert p == camera[1] and params["strength"] == camera[2]["strength"]
+            scale = 192 / (SHADOW_FRAME_SHARE * CLOSE_UP_PHOTO_PX)
+            assert params["softness"] == pytest.approx([v * scale for v in camera[2]["softness"]])
         assert AugmentConfig.preset(severity, size=192) == AugmentConfig(
-            steps=AugmentConfig.preset(severity, size=192, colour=True).steps[: len(plain)]
+            steps=[s for s in AugmentConfig.preset(severity, size=192, colour=True).steps if s.name != "shadow"][
+                : len(plain)
+            ]
         )
     medium = {n: (p, params) for n, p, params in residual_steps("medium", colour=True)}
     assert medium["chroma_subsampling"][0] == 1.0
