@@ -418,10 +418,10 @@ class CodecRun:
 
     def _update_code(self, wrong: Tensor, full_corruption: bool) -> None:
         """Shrink an auto-sized code that does not read (:mod:`deepmorph_core.code_shrink`):
-        after a settling window at full corruption, when the next window's captures (every
-        rank's) read fewer than :data:`~deepmorph_core.code_shrink.SHRINK_BELOW` of their code
-        words, with a window's steps still to train. ``wrong``: this step's ``(rows, N_b)``
-        code bits read wrong."""
+        after a settling window at full corruption, when a window's captures (every rank's)
+        read fewer than :data:`~deepmorph_core.code_shrink.SHRINK_BELOW` of their code words,
+        with a window's steps still to train; judged at the end of each window. ``wrong``: this
+        step's ``(rows, N_b)`` code bits read wrong."""
         cfg, rec = self.cfg, self.record
         if rec.payload_auto is None or cfg.freeze_encoder:
             return
@@ -431,7 +431,14 @@ class CodecRun:
         window = cfg.early_stop_window
         self._settled += 1
         self._errors = [*self._errors, wrong][-window:]
-        if self._settled < 2 * window or rec.stopped_early or rec.step + 1 + window > cfg.steps:
+        # judged at the end of each window after the settling one (the errors are gathered from
+        # every rank only then)
+        if (
+            self._settled < 2 * window
+            or self._settled % window
+            or rec.stopped_early
+            or rec.step + 1 + window > cfg.steps
+        ):
             return
         errors = torch.cat([torch.cat(part) for part in gather_objects(self._errors, self.world)])
         spec = self.model.codec.spec
