@@ -179,14 +179,24 @@ def largest_payload(
     none fits."""
     best: CodecSpec | None = None
     for payload in range(1, MAX_PAYLOAD_BITS + 1):
-        for t in ecc:
-            try:
-                spec = choose_codec(payload, crc_bits, t)
-            except DeepMorphError:
-                continue
+        for spec in payload_codes(payload, crc_bits, ecc):
             if spec.code_bits <= code_bits and (best is None or payload > best.payload_bits):
                 best = spec
     return best
+
+
+def payload_codes(
+    payload_bits: int, crc_bits: int | None = None, ecc: tuple[int, ...] = ECC_CHOICES
+) -> list[CodecSpec]:
+    """The codes of a payload with each BCH strength in ``ecc`` that exists (in ``ecc``'s order;
+    the default CRC unless ``crc_bits``)."""
+    found = []
+    for t in ecc:
+        try:
+            found.append(choose_codec(payload_bits, crc_bits, t))
+        except DeepMorphError:
+            continue
+    return found
 
 
 def predict(
@@ -267,6 +277,7 @@ __all__ = [
     "ElementCapacity",
     "code_bits_for",
     "largest_payload",
+    "payload_codes",
     "predict",
     "size_warning",
 ]

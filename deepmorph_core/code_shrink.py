@@ -30,9 +30,8 @@ import torch
 from torch import Tensor, nn
 
 from deepmorph_core.bundle import AutoPayload, CodeShrink
-from deepmorph_core.capacity import ECC_CHOICES
-from deepmorph_core.codec import CodecSpec, PayloadCodec, choose_codec
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.capacity import ECC_CHOICES, payload_codes
+from deepmorph_core.codec import CodecSpec, PayloadCodec
 from deepmorph_core.model import DeepMorphModel
 
 #: A code that reads fewer of its words than this over a window at full corruption is shrunk.
@@ -72,7 +71,7 @@ def smaller_code(errors: Tensor, spec: CodecSpec, auto: AutoPayload) -> tuple[Co
     size = math.ceil((carried + spec.code_bits - 1) / 2)
     new: CodecSpec | None = None
     for payload in range(spec.payload_bits - 1, 0, -1):
-        codes = _codes(payload, auto)
+        codes = payload_codes(payload, auto.crc_bits, ECC_CHOICES if auto.ecc_t is None else (auto.ecc_t,))
         fitting = [c for c in codes if c.code_bits <= size]
         if fitting or payload == 1:
             new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
@@ -81,17 +80,6 @@ def smaller_code(errors: Tensor, spec: CodecSpec, auto: AutoPayload) -> tuple[Co
         return None
     order = torch.argsort(errors.sum(0), stable=True)  # best read first
     return new, sorted(int(k) for k in order[: new.code_bits]), carried
-
-
-def _codes(payload: int, auto: AutoPayload) -> list[CodecSpec]:
-    """The codes ``auto`` allows for a payload, the most correcting first (as ``auto`` chose)."""
-    found = []
-    for t in (auto.ecc_t,) if auto.ecc_t is not None else ECC_CHOICES:
-        try:
-            found.append(choose_codec(payload, auto.crc_bits, t))
-        except DeepMorphError:
-            continue
-    return found
 
 
 def _linear(weight: Tensor, bias: Tensor | None, like: nn.Linear) -> nn.Linear:

@@ -349,7 +349,8 @@ class CodecRun:
         # loss x rows, right bits, right words, words read
         totals = torch.zeros(4, dtype=torch.float64, device=self.device)
         correctable = self.model.codec.spec.bch_t
-        wrong_bits: list[Tensor] = []
+        # the bits each capture read wrong, kept only where an auto-sized code may shrink
+        wrong_bits: list[Tensor] | None = [] if self._sizing() else None
         for shard in self.mine:
             self.gen = self._gens[shard]
             bits = torch.randint(0, 2, (sizes[shard], self.model.codec.spec.code_bits), generator=self.gen).float()
@@ -365,7 +366,8 @@ class CodecRun:
             with torch.no_grad():
                 right = (logits > 0) == (bits > 0.5)
                 read = ((~right).sum(1) <= correctable).sum()
-                wrong_bits.append((~right).cpu())
+                if wrong_bits is not None:
+                    wrong_bits.append((~right).cpu())
                 totals += torch.stack([loss.detach().double() * sizes[shard], right.sum(), right.all(1).sum(), read])
         if norms:
             norms.finish(self.shards, self.world)
@@ -381,7 +383,8 @@ class CodecRun:
         read = words_read / cfg.batch
         self._update_stage(bit_acc, rec.step + 1)  # the loop counts this step once it returns
         self._update_early_stop(read, full_corruption)
-        self._update_code(torch.cat(wrong_bits), full_corruption)
+        if wrong_bits is not None:
+            self._update_code(torch.cat(wrong_bits), full_corruption)
         return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc, "read": read}
 
     def _set_learning_rates(self) -> None:
@@ -416,6 +419,10 @@ class CodecRun:
             rec.total_steps = rec.step + 1  # the loop counts this step once it returns, then finishes
             rec.stopped_early = True
 
+    def _sizing(self) -> bool:
+        """Whether training may still shrink the code: sized by ``auto``, the encoder training."""
+        return self.record.payload_auto is not None and not self.cfg.freeze_encoder
+
     def _update_code(self, wrong: Tensor, full_corruption: bool) -> None:
         """Shrink an auto-sized code that does not read (:mod:`deepmorph_core.code_shrink`):
         after a settling window at full corruption, when a window's captures (every rank's)
@@ -423,8 +430,6 @@ class CodecRun:
         with a window's steps still to train; judged at the end of each window. ``wrong``: this
         step's ``(rows, N_b)`` code bits read wrong."""
         cfg, rec = self.cfg, self.record
-        if rec.payload_auto is None or cfg.freeze_encoder:
-            return
         if not full_corruption:
             self._errors, self._settled = [], 0
             return
