@@ -38,7 +38,7 @@ COMMANDS = (
 
 #: Runs the command line in-process, then says on stderr whether torch was imported.
 _PROBE = (
-    "import sys\nfrom deepmorph_core.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
+    "import sys\nfrom deepmorph.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
     "try:\n    main()\nexcept SystemExit:\n    pass\nprint('TORCH', 'torch' in sys.modules, file=sys.stderr)\n"
 )
 

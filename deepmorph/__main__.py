@@ -1,6 +1,6 @@
 """``python -m deepmorph``: the ``deepmorph`` command line."""
 
-from deepmorph_core.cli import main
+from deepmorph.cli import main
 
 if __name__ == "__main__":
     main()

@@ -1,6 +1,6 @@
-"""The facade's plugin module, loaded through the ``deepmorph`` entry point
-(``builtin_registry``) exactly as third-party plugins are: the payload registry's commands and
-the studio."""
+"""The application's plugin module, loaded through the ``deepmorph`` entry point
+(``builtin_commands``) exactly as third-party plugins are: the photo commands, the payload
+registry's commands and the studio."""
 
 from __future__ import annotations
 
@@ -14,8 +14,14 @@ if TYPE_CHECKING:
 
 @hookimpl
 def deepmorph_register_commands(cli: typer.Typer) -> None:
-    """Add ``registry`` (``add``, ``list``, ``show``, ``remove``, ``export``), ``decode --registry``'s
-    lookup and ``studio``."""
-    from deepmorph import commands
+    """Add ``registry`` (``add``, ``list``, ``show``, ``remove``, ``export``:
+    :mod:`deepmorph.cli.registry_commands`), ``studio`` (the local web app:
+    :mod:`deepmorph.studio.cli`), then ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``,
+    ``train-detector``, ``export`` and ``demo`` (:mod:`deepmorph.cli.photo_commands`)."""
+    from deepmorph.cli import photo_commands, registry_commands
+    from deepmorph.cli.frame import add_commands
+    from deepmorph.studio.cli import studio
 
-    commands.register(cli)
+    registry_commands.register(cli)
+    add_commands(cli, (("studio", studio, None),))
+    photo_commands.register(cli)

@@ -1,7 +1,7 @@
 """DeepMorph core, the bottom layer the other packages build on: the plugin spine, SVG reading
 and writing, bound-specs, morphs and the soft rasterizer, the payload codec, the networks and
-their training, model bundles, photo preprocessing and the command-line frame. ``hookimpl`` is
-what plugins decorate their hook functions with."""
+their training, model bundles and photo preprocessing. The command line is the application's
+(:mod:`deepmorph.cli`). ``hookimpl`` is what plugins decorate their hook functions with."""
 
 import os
 

@@ -1,6 +1,7 @@
 """The photo chain's plugin module, loaded through the ``deepmorph`` entry point
-(``builtin_detectors``) exactly as third-party plugins are: the built-in detector, the photo
-commands, and the validation of trained models on close-up photos."""
+(``builtin_detectors``) exactly as third-party plugins are: the built-in detectors and the
+validation of trained models on close-up photos. The photo commands are the application's
+(:mod:`deepmorph.cli.photo_commands`, registered by :mod:`deepmorph.plugin`)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,6 @@ from typing import TYPE_CHECKING
 from deepmorph_core import hookimpl
 
 if TYPE_CHECKING:
-    import typer
-
     from deepmorph_core.bundle import ValidationRecord
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Register
@@ -25,14 +24,6 @@ def deepmorph_register_detectors(register: Register) -> None:
 
     register.detector(CentreNetDetector)
     register.detector(UniversalDetector)
-
-
-@hookimpl
-def deepmorph_register_commands(cli: typer.Typer) -> None:
-    """Add ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``, ``train-detector``, ``export`` and ``demo``."""
-    from deepmorph_detect import commands
-
-    commands.register(cli)
 
 
 @hookimpl

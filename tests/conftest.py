@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
+import deepmorph.plugin as builtin_commands
 import deepmorph_augment.plugin as builtin_augmentations
 import deepmorph_detect.plugin as builtin_detectors
 import deepmorph_primitives.plugin as builtin_plugin
@@ -56,14 +57,18 @@ def shaken_clip(image: np.ndarray, count: int, rng: np.random.Generator, folder:
 
 @pytest.fixture
 def builtin_registry() -> Registry:
-    """What the deepmorph distribution itself provides: built-in primitives, augmentations, detectors."""
-    return load_registry([builtin_plugin, builtin_augmentations, builtin_detectors], entry_points=False)
+    """What the deepmorph distribution itself provides: built-in primitives, augmentations, detectors, commands."""
+    return load_registry(
+        [builtin_plugin, builtin_augmentations, builtin_detectors, builtin_commands], entry_points=False
+    )
 
 
 @pytest.fixture
 def bezier_registry() -> Registry:
     bez = pytest.importorskip("deepmorph_bezier.plugin", reason="the example Bézier plugin is not installed")
-    return load_registry([builtin_plugin, builtin_augmentations, builtin_detectors, bez], entry_points=False)
+    return load_registry(
+        [builtin_plugin, builtin_augmentations, builtin_detectors, builtin_commands, bez], entry_points=False
+    )
 
 
 @pytest.fixture(autouse=True)

@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from deepmorph_core.cli.frame import err, out
+from deepmorph.cli.frame import err, out
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.capacity import (
     CODE_BITS_PER_GROUP,
     LARGEST_CODE_MEASURED,
@@ -16,7 +17,6 @@ from deepmorph_core.capacity import (
     predict,
     size_warning,
 )
-from deepmorph_core.cli import application
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel

@@ -11,8 +11,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundle import AutoPayload
-from deepmorph_core.cli import application
 from deepmorph_core.code_shrink import information, read_share, shrink_networks, smaller_code
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.loop import Interrupted

@@ -11,7 +11,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from deepmorph_core.cli import application
+from deepmorph.cli import application
 from deepmorph_core.distributed import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.loop import read_log

@@ -22,8 +22,8 @@ import torch
 from safetensors.torch import load_file, save_file
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, atomic_write_all
 
@@ -368,7 +368,7 @@ def test_memory_stays_bounded_on_hostile_files(tmp_path: Path) -> None:
     code = (
         "import resource, sys\n"
         "resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))\n"
-        "from deepmorph_core.cli import main\n"
+        "from deepmorph.cli import main\n"
         "sys.argv = ['deepmorph'] + sys.argv[1:]\n"
         "main()\n"
     )

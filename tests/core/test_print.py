@@ -14,8 +14,8 @@ from lxml import etree
 from PIL import Image
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.code import Code
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel

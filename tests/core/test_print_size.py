@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from deepmorph_core.cli import application
+from deepmorph.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.print_size import PHONE_FOV_DEG, PHONE_FRAME_PX, movement, pixels_across, plan, plan_sizes

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from deepmorph_core.cli import application
+from deepmorph.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel

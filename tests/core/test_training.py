@@ -11,9 +11,9 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.capacity import predict
-from deepmorph_core.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.image_io import save_gray
 from deepmorph_core.loop import Interrupted

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core import hookimpl
 from deepmorph_core.bundle import ValidationRecord
-from deepmorph_core.cli import application
 from deepmorph_core.errors import PluginError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import load_registry

@@ -17,8 +17,8 @@ import pytest
 from typer.testing import CliRunner
 
 import deepmorph_detect.locate as locate_module
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.codec import PayloadCodec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
@@ -361,7 +361,7 @@ def test_a_corrupt_video_prints_our_error_and_nothing_of_ffmpegs(tmp_path: Path)
     clip.write_bytes(b"\x00\x00\x00\x18ftypmp42" + b"\x00" * 64)
     env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
     run = subprocess.run(
-        [sys.executable, "-c", "from deepmorph_core.cli import main; main()", "decode", str(BUNDLED_MODEL), str(clip)],
+        [sys.executable, "-c", "from deepmorph.cli import main; main()", "decode", str(BUNDLED_MODEL), str(clip)],
         capture_output=True,
         text=True,
         env=env,

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import deepmorph.plugin as builtin_commands
 import deepmorph_augment.plugin as builtin_augmentations
 import deepmorph_detect.plugin as builtin_detectors
 import deepmorph_primitives.plugin as builtin_primitives
+from deepmorph.cli import application
 from deepmorph_core import hookimpl
-from deepmorph_core.cli import application
 from deepmorph_core.errors import PluginError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import load_registry, set_default_registry
@@ -55,7 +56,9 @@ PLUGIN.deepmorph_register_detectors = deepmorph_register_detectors
 
 @pytest.fixture
 def registry():
-    registry = load_registry([builtin_primitives, builtin_augmentations, builtin_detectors, PLUGIN], entry_points=False)
+    registry = load_registry(
+        [builtin_primitives, builtin_augmentations, builtin_detectors, builtin_commands, PLUGIN], entry_points=False
+    )
     set_default_registry(registry)
     KnownCorners.calls = 0
     return registry

@@ -12,9 +12,9 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.detector_training import DetectorConfig, SceneBatches, quad_loss, targets_for, train_detector
@@ -251,8 +251,8 @@ def test_the_commands_options_are_the_declared_settings() -> None:
     literal default of its own (a changed one, in a fresh process, reaches it)."""
     import inspect
 
+    from deepmorph.cli.photo_commands import train_detector_cmd
     from deepmorph_core.train_settings import exposed
-    from deepmorph_detect.commands import train_detector_cmd
     from deepmorph_detect.detector_settings import DetectorSettings
     from tests.project.test_train_settings import declared
 
@@ -277,7 +277,7 @@ import dataclasses, json
 import deepmorph_detect.detector_settings as settings
 settings.DETECTOR_DEFAULTS = dataclasses.replace(settings.DETECTOR_DEFAULTS, steps=301, lr=7e-4)
 from tests.project.test_train_settings import declared
-from deepmorph_detect.commands import train_detector_cmd
+from deepmorph.cli.photo_commands import train_detector_cmd
 cli = declared(train_detector_cmd)
 print(json.dumps([cli["steps"].default, cli["lr"].default]))
 """

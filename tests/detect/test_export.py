@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.framing import align_to_frame
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import format_payload
 from deepmorph_detect.photo_report import NO_PLOTS, write_report

@@ -12,8 +12,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.errors import DeepMorphWarning
 from deepmorph_core.graphs import GraphError, OnnxNetwork
 from deepmorph_core.model import DeepMorphModel

@@ -12,8 +12,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.codec import DecodeResult, PayloadCodec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.cli import application
 from deepmorph_core.render import render_svg
 from deepmorph_detect.scenes import close_up_photo
 

@@ -55,7 +55,7 @@ def installed_plugin(tmp_path_factory) -> Path:
 
 
 def run_cli(site: Path, *args: str) -> subprocess.CompletedProcess:
-    code = "import sys; from deepmorph_core.cli import main; sys.argv = ['deepmorph', *sys.argv[1:]]; main()"
+    code = "import sys; from deepmorph.cli import main; sys.argv = ['deepmorph', *sys.argv[1:]]; main()"
     return run_python(site, "-c", code, *args)
 
 

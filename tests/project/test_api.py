@@ -149,7 +149,7 @@ def test_a_folder_or_a_video_is_one_sequence_read_as_decode_reads_it(ghost: deep
     little, give one drawing read over the frames, as ``deepmorph decode`` gives it."""
     from typer.testing import CliRunner
 
-    from deepmorph_core.cli import application
+    from deepmorph.cli import application
     from deepmorph_detect.scenes import SceneMaker
 
     scene = SceneMaker(ghost.bundle, severity="medium", seed=14).make(drawings=1)

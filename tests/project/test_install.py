@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from deepmorph_core.cli import application
+from deepmorph.cli import application
 from deepmorph_core.loop import NO_PLOT
 from deepmorph_detect.backgrounds import PHOTOS, sample_photos
 

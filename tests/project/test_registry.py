@@ -421,7 +421,7 @@ def test_the_installed_command_line_has_the_registry_and_lists_without_torch(tmp
     """Through the entry point, as installed: ``registry list`` of a registry imports no torch."""
     PayloadRegistry(tmp_path / "r.sqlite3").add(ModelKey("0" * 64, "other.svg", 24), 1, URL)
     probe = (
-        "import sys\nfrom deepmorph_core.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
+        "import sys\nfrom deepmorph.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
         "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
         "print('TORCH', 'torch' in sys.modules, file=sys.stderr)\n"
     )

@@ -18,10 +18,10 @@ import typer
 from typer.testing import CliRunner
 
 import deepmorph
+from deepmorph.cli import application
+from deepmorph.cli import commands as cli
 from deepmorph.studio.app import train_form, training_settings
 from deepmorph_core.bundled import BUNDLED_DRAWING
-from deepmorph_core.cli import application
-from deepmorph_core.cli import commands as cli
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.train import TrainConfig, tune_decoder
 from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, TUNE_DEFAULTS, TrainSettings, TuneSettings, exposed
@@ -47,7 +47,7 @@ class Declared:
 
 
 def declared(command: Callable[..., Any]) -> dict[str, Declared]:
-    """Every option of a command function, by parameter name (also read by tests/core/test_cli_conventions.py's way)."""
+    """Every option of a command function, by parameter name (also read by tests/app/test_cli_conventions.py's way)."""
     defaults = inspect.signature(command).parameters
     found = {}
     for name, hint in get_type_hints(command, include_extras=True).items():
@@ -164,7 +164,7 @@ settings.PAYLOAD_BITS, settings.RENDER_SAMPLES, settings.PHOTO_SAMPLES = 25, 150
 from tests.project.test_train_settings import declared
 import deepmorph
 from deepmorph.studio.app import train_form, training_settings
-from deepmorph_core.cli import commands
+from deepmorph.cli import commands
 faces = {
     "deepmorph train": {n: o.default for n, o in declared(commands.train).items()},
     "deepmorph train-many": {n: o.default for n, o in declared(commands.train_many).items()},
@@ -215,7 +215,7 @@ import dataclasses, inspect, json, sys
 import deepmorph_core.train_settings as settings
 settings.TUNE_DEFAULTS = dataclasses.replace(settings.TUNE_DEFAULTS, steps=801, small_prints=0.25, lr=1e-3)
 from tests.project.test_train_settings import declared
-from deepmorph_core.cli import commands
+from deepmorph.cli import commands
 from deepmorph_core.train import tune_decoder
 cli = {n: o.default for n, o in declared(commands.tune_decoder).items()}
 api = {n: p.default for n, p in inspect.signature(tune_decoder).parameters.items()}

@@ -10,8 +10,8 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_DRAWING
-from deepmorph_core.cli import application
 from deepmorph_core.drawing import load_drawing
 from tests.conftest import FEATHER
 

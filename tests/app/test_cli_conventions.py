@@ -17,10 +17,10 @@ import numpy as np
 import typer
 from typer.testing import CliRunner
 
+from deepmorph.cli import application
+from deepmorph.cli.frame import EXIT_NOTHING_READ, PhotoSeverityName, SeverityName
 from deepmorph_core import __version__
 from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
-from deepmorph_core.cli import application
-from deepmorph_core.cli.frame import EXIT_NOTHING_READ, PhotoSeverityName, SeverityName
 from deepmorph_core.severity import PHOTO_SEVERITIES, SEVERITIES
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,7 +53,7 @@ def test_help_lists_every_command_and_the_exit_statuses() -> None:
 def test_help_version_and_list_primitives_import_no_torch() -> None:
     """A fast start: these answer without importing torch (timed by bench/cli_start.py)."""
     probe = (
-        "import sys\nfrom deepmorph_core.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
+        "import sys\nfrom deepmorph.cli import main\nsys.argv = ['deepmorph', *sys.argv[1:]]\n"
         "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
         "print('IMPORTED', sorted(m for m in ('torch', 'cv2', 'deepmorph_primitives.line') if m in sys.modules),"
         " file=sys.stderr)\n"

@@ -1,6 +1,6 @@
 """What every command shares: the consoles, one-line errors, common options, progress bars.
 
-Commands (core's own in :mod:`deepmorph_core.cli.commands`, plugins' through the
+Commands (the command line's own in :mod:`deepmorph.cli.commands`, plugins' through the
 ``deepmorph_register_commands`` hook) import these; nothing here imports torch.
 """
 

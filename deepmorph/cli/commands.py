@@ -1,6 +1,6 @@
-"""Core's commands: the drawing (``list-primitives``, ``inspect``, ``morph``, ``render``) and the
-model (``train``, ``info``, ``tune-decoder``, ``encode``). Each parses its arguments and calls
-the library; photos are the photo chain's commands (:mod:`deepmorph_detect.commands`).
+"""The command line's own commands: the drawing (``list-primitives``, ``inspect``, ``morph``,
+``render``) and the model (``train``, ``info``, ``tune-decoder``, ``encode``). Each parses its
+arguments and calls the library; photos are the photo commands' (:mod:`deepmorph.cli.photo_commands`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Optional
 import typer
 from rich.table import Table
 
-from deepmorph_core.cli.frame import (
+from deepmorph.cli.frame import (
     PANEL_CODES,
     PANEL_DRAWINGS,
     PANEL_MODELS,
@@ -799,7 +799,7 @@ def encode(
 
 
 def register(cli: typer.Typer) -> None:
-    """Add core's commands to ``cli``."""
+    """Add the drawing and model commands to ``cli``."""
     add_commands(
         cli,
         (

@@ -1,18 +1,17 @@
 """The photo chain's commands: ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``,
 ``train-detector``, ``export`` and ``demo``, added to the command line through the
-``deepmorph_register_commands`` hook (:mod:`deepmorph_detect.plugin`). Each parses its
-arguments and calls the library."""
+``deepmorph_register_commands`` hook (:mod:`deepmorph.plugin`). Each parses its arguments and
+calls the library (:mod:`deepmorph_detect`)."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli.frame import (
+from deepmorph.cli.frame import (
     EXIT_NOTHING_READ,
     PANEL_CODES,
     PANEL_MEASURE,
@@ -55,12 +54,6 @@ DetectorOpt = Annotated[
     ),
 ]
 HardOpt = Annotated[bool, typer.Option("--hard-decision", help="Skip soft-decision (Chase) decoding.")]
-
-#: ``decode --registry``: ``payload_registry(db, model)`` checks the payload registry before any
-#: work and returns what looks a detection up (its entry as JSON, or None). Set by the facade's
-#: registry commands (:mod:`deepmorph.commands`) when they are registered: this layer cannot
-#: import the facade.
-payload_registry: Callable[[Optional[Path], Any], Callable[[dict[str, Any]], Any]] | None = None
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -147,9 +140,9 @@ def decode(
     m = DeepMorphModel.load(model)
     look_up = None
     if registry or db is not None:
-        if payload_registry is None:
-            raise DeepMorphError("--registry: the payload registry's commands are not installed")
-        look_up = payload_registry(db, m)  # a missing or foreign registry is refused before any work
+        from deepmorph.cli.registry_commands import decode_lookup
+
+        look_up = decode_lookup(db, m)  # a missing or foreign registry is refused before any work
     locator = Locator(m, detector=detector)
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []

@@ -1,9 +1,10 @@
 """The ``deepmorph`` command line: the frame every command runs in.
 
-Commands only parse their arguments and call the library. Core's own commands are in
-:mod:`deepmorph_core.cli.commands`; every other command arrives through the
-``deepmorph_register_commands`` hook, the built-in photo commands included
-(:mod:`deepmorph_detect.commands`). Every user-facing failure is a
+Commands only parse their arguments and call the library. The drawing and training commands are
+in :mod:`deepmorph.cli.commands`; every other command arrives through the
+``deepmorph_register_commands`` hook, the built-in photo and registry commands included
+(:mod:`deepmorph.cli.photo_commands`, :mod:`deepmorph.cli.registry_commands`, registered by
+:mod:`deepmorph.plugin`). Every user-facing failure is a
 :class:`~deepmorph_core.errors.DeepMorphError`, printed as one ``error: ...`` line with exit
 status 1; usage errors exit with 2 (typer's convention); ``decode`` exits with 4 when an input
 gave no verified payload. Building the application imports no torch: ``--help``, ``--version``
@@ -17,7 +18,7 @@ from typing import Annotated
 
 import typer
 
-from deepmorph_core.cli.frame import EXIT_NOTHING_READ, err, print_error
+from deepmorph.cli.frame import EXIT_NOTHING_READ, err, print_error
 from deepmorph_core.errors import DeepMorphError
 
 _app: typer.Typer | None = None
@@ -89,10 +90,10 @@ def _root(
 
 
 def application() -> typer.Typer:
-    """The command-line application with core's commands and every plugin's (built once)."""
+    """The command-line application with its own commands and every plugin's (built once)."""
     global _app
     if _app is None:
-        from deepmorph_core.cli import commands
+        from deepmorph.cli import commands
         from deepmorph_core.plugins import default_registry
 
         app = typer.Typer(

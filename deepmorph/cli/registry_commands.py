@@ -1,7 +1,7 @@
 """``deepmorph registry``: the payload registry's commands (``add``, ``list``, ``show``,
-``remove``, ``export``), and ``deepmorph studio`` (:mod:`deepmorph.studio`), added to the
-command line through the ``deepmorph_register_commands`` hook (:mod:`deepmorph.plugin`), and
-the lookup ``decode --registry`` runs. Each parses its arguments and calls the library."""
+``remove``, ``export``), added to the command line through the ``deepmorph_register_commands``
+hook (:mod:`deepmorph.plugin`), and the lookup ``decode --registry`` runs
+(:mod:`deepmorph.cli.photo_commands`). Each parses its arguments and calls the library."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
-from deepmorph_core.cli.frame import PANEL_CODES, JsonOpt, ModelArg, add_commands, out, print_json, safe
+from deepmorph.cli.frame import PANEL_CODES, JsonOpt, ModelArg, add_commands, out, print_json, safe
 from deepmorph_core.errors import DeepMorphError
 
 if TYPE_CHECKING:
@@ -173,11 +173,7 @@ def decode_lookup(db: Path | None, model: DeepMorphModel) -> Callable[[dict[str,
 
 
 def register(cli: typer.Typer) -> None:
-    """Add the ``registry`` commands and ``studio`` (the local web app) to ``cli``, and hand
-    ``decode`` its registry lookup (the photo chain's layer cannot import this one)."""
-    from deepmorph.studio.cli import studio
-    from deepmorph_detect import commands as photo_commands
-
+    """Add the ``registry`` commands to ``cli``."""
     group = typer.Typer(name="registry", help=HELP, no_args_is_help=True)
     add_commands(
         group,
@@ -190,8 +186,6 @@ def register(cli: typer.Typer) -> None:
         ),
     )
     cli.add_typer(group, name="registry", rich_help_panel=PANEL_CODES)
-    add_commands(cli, (("studio", studio, None),))
-    photo_commands.payload_registry = decode_lookup
 
 
 __all__ = ["decode_lookup", "register"]
