@@ -14,7 +14,7 @@ where ``P`` is 0) with the predicted code and otherwise the default settings (``
 most three sizes, ``--sizes``); each model read back with fresh payloads:
 
 * **renders**: 1000 resvg renders under the training corruption at ``medium``
-  (:func:`deepmorph_core.validation.validate_renders`);
+  (:func:`deepmorph.training.validation.validate_renders`);
 * **close-ups**: 1000 simulated photos of prints filling the frame at ``medium`` through the
   photo chain, and 200 at ``hard`` (:func:`deepmorph_detect.photo_validation.validate_close_ups`);
 * **unrelated**: images that are not the drawing (other icons, noise, clutter): false accepts.
@@ -179,7 +179,7 @@ def unrelated_images(n: int, feather: Path | None, exclude: set[str], seed: int)
 
 def evaluate(model: Any, args: argparse.Namespace, unrelated: list[tuple[str, Any]], seed: int) -> dict[str, Any]:
     """Renders, close-ups (medium and hard) and unrelated images, as in the module docstring."""
-    from deepmorph_core.validation import validate_renders
+    from deepmorph.training.validation import validate_renders
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.photo_validation import validate_close_ups
 
@@ -205,9 +205,9 @@ def train_size(
     """A model of ``svg`` at ``bits`` payload bits with the predicted code ``(crc_bits, bch_t)``
     and otherwise the default settings (kept in ``--models-dir``; reused with ``--reuse`` when
     finished)."""
+    from deepmorph.training.codec import train_model
     from deepmorph_core.errors import DeepMorphError
     from deepmorph_core.model import DeepMorphModel
-    from deepmorph_core.train import train_model
 
     path = args.models_dir / f"{name}-p{bits}-seed{args.seed}.dmm"
     if args.reuse and path.is_file():

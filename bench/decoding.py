@@ -126,9 +126,9 @@ def score(decode: Any, probs: np.ndarray, payloads: np.ndarray) -> tuple[int, in
 
 
 def measure(path: Path, samples: int, garbage: int, seed: int) -> dict[str, Any]:
+    from deepmorph.training.validation import read_renders
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.payload import random_payloads
-    from deepmorph_core.validation import read_renders
 
     model = DeepMorphModel.load(path)
     codec = model.codec

@@ -3,7 +3,7 @@ per-drawing detector step.
 
 **Drawings**, by rule: the first ``--drawings`` (3) Feather icons, alphabetically, with 30 to 60
 variables at the capacity panel's move (2 % of the viewBox width) that the universal detector
-never saw in training (``held_out`` in ``deepmorph_detect/universal_training.py``). Each is
+never saw in training (``held_out`` in ``deepmorph/training/universal.py``). Each is
 trained as the README says (``--payload-bits auto``, every other setting at its default, or
 ``--steps``/``--set KEY=VALUE`` where given) on ``--threads`` (2) threads, with the bundle's
 validation (1000 renders, 200 close-ups) counted in the time, as a user waits for it.
@@ -41,9 +41,9 @@ VARIABLES = (30, 60)
 
 def pick_drawings(folder: Path, count: int) -> list[tuple[Path, float, int]]:
     """The rule in the module docstring: ``(svg, move, variables)`` of each drawing."""
+    from deepmorph.training.universal import held_out
     from deepmorph_core.errors import DeepMorphError
     from deepmorph_core.morphable import MorphableDrawing
-    from deepmorph_detect.universal_training import held_out
 
     picked = []
     for path in sorted(folder.glob("*.svg")):
@@ -63,8 +63,8 @@ def pick_drawings(folder: Path, count: int) -> list[tuple[Path, float, int]]:
 
 def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: int) -> dict[str, Any]:
     """Train and validate one drawing as ``deepmorph train`` does; its times and record."""
-    from deepmorph_core.train import train_model
-    from deepmorph_core.train_settings import DEFAULTS
+    from deepmorph.training.codec import train_model
+    from deepmorph.training.settings import DEFAULTS
 
     keep: list[Path] = []
     phases: dict[str, float] = {}

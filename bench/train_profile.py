@@ -2,7 +2,7 @@
 
 The drawing, by rule: the first Feather icon (alphabetically) with 30 to 60 variables at the
 capacity panel's default move (2 % of the viewBox width), trained at ``--payload-bits auto``
-with :class:`~deepmorph_core.train.TrainConfig`'s defaults (batch 32, 96 px, medium corruption,
+with :class:`~deepmorph.training.codec.TrainConfig`'s defaults (batch 32, 96 px, medium corruption,
 a quarter of each batch drawn by resvg). Steps are timed at the end of the curriculum's ramp
 (full ``medium`` corruption), in stage 1 (decoder alone: the morphs carry no gradient) and in
 stage 2 (encoder too: the gradient runs back through the corruption and the soft rasterizer).
@@ -101,7 +101,7 @@ class Timer:
 
 def instrument(run: Any, timer: Timer) -> None:
     """Wrap the run's parts (its instance attributes, and the framing functions train.py calls)."""
-    import deepmorph_core.train as train_module
+    import deepmorph.training.codec as train_module
 
     model = run.model
     model.encoder.forward = timer.wrap("encoder fwd", model.encoder.forward)
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from deepmorph_core.train import CodecRun, TrainConfig, open_model
+    from deepmorph.training.codec import CodecRun, TrainConfig, open_model
 
     if args.drawing:
         svg, move = args.drawing, args.move

@@ -3,7 +3,7 @@
 The drawing is :mod:`train_profile`'s (the first Feather icon with 30 to 60 variables at the
 capacity panel's move), at its predicted payload size and the default settings (batch 32,
 96 px, medium corruption, a quarter of each batch drawn by resvg). Each configuration runs
-real training steps (:class:`~deepmorph_core.train.CodecRun`, stage 2 at full corruption, the
+real training steps (:class:`~deepmorph.training.codec.CodecRun`, stage 2 at full corruption, the
 heavier stage): ``--warmup`` steps, then ``--steps`` timed between two barriers. Rows:
 
 * 1 process, 1 thread (the batch from one random stream);
@@ -40,8 +40,8 @@ def worker(rank: int, world_size: int, port: int, args: dict[str, Any], results:
     threads = set_threads(args["threads"])
     import torch.distributed as dist
 
-    from deepmorph_core.distributed import World, join, leave
-    from deepmorph_core.train import CodecRun, open_model
+    from deepmorph.training.codec import CodecRun, open_model
+    from deepmorph.training.distributed import World, join, leave
 
     world = World(rank, world_size, rank)
     with tempfile.TemporaryDirectory() as tmp:
@@ -104,9 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     set_threads(1)
 
+    from deepmorph.training.codec import TrainConfig
     from deepmorph_core.capacity import predict
     from deepmorph_core.morphable import MorphableDrawing
-    from deepmorph_core.train import TrainConfig
 
     svg, move, n_variables = pick_drawing(args.feather)
     codec = predict(MorphableDrawing.load(svg, move=move), TrainConfig().width).codec

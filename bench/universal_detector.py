@@ -6,7 +6,7 @@ model with a per-drawing detector trained from scratch: ``deepmorph train-detect
 ``--tuned``, also every ``NAME-tuned.dmm`` there (``train-detector`` at its defaults: a short
 fine-tune of the universal detector), located on the same scenes.
 None of them was in the universal detector's training set (``held_out`` in
-``deepmorph_detect/universal_training.py``; checked here).
+``deepmorph/training/universal.py``; checked here).
 
 For each drawing and severity (medium, hard), ``--n`` scenes (640x480: one or two payload morphs,
 one other drawing, an ArUco marker in every other scene) are located twice, once with the
@@ -151,8 +151,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=RESULTS / "universal_detector.json")
     args = ap.parse_args()
     threads = set_threads(args.threads)
+    from deepmorph.training.universal import held_out
     from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
-    from deepmorph_detect.universal_training import held_out
 
     drawings = panel(args.models)
     if args.only:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS
+from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -206,7 +206,7 @@ def train(
 ) -> Model:
     """Train a model for ``drawing`` and write it to ``out``: ``deepmorph train``, one keyword per
     option (``--crc`` is ``crc_bits``), with the same defaults
-    (:mod:`deepmorph_core.train_settings`).
+    (:mod:`deepmorph.training.settings`).
 
     Args:
         drawing: the SVG.
@@ -222,7 +222,7 @@ def train(
         seed, encoder_init, spatial_transformer, readout, device, threads: the run and its networks
             (``device="auto"``: CUDA where present).
         early_stop: end before ``steps`` once the batches at full corruption read their
-            payloads well enough (:class:`~deepmorph_core.train_settings.TrainSettings`).
+            payloads well enough (:class:`~deepmorph.training.settings.TrainSettings`).
         shards: random streams the batch is drawn from (default: one per torchrun process).
         resume: continue the checkpoint at ``out``.
         checkpoint_every: steps between checkpoints.
@@ -245,7 +245,7 @@ def train(
     """
     import warnings
 
-    from deepmorph_core.train import train_model
+    from deepmorph.training.codec import train_model
 
     def warn(text: str) -> None:
         warnings.warn(text, stacklevel=4)  # shown at the line that called deepmorph.train

@@ -44,7 +44,7 @@ _SHAPE = Annotated[list[Annotated[int, Field(ge=1, le=1 << 20)]], Field(min_leng
 
 class AutoPayload(BaseModel):
     """A payload sized by ``--payload-bits auto``: what the user fixed of its code (``None``:
-    the codec's choice), kept when training shrinks it (:mod:`deepmorph_core.code_shrink`)."""
+    the codec's choice), kept when training shrinks it (:mod:`deepmorph.training.code_shrink`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -53,7 +53,7 @@ class AutoPayload(BaseModel):
 
 
 class CodeShrink(BaseModel):
-    """Training made the code smaller (:mod:`deepmorph_core.code_shrink`).
+    """Training made the code smaller (:mod:`deepmorph.training.code_shrink`).
 
     Attributes:
         step: the step it happened after.
@@ -104,7 +104,7 @@ class TrainingRecord(BaseModel):
 
 
 class ValidationRecord(BaseModel):
-    """How a trained model read fresh payloads (:mod:`deepmorph_core.validation`).
+    """How a trained model read fresh payloads (:mod:`deepmorph.training.validation`).
 
     Attributes:
         name: which validation (``renders``: real renders under the training corruption;

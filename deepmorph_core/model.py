@@ -2,7 +2,7 @@
 
 :class:`DeepMorphModel` encodes payloads into morphed SVG, reads the bits of an image in
 which the drawing fills the frame, and saves and loads itself as a bundle
-(:mod:`deepmorph_core.bundle`). Training lives in :mod:`deepmorph_core.train`; finding and
+(:mod:`deepmorph_core.bundle`). Training lives in :mod:`deepmorph.training.codec`; finding and
 reading drawings in photos is the photo chain's (:mod:`deepmorph_detect`), which builds on this.
 The networks' ONNX graphs travel with the model (:attr:`DeepMorphModel.graphs`): the decoder's
 is exported when training ends (:meth:`DeepMorphModel.store_decoder_graph`).

@@ -2,7 +2,7 @@
 CNN decoder (a few strided convolutions and a two-layer head).
 
 Both are plain ``nn.Module``s over batched tensors; the morph space, rasterizer and
-augmentations in between live in their own modules (:mod:`deepmorph_core.train` wires them).
+augmentations in between live in their own modules (:mod:`deepmorph.training.codec` wires them).
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ class DecoderConfig(BaseModel):
             bundle without this field loads without one.
         readout: a linear readout of the image's pixels added to the CNN's logits (a matched
             filter per bit). Training fits it by least squares where the CNN alone stalls
-            (:func:`~deepmorph_core.train.fit_readout`) and leaves it out where it does not.
+            (:func:`~deepmorph.training.codec.fit_readout`) and leaves it out where it does not.
             Off by default, so a bundle without this field loads without one.
     """
 

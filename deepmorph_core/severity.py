@@ -184,6 +184,9 @@ SEVERITIES: dict[str, Severity] = {
 LADDER = tuple(SEVERITIES)
 #: The severities a photo can have.
 PHOTO_SEVERITIES = tuple(k for k, v in SEVERITIES.items() if v.photo is not None)
+#: The severity trained models are validated at: renders (:mod:`deepmorph.training.validation`)
+#: and close-up photos (:mod:`deepmorph_detect.photo_validation`).
+VALIDATION_SEVERITY = "medium"
 
 
 def severity(name: str) -> Severity:

@@ -1,7 +1,7 @@
 """Finding drawings in photos: detection, alignment, rectification, pose, fusion, scenes.
 
-* :mod:`~deepmorph_detect.network` and :mod:`~deepmorph_detect.detector_training`: the detector CNN
-  and its training on synthetic scenes (``deepmorph train-detector``).
+* :mod:`~deepmorph_detect.network`: the detector CNN (trained on synthetic scenes by the
+  application layer's :mod:`deepmorph.training.detector`, ``deepmorph train-detector``).
 * :mod:`~deepmorph_detect.locate`: the chain from a photo to decoded drawings with keypoints,
   homography and pose; :mod:`~deepmorph_detect.refine`: sub-pixel alignment and verification.
 * :mod:`~deepmorph_detect.camera`: intrinsics, calibration files and PnP.

@@ -20,7 +20,7 @@ from deepmorph_core.corruption import AugmentPipeline, build_pipeline
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
-from deepmorph_core.validation import SEVERITY
+from deepmorph_core.severity import VALIDATION_SEVERITY
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_photo, colour_print, model_added_steps
 
@@ -51,7 +51,7 @@ def validate_close_ups(  # noqa: PLR0913
     model: DeepMorphModel,
     samples: int,
     seed: int = 0,
-    severity: str = SEVERITY,
+    severity: str = VALIDATION_SEVERITY,
     print_px: float | None = None,
     detector: str | None = None,
 ) -> ValidationRecord:

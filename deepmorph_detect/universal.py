@@ -6,7 +6,7 @@ drawing: its viewBox, which no photo shows. The universal detector learns what e
 shows: the **ink square**, the square around the box of a drawing's ink, centred on it, as wide
 as its longer side (:func:`ink_square`). It is :class:`~deepmorph_detect.network.DetectorNet`
 trained on scenes of the shared line and colour sets (``python -m
-deepmorph_detect.universal_training``), shipped in ``deepmorph_detect/data``. For a model, each
+deepmorph.training.universal``), shipped in ``deepmorph_detect/data``. For a model, each
 proposed square is mapped to the model's viewBox through the model's own ink square; alignment,
 reading and the checks then decide which proposals are that drawing, as for any detector.
 
@@ -52,7 +52,7 @@ class UniversalMeta(BaseModel):
 
     Attributes:
         width: the network's channel width.
-        config: the training settings (:class:`~deepmorph_detect.universal_training.UniversalConfig`).
+        config: the training settings (:class:`~deepmorph.training.universal.UniversalConfig`).
         record: steps, time and threads of the training.
         training_set: the drawing sets it was trained on, how many of each, and the rule that
             held drawings out for benchmarks.
@@ -164,7 +164,7 @@ class UniversalDetector(CentreNetDetector):
         if not UNIVERSAL_PATH.is_file():
             raise DeepMorphError(
                 f"{UNIVERSAL_PATH}: the universal detector is not installed with this copy of DeepMorph"
-                " (reinstall it, or train one: python -m deepmorph_detect.universal_training)"
+                " (reinstall it, or train one: python -m deepmorph.training.universal)"
             )
         md = model.drawing
         viewbox = md.drawing.viewbox

@@ -83,8 +83,8 @@ def isolated_plugins(builtin_registry: Registry) -> Iterator[None]:
 @pytest.fixture(autouse=True, scope="session")
 def small_validations() -> Iterator[None]:
     """Training validates on 1000 renders and 200 photos; tests train tiny models many times,
-    so they validate on a few (tests/core/test_validation.py checks the real thing)."""
-    import deepmorph_core.validation as validation
+    so they validate on a few (tests/app/test_validation.py checks the real thing)."""
+    import deepmorph.training.validation as validation
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(validation, "RENDER_SAMPLES", 24)

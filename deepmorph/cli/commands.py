@@ -41,9 +41,7 @@ from deepmorph.cli.frame import (
     warn_dropped,
     write_text_atomic,
 )
-from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.fileio import refuse_to_overwrite
-from deepmorph_core.train_settings import (
+from deepmorph.training.settings import (
     DEFAULTS,
     PAYLOAD_BITS,
     PHOTO_SAMPLES,
@@ -51,12 +49,14 @@ from deepmorph_core.train_settings import (
     TUNE_DEFAULTS,
     TuneSettings,
 )
+from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.fileio import refuse_to_overwrite
 
 if TYPE_CHECKING:
     import numpy as np
 
+    from deepmorph.training.many import DrawingResult
     from deepmorph_core.morphable import MorphableDrawing
-    from deepmorph_core.train_many import DrawingResult
 
 
 DeviceOpt = Annotated[
@@ -384,8 +384,8 @@ def train(
     Under `torchrun --nproc_per_node N -m deepmorph train ...` the N processes train it together
     (docs/training.md); the first alone writes and prints.
     """
-    from deepmorph_core.distributed import world_from_env
-    from deepmorph_core.train import train_model
+    from deepmorph.training.codec import train_model
+    from deepmorph.training.distributed import world_from_env
 
     def describe(m: dict[str, Any]) -> str:
         return (
@@ -478,7 +478,7 @@ def train_many(
     """Train every drawing in a folder: done bundles are skipped, checkpoints resumed, one
     process per device; a drawing that fails is reported and the others go on. Exits with 1
     when a drawing failed."""
-    from deepmorph_core.train_many import train_many as run
+    from deepmorph.training.many import train_many as run
 
     def progress(result: DrawingResult, finished: int, total: int) -> None:
         what = result.error if result.status == "failed" else f"{result.steps} steps, {result.seconds:.0f} s"
@@ -691,8 +691,8 @@ def tune_decoder(
     as_json: JsonOpt = False,
 ) -> None:
     """Train a trained model's decoder further, encoder frozen: printed codes and the detector stay valid."""
+    from deepmorph.training.codec import tune_decoder as tune
     from deepmorph_core.model import DeepMorphModel
-    from deepmorph_core.train import tune_decoder as tune
 
     use_threads(threads)
     with step_progress("tuning", lambda m: f"decoder bit acc {m['bit_acc']:.4f}") as on_start:
@@ -732,11 +732,11 @@ def validate(
     as_json: JsonOpt = False,
 ) -> None:
     """Read fresh random payloads back from renders and photos: what the model really reads."""
-    from deepmorph_core.distributed import resolve_device
+    from deepmorph.training.distributed import resolve_device
+    from deepmorph.training.validation import validate as run_validation
+    from deepmorph.training.validation import validation_warning
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import default_registry
-    from deepmorph_core.validation import validate as run_validation
-    from deepmorph_core.validation import validation_warning
 
     use_threads(threads)
     where = resolve_device(device)

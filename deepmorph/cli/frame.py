@@ -18,9 +18,9 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
+from deepmorph.training.settings import PHOTO_SAMPLES, RENDER_SAMPLES, TrainSettings, exposed
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import atomic_write
-from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES, TrainSettings, exposed
 
 _UNPRINTABLE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069]")
 
@@ -292,8 +292,8 @@ ValidationOpt = Annotated[
 
 def setting_option(field: str, help: str | None = None, settings: type = TrainSettings) -> Any:  # noqa: A002 - the option's help
     """The option of training setting ``field``: its flag, help and bounds as
-    :class:`~deepmorph_core.train_settings.TrainSettings` (or ``settings``, such as
-    :class:`~deepmorph_core.train_settings.TuneSettings`) declares them (``help`` replaces its
+    :class:`~deepmorph.training.settings.TrainSettings` (or ``settings``, such as
+    :class:`~deepmorph.training.settings.TuneSettings`) declares them (``help`` replaces its
     line; a flag on or off is ``--x/--no-x``). Its default is the class's own."""
     setting = exposed(settings)[field]
     flag = f"--{setting.option}" + (f"/--no-{setting.option}" if setting.switch else "")

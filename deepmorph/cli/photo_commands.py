@@ -32,9 +32,9 @@ from deepmorph.cli.frame import (
     use_threads,
     write_text_atomic,
 )
+from deepmorph.training.detector_settings import DETECTOR_DEFAULTS, DetectorSettings
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, check_target, refuse_non_folder, refuse_to_overwrite
-from deepmorph_detect.detector_settings import DETECTOR_DEFAULTS, DetectorSettings
 
 
 def _progress(name: str):  # noqa: ANN202 - a rich Progress
@@ -400,7 +400,7 @@ def train_detector_cmd(
     """Fine-tune a detector for one model, starting from the universal detector every model
     already has (about 2 minutes), and store it in the bundle. Worth it only where
     `bench/universal_detector.py` shows it finds more of the drawing."""
-    from deepmorph_detect.detector_training import DetectorConfig, train_detector
+    from deepmorph.training.detector import DetectorConfig, train_detector
 
     config = (
         None
@@ -478,13 +478,13 @@ def demo(
     """Bundled drawing end to end: model, encode a payload, simulate print-and-photo, decode."""
     import numpy as np
 
+    from deepmorph.training.codec import train_model
     from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
     from deepmorph_core.fileio import output_folder
     from deepmorph_core.image_io import save_bgr, save_gray, save_rgb
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.payload import format_payload, random_payloads
     from deepmorph_core.render import overlay, render_svg, render_svg_ink
-    from deepmorph_core.train import train_model
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import close_up_photo
 

@@ -37,8 +37,8 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from deepmorph.studio import drawing as drawings
 from deepmorph.studio.jobs import JobQueue
+from deepmorph.training.settings import DEFAULTS, PHOTO_SAMPLES, RENDER_SAMPLES, exposed
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.train_settings import DEFAULTS, PHOTO_SAMPLES, RENDER_SAMPLES, exposed
 
 if TYPE_CHECKING:
     import numpy as np
@@ -597,7 +597,7 @@ def train_form() -> dict[str, dict[str, Any]]:
     """The Train form's inputs by name: each one's ``default``, ``min`` and ``max``.
 
     The training settings are named by their :func:`deepmorph.train` keywords, with the defaults
-    and bounds of :mod:`deepmorph_core.train_settings`, capped by :data:`STUDIO_CAPS` (and the
+    and bounds of :mod:`deepmorph.training.settings`, capped by :data:`STUDIO_CAPS` (and the
     studio's own defaults, :data:`STUDIO_DEFAULTS`, where it has them). A new model hides the
     payload ``deepmorph capacity`` predicts to read (``auto``) and is validated on photos, as
     many by default as the command line reads (and five times as many renders, its share). The

@@ -1,5 +1,5 @@
 """One training run of the studio's queue, in its own process: ``python -m deepmorph.studio.worker
-JOB.json``. It calls :func:`deepmorph_core.train.train_model` (the function ``deepmorph train``
+JOB.json``. It calls :func:`deepmorph.training.codec.train_model` (the function ``deepmorph train``
 calls) and reports on stdout, one JSON object a line: ``start`` (total and done steps), ``log``
 (each log line of the training loop), ``validating``, then ``done`` (the bundle and its
 validation) or ``error`` / ``cancelled``. SIGTERM cancels: the loop writes its checkpoint first.
@@ -20,9 +20,9 @@ def _say(event: str, **data: Any) -> None:
 
 def run(job_path: Path) -> int:
     """Train the job described in ``job_path``; the exit status is 0 when it finished."""
+    from deepmorph.training.codec import train_model
+    from deepmorph.training.loop import Interrupted
     from deepmorph_core.errors import DeepMorphError
-    from deepmorph_core.loop import Interrupted
-    from deepmorph_core.train import train_model
 
     job = json.loads(job_path.read_text())
     settings = job["settings"]

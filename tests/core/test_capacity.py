@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.codec import train_model
 from deepmorph_core.capacity import (
     CODE_BITS_PER_GROUP,
     LARGEST_CODE_MEASURED,
@@ -21,7 +22,6 @@ from deepmorph_core.codec import choose_codec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.morphable import MorphableDrawing
-from deepmorph_core.train import train_model
 from tests.conftest import FEATHER, make_svg
 
 app = application()

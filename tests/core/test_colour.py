@@ -14,6 +14,7 @@ from lxml import etree
 from PIL import Image
 
 import deepmorph
+from deepmorph.training.codec import train_model
 from deepmorph_core.drawing import load_drawing
 from deepmorph_core.errors import SvgError
 from deepmorph_core.model import DeepMorphModel
@@ -21,7 +22,6 @@ from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.svg.plain_colours import plain_colours
 from deepmorph_core.svg.style import Paint
-from deepmorph_core.train import train_model
 from tests.conftest import make_svg
 
 DATA = Path(__file__).resolve().parents[1] / "data"  # the colour icons are MIT (LICENSE beside them)

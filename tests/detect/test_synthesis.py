@@ -277,7 +277,7 @@ def test_the_per_bit_evidence_is_corrected_where_the_soft_rasterizer_misdraws_a_
     evidence on clean real renders contradicts such bits and the per-bit check withdraws right
     payloads; checked against the word's own real render, every word is shown."""
     import deepmorph_detect.synthesis as synthesis
-    from deepmorph_core.train import train_model
+    from deepmorph.training.codec import train_model
     from deepmorph_detect.refine import Template
 
     train_model(

@@ -10,9 +10,17 @@ import numpy as np
 import pytest
 import torch
 
+from deepmorph.training.loop import Interrupted
+from deepmorph.training.universal import (
+    PANEL_DRAWINGS,
+    PoolSceneMaker,
+    UniversalConfig,
+    held_out,
+    load_pool,
+    train_universal,
+)
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import default_registry
 from deepmorph_detect.centrenet import CentreNetDetector
@@ -25,14 +33,6 @@ from deepmorph_detect.universal import (
     ink_square,
     load_universal,
     shared_runner,
-)
-from deepmorph_detect.universal_training import (
-    PANEL_DRAWINGS,
-    PoolSceneMaker,
-    UniversalConfig,
-    held_out,
-    load_pool,
-    train_universal,
 )
 
 DATA = Path(__file__).resolve().parents[1] / "data"

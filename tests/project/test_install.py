@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
-from deepmorph_core.loop import NO_PLOT
+from deepmorph.training.loop import NO_PLOT
 from deepmorph_detect.backgrounds import PHOTOS, sample_photos
 
 ROOT = Path(__file__).resolve().parents[2]

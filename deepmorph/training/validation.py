@@ -22,19 +22,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from deepmorph.training.settings import PHOTO_SAMPLES, RENDER_SAMPLES
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.framing import frame_renders
 from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.payload import random_payloads
-from deepmorph_core.train_settings import PHOTO_SAMPLES, RENDER_SAMPLES
+from deepmorph_core.severity import VALIDATION_SEVERITY
 
 if TYPE_CHECKING:
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Registry
 
 TARGET_RATE = 0.99  # below this share of payloads read, training ends with a warning
-SEVERITY = "medium"
 
 
 def default_samples() -> tuple[int, int]:
@@ -46,7 +46,7 @@ def validate_renders(
     model: DeepMorphModel,
     samples: int = RENDER_SAMPLES,
     seed: int = 0,
-    severity: str = SEVERITY,
+    severity: str = VALIDATION_SEVERITY,
     batch: int = 100,
     device: str = "cpu",
 ) -> ValidationRecord:
@@ -88,7 +88,7 @@ def validate_renders(
 def read_renders(
     model: DeepMorphModel,
     codes: np.ndarray,
-    severity: str = SEVERITY,
+    severity: str = VALIDATION_SEVERITY,
     seed: int = 0,
     batch: int = 100,
     device: str = "cpu",

@@ -1,6 +1,6 @@
 """The training settings, each declared once: its type, default, bounds and help.
 
-:class:`TrainSettings` is the one declaration. :class:`deepmorph_core.train.TrainConfig` (the
+:class:`TrainSettings` is the one declaration. :class:`deepmorph.training.codec.TrainConfig` (the
 validated settings a bundle stores) inherits its fields; ``deepmorph train`` and
 ``deepmorph train-many`` take their options' defaults, bounds and help from it
 (:func:`exposed`, :data:`DEFAULTS`), :func:`deepmorph.train` its keywords' defaults, and the
@@ -23,7 +23,7 @@ from annotated_types import Ge, Gt, Le
 #: The payload length a new model hides unless told (``--payload-bits``, ``payload_bits=``).
 PAYLOAD_BITS = 24
 #: Fresh payloads read back after training unless told: from renders and from close-up photos
-#: (``--validation``, ``validation=``; :mod:`deepmorph_core.validation`).
+#: (``--validation``, ``validation=``; :mod:`deepmorph.training.validation`).
 RENDER_SAMPLES, PHOTO_SAMPLES = 1000, 200
 #: The early stop's window (steps at full corruption) and the share of code words they must read.
 EARLY_STOP_WINDOW, EARLY_STOP_RATE = 250, 0.995
@@ -40,7 +40,7 @@ def setting(default: Any, option: str | None = None, help: str = "") -> Any:  # 
 
 @dataclass(frozen=True)
 class TrainSettings:
-    """Training settings (stored in the bundle, as :class:`deepmorph_core.train.TrainConfig`).
+    """Training settings (stored in the bundle, as :class:`deepmorph.training.codec.TrainConfig`).
 
     Attributes:
         steps: total optimisation steps (both stages).
@@ -56,7 +56,7 @@ class TrainSettings:
             :data:`SMALL_PRINT_SCALE` of the decoder's width, corrupted at that size (the
             preset scaled to it), and enlarged again. A print 60 px wide in a photo is blurred,
             noised and compressed at 60 px, not at the decoder's width. A decoder tuned so
-            (:func:`~deepmorph_core.train.tune_decoder`) reads more payloads from photos, and
+            (:func:`~deepmorph.training.codec.tune_decoder`) reads more payloads from photos, and
             lets a few more CRC collisions through (``docs/training.md``).
         severity: capture-corruption preset (``none``, ``easy``, ``medium``, ``hard``) reached
             at the end of the curriculum.
@@ -70,8 +70,8 @@ class TrainSettings:
             (:mod:`deepmorph_core.spatial`), trained with it end to end; it undoes the
             perspective and turn that framing by ink moments leaves (``docs/training.md``).
         readout: give the decoder a linear readout of the pixels, fitted by least squares
-            (:func:`~deepmorph_core.train.fit_readout`) and then trained with the CNN where the
-            CNN alone stalls in stage 1 (below :data:`~deepmorph_core.train.READOUT_STALL` of
+            (:func:`~deepmorph.training.codec.fit_readout`) and then trained with the CNN where the
+            CNN alone stalls in stage 1 (below :data:`~deepmorph.training.codec.READOUT_STALL` of
             bits); left out of the bundle where it does not (``docs/training.md``).
         early_stop: end training before ``steps`` once it reads well enough: when, over the last
             ``early_stop_window`` steps, all at ``severity`` (the curriculum's ramp done), at
@@ -82,11 +82,11 @@ class TrainSettings:
         early_stop_window, early_stop_rate: see ``early_stop``.
         freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
-            :func:`~deepmorph_core.train.tune_decoder` runs on a trained bundle.
+            :func:`~deepmorph.training.codec.tune_decoder` runs on a trained bundle.
         seed: makes a run reproducible (same seed, same threads: same model).
         device: ``cpu``, ``cuda`` or ``auto`` (CUDA where present); a bundle stores the device
             it resolved to.
-        shards: random streams the batch is drawn from (:mod:`deepmorph_core.distributed`):
+        shards: random streams the batch is drawn from (:mod:`deepmorph.training.distributed`):
             the processes of a torchrun share them, so a run's numbers depend on its seed and
             shards, not on how many processes train it. ``None``: one per process.
         threads: torch CPU threads (``None``: torch's default).
@@ -154,7 +154,7 @@ DEFAULTS = TrainSettings()
 
 @dataclass(frozen=True)
 class TuneSettings:
-    """What a decoder tuning (:func:`deepmorph_core.train.tune_decoder`, ``deepmorph
+    """What a decoder tuning (:func:`deepmorph.training.codec.tune_decoder`, ``deepmorph
     tune-decoder``) sets for itself; everything else is the bundle's own training settings.
 
     Attributes:

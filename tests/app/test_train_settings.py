@@ -1,4 +1,4 @@
-"""The training settings are declared once (:mod:`deepmorph_core.train_settings`): ``TrainConfig``,
+"""The training settings are declared once (:mod:`deepmorph.training.settings`): ``TrainConfig``,
 ``deepmorph train`` and ``train-many``, ``deepmorph.train`` and the studio's Train form take
 their defaults (and, where they say them, bounds and help) from there, and change with it."""
 
@@ -21,10 +21,10 @@ import deepmorph
 from deepmorph.cli import application
 from deepmorph.cli import commands as cli
 from deepmorph.studio.app import train_form, training_settings
+from deepmorph.training.codec import TrainConfig, tune_decoder
+from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS, TUNE_DEFAULTS, TrainSettings, TuneSettings, exposed
 from deepmorph_core.bundled import BUNDLED_DRAWING
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.train import TrainConfig, tune_decoder
-from deepmorph_core.train_settings import DEFAULTS, PAYLOAD_BITS, TUNE_DEFAULTS, TrainSettings, TuneSettings, exposed
 
 ROOT = Path(__file__).resolve().parents[2]
 #: ``deepmorph train``'s options that are not training settings, with their keyword in
@@ -116,7 +116,7 @@ def test_the_cli_and_the_facade_take_each_setting_as_declared() -> None:
 def test_no_options_and_no_keywords_train_alike(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """``deepmorph train`` with no options, ``deepmorph.train`` with no keywords and the studio's
     Train form left as it is hand training the same settings: ``TrainConfig``'s defaults."""
-    import deepmorph_core.train
+    import deepmorph.training.codec
 
     calls: list[dict[str, Any]] = []
 
@@ -124,7 +124,7 @@ def test_no_options_and_no_keywords_train_alike(monkeypatch: pytest.MonkeyPatch,
         calls.append(kwargs)
         raise DeepMorphError("recorded")
 
-    monkeypatch.setattr(deepmorph_core.train, "train_model", recorded)
+    monkeypatch.setattr(deepmorph.training.codec, "train_model", recorded)
     res = CliRunner().invoke(application(), ["train", str(BUNDLED_DRAWING), "--out", str(tmp_path / "cli.dmm")])
     assert res.exit_code == 1 and "error: recorded" in res.output, res.output
     with pytest.raises(DeepMorphError, match="recorded"):
@@ -157,11 +157,11 @@ def _another(field: str, default: Any) -> Any:
 
 CHANGED = """
 import dataclasses, inspect, json, sys
-import deepmorph_core.train_settings as settings
+import deepmorph.training.settings as settings
 changed = json.loads(sys.argv[1])
 settings.DEFAULTS = dataclasses.replace(settings.DEFAULTS, **changed)
 settings.PAYLOAD_BITS, settings.RENDER_SAMPLES, settings.PHOTO_SAMPLES = 25, 1500, 300
-from tests.project.test_train_settings import declared
+from tests.app.test_train_settings import declared
 import deepmorph
 from deepmorph.studio.app import train_form, training_settings
 from deepmorph.cli import commands
@@ -212,11 +212,11 @@ def test_the_studio_form_says_the_settings_bounds() -> None:
 
 TUNE_CHANGED = """
 import dataclasses, inspect, json, sys
-import deepmorph_core.train_settings as settings
+import deepmorph.training.settings as settings
 settings.TUNE_DEFAULTS = dataclasses.replace(settings.TUNE_DEFAULTS, steps=801, small_prints=0.25, lr=1e-3)
-from tests.project.test_train_settings import declared
+from tests.app.test_train_settings import declared
 from deepmorph.cli import commands
-from deepmorph_core.train import tune_decoder
+from deepmorph.training.codec import tune_decoder
 cli = {n: o.default for n, o in declared(commands.tune_decoder).items()}
 api = {n: p.default for n, p in inspect.signature(tune_decoder).parameters.items()}
 print(json.dumps({"cli": [cli[k] for k in ("steps", "small_prints", "lr")],
@@ -225,7 +225,7 @@ print(json.dumps({"cli": [cli[k] for k in ("steps", "small_prints", "lr")],
 
 
 def test_tuning_settings_are_declared_once() -> None:
-    """``deepmorph tune-decoder`` and :func:`~deepmorph_core.train.tune_decoder` take their defaults,
+    """``deepmorph tune-decoder`` and :func:`~deepmorph.training.codec.tune_decoder` take their defaults,
     bounds and help from :class:`TuneSettings`, and a changed default reaches both."""
     options, signature = declared(cli.tune_decoder), inspect.signature(tune_decoder).parameters
     for field, setting in exposed(TuneSettings).items():

@@ -1,12 +1,12 @@
 """The settings of a detector trained on scenes, each declared once: type, default, bounds, help.
 
 :class:`SceneSettings` holds what every detector trained on scenes takes (the universal
-detector's training, :mod:`deepmorph_detect.universal_training`); :class:`DetectorSettings`
+detector's training, :mod:`deepmorph.training.universal`); :class:`DetectorSettings`
 a model's own detector's, a short fine-tune of the universal one by default. The validated
-configurations stored in bundles (:class:`~deepmorph_detect.detector_training.SceneTrainingConfig`,
-:class:`~deepmorph_detect.detector_training.DetectorConfig`) inherit these fields, and
+configurations stored in bundles (:class:`~deepmorph.training.detector.SceneTrainingConfig`,
+:class:`~deepmorph.training.detector.DetectorConfig`) inherit these fields, and
 ``deepmorph train-detector`` takes its options' defaults, bounds and help from
-:data:`DETECTOR_DEFAULTS` (:func:`deepmorph_core.train_settings.exposed`).
+:data:`DETECTOR_DEFAULTS` (:func:`deepmorph.training.settings.exposed`).
 
 Nothing here imports torch or pydantic: building the command line reads it.
 """
@@ -18,7 +18,7 @@ from typing import Annotated, Literal
 
 from annotated_types import Ge, Gt, Le
 
-from deepmorph_core.train_settings import setting
+from deepmorph.training.settings import setting
 
 
 @dataclass(frozen=True)

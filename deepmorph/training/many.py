@@ -1,7 +1,7 @@
 """Training every drawing of a folder: one process per device, done ones skipped, checkpoints resumed.
 
 ``deepmorph train-many drawings/ --out models/`` trains ``drawings/<name>.svg`` into
-``models/<name>.dmm`` with :func:`~deepmorph_core.train.train_model`:
+``models/<name>.dmm`` with :func:`~deepmorph.training.codec.train_model`:
 
 * a bundle whose training has finished is **done** and left alone; a checkpoint (a bundle not
   finished) is **resumed**; anything else is trained from the start;
@@ -23,8 +23,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from deepmorph.training.distributed import World, resolve_device
 from deepmorph_core.bundle import load_bundle
-from deepmorph_core.distributed import World, resolve_device
 from deepmorph_core.errors import DeepMorphError
 
 Status = Literal["trained", "resumed", "done", "failed"]
@@ -127,7 +127,7 @@ def result_of(
 
 def run_job(job: Job) -> DrawingResult:
     """Train one drawing; every failure becomes its :class:`DrawingResult`'s one-line ``error``."""
-    from deepmorph_core.train import train_model
+    from deepmorph.training.codec import train_model
 
     start = time.perf_counter()
     warnings: list[str] = []
@@ -176,9 +176,9 @@ def train_many(
     """Train every drawing in ``folder`` into ``out_dir`` (module docstring).
 
     Args:
-        payload_bits, bounds, validation_samples: as :func:`~deepmorph_core.train.train_model`
+        payload_bits, bounds, validation_samples: as :func:`~deepmorph.training.codec.train_model`
             takes them, the same for every drawing (``auto``: each its own predicted size).
-        train: :class:`~deepmorph_core.train.TrainConfig` fields for new trainings (a resumed
+        train: :class:`~deepmorph.training.codec.TrainConfig` fields for new trainings (a resumed
             one keeps its checkpoint's, but for ``steps`` and ``threads``).
         device: ``auto``, ``cpu`` or ``cuda``.
         jobs: worker processes (default: one per CUDA device, one on the CPU).

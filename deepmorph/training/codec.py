@@ -13,9 +13,9 @@ The real-renderer share closes the gap between what the soft rasterizer draws an
 resvg (and so a printer) draws. Those rows carry no gradient to the encoder, so they only
 teach the decoder to read real renders.
 
-The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s; the
+The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph.training.loop`'s; the
 device and the processes of a torchrun (each drawing its shards of the batch, gradients summed
-across them) are :mod:`deepmorph_core.distributed`'s.
+across them) are :mod:`deepmorph.training.distributed`'s.
 Checkpoints are whole bundles plus optimiser and generator state, so ``resume`` continues a
 run exactly. :func:`train_model` and :func:`tune_decoder` are what the command line calls.
 """
@@ -35,13 +35,8 @@ import torch.nn.functional as F
 from pydantic import BaseModel, ConfigDict, ValidationError
 from torch import Tensor, nn
 
-from deepmorph_core.bounds import format_validation_error
-from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, ValidationRecord
-from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
-from deepmorph_core.code_shrink import SHRINK_BELOW, describe, read_share, shrink_networks, smaller_code
-from deepmorph_core.codec import CodecSpec, choose_codec
-from deepmorph_core.corruption import build_pipeline
-from deepmorph_core.distributed import (
+from deepmorph.training.code_shrink import SHRINK_BELOW, describe, read_share, shrink_networks, smaller_code
+from deepmorph.training.distributed import (
     BatchNormShards,
     World,
     all_reduce_sum,
@@ -56,10 +51,17 @@ from deepmorph_core.distributed import (
     sum_gradients,
     world_from_env,
 )
+from deepmorph.training.loop import LoopSummary, Panel, TrainingLoop
+from deepmorph.training.settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TUNE_DEFAULTS, TrainSettings
+from deepmorph.training.validation import default_samples, validate, validation_warning
+from deepmorph_core.bounds import format_validation_error
+from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, ValidationRecord
+from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
+from deepmorph_core.codec import CodecSpec, choose_codec
+from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders
-from deepmorph_core.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
@@ -68,13 +70,11 @@ from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
-from deepmorph_core.train_settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TUNE_DEFAULTS, TrainSettings
-from deepmorph_core.validation import default_samples, validate, validation_warning
 
 
 class TrainConfig(BaseModel, TrainSettings):
     """Training settings, validated (stored in the bundle): the fields, their defaults and
-    bounds are :class:`~deepmorph_core.train_settings.TrainSettings`', declared there once for
+    bounds are :class:`~deepmorph.training.settings.TrainSettings`', declared there once for
     this model, the command line, :func:`deepmorph.train` and the studio."""
 
     model_config = ConfigDict(extra="forbid")
@@ -159,14 +159,14 @@ def fit_readout(
 
 
 class CodecRun:
-    """One codec training run (or its resumption) for the shared loop (:class:`~deepmorph_core.loop.Run`).
+    """One codec training run (or its resumption) for the shared loop (:class:`~deepmorph.training.loop.Run`).
 
     Args:
         model: a fresh model (``DeepMorphModel.create``) or a loaded checkpoint.
         config: training settings (``device`` resolved: ``cpu`` or ``cuda``).
         out: the bundle path written at checkpoints and at the end (by rank 0 alone).
-        world: this process's place in a data-parallel run (:func:`deepmorph_core.distributed.join`
-            already called); it draws the shards :func:`~deepmorph_core.distributed.rank_shards` gives it.
+        world: this process's place in a data-parallel run (:func:`deepmorph.training.distributed.join`
+            already called); it draws the shards :func:`~deepmorph.training.distributed.rank_shards` gives it.
     """
 
     panels = CODEC_PANELS
@@ -218,7 +218,7 @@ class CodecRun:
         self._window: list[float] = []
         self._prev_window: float | None = None
         self._reads: list[float] = []  # the early stop's window: code words read, per step at full corruption
-        # an auto-sized code's window (deepmorph_core.code_shrink): per step at full corruption, the
+        # an auto-sized code's window (deepmorph.training.code_shrink): per step at full corruption, the
         # code bits each capture of this rank's shards got wrong; and the steps since it was last sized
         self._errors: list[Tensor] = []
         self._settled = 0
@@ -424,9 +424,9 @@ class CodecRun:
         return self.record.payload_auto is not None and not self.cfg.freeze_encoder
 
     def _update_code(self, wrong: Tensor, full_corruption: bool) -> None:
-        """Shrink an auto-sized code that does not read (:mod:`deepmorph_core.code_shrink`):
+        """Shrink an auto-sized code that does not read (:mod:`deepmorph.training.code_shrink`):
         after a settling window at full corruption, when a window's captures (every rank's)
-        read fewer than :data:`~deepmorph_core.code_shrink.SHRINK_BELOW` of their code words,
+        read fewer than :data:`~deepmorph.training.code_shrink.SHRINK_BELOW` of their code words,
         with a window's steps still to train; judged at the end of each window. ``wrong``: this
         step's ``(rows, N_b)`` code bits read wrong."""
         cfg, rec = self.cfg, self.record
@@ -537,7 +537,7 @@ def train_model(
 
     Under torchrun each process calls it: they train together, rank 0 alone writes the
     checkpoints and the bundle, reports progress and warnings, and validates
-    (:mod:`deepmorph_core.distributed`).
+    (:mod:`deepmorph.training.distributed`).
 
     Args:
         svg: the drawing.
@@ -555,8 +555,8 @@ def train_model(
         drop_unsupported: train on the drawing with what DeepMorph cannot model left out (a
             warning names each part); the bundle holds that drawing.
         validation_samples: fresh payloads read from renders and from photos once training
-            has finished (:mod:`deepmorph_core.validation`; default
-            :func:`~deepmorph_core.validation.default_samples`); the records are stored in the
+            has finished (:mod:`deepmorph.training.validation`; default
+            :func:`~deepmorph.training.validation.default_samples`); the records are stored in the
             bundle, and a model reading fewer than 99 % gets a warning. ``(0, 0)``: none.
         on_validation: called when validation starts (a progress message).
         world: this process's place in a data-parallel run (default: what torchrun's environment
@@ -675,7 +675,7 @@ def open_model(
                 decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer, readout=config.readout),
                 label=label,
             )
-            if payload_bits == "auto":  # training may make the code smaller (deepmorph_core.code_shrink)
+            if payload_bits == "auto":  # training may make the code smaller (deepmorph.training.code_shrink)
                 model.meta.record.payload_auto = AutoPayload(crc_bits=crc_bits, ecc_t=ecc_t)
     except ValidationError as exc:
         raise _settings_error("training settings", exc) from None

@@ -10,13 +10,13 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.codec import train_model
+from deepmorph.training.loop import Interrupted
+from deepmorph.training.many import train_many
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.train import train_model
-from deepmorph_core.train_many import train_many
+from tests.app.test_training import TINY
 from tests.conftest import make_svg
-from tests.core.test_training import TINY
 
 app = application()
 SECOND = make_svg(

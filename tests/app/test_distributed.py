@@ -19,12 +19,12 @@ from pathlib import Path
 import pytest
 import torch
 
-from deepmorph_core.distributed import World, rank_shards, resolve_device, shard_sizes, world_from_env
+from deepmorph.training.codec import train_model
+from deepmorph.training.distributed import World, rank_shards, resolve_device, shard_sizes, world_from_env
+from deepmorph.training.loop import Interrupted, read_log
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.loop import Interrupted, read_log
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.train import train_model
-from tests.core.test_training import TINY
+from tests.app.test_training import TINY
 
 #: A few steps of both stages (stage 2 from step 3, with the readout fitted: the CNN stalls),
 #: with real renders, corruption and batch norm, so that every part of a step is shared.
@@ -138,7 +138,7 @@ def test_a_checkpoint_of_one_process_resumes_on_two(drawing: Path) -> None:
 #: of several processes writes none on an interrupt); the other rank then fails with it.
 STOP_AT_16 = """
 import sys
-from deepmorph_core.train import train_model
+from deepmorph.training.codec import train_model
 train = {train!r}
 
 def stop_at_16(total, done):
@@ -177,13 +177,13 @@ def test_a_checkpoint_of_two_processes_resumes_on_one(drawing: Path) -> None:
 #: A torchrun of this script trains an auto-sized code that does not read at once at ``hard``:
 #: both processes must shrink it the same way, from both ranks' captures.
 AUTO_SHRINK = """
-from deepmorph_core.train import train_model
+from deepmorph.training.codec import train_model
 train_model("tiny.svg", "auto2.dmm", payload_bits="auto", train={train!r}, validation_samples=(0, 0))
 """
 
 
 def test_two_processes_shrink_an_auto_code_as_one_process_does(drawing: Path) -> None:
-    """An ``auto`` code shrunk under torchrun (:mod:`deepmorph_core.code_shrink`) is shrunk at
+    """An ``auto`` code shrunk under torchrun (:mod:`deepmorph.training.code_shrink`) is shrunk at
     the same step to the same bits as by one process drawing the same two shards: the decision
     is made on every rank from every rank's captures."""
     train = {**CFG, "steps": 32, "shards": 2, "severity": "hard", "curriculum": 0.0, "early_stop_window": 10,

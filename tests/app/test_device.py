@@ -12,14 +12,14 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
-from deepmorph_core.distributed import resolve_device
+from deepmorph.training.codec import train_model
+from deepmorph.training.distributed import resolve_device
+from deepmorph.training.loop import read_log
+from deepmorph.training.validation import validate_renders
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.loop import read_log
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig
-from deepmorph_core.train import train_model
-from deepmorph_core.validation import validate_renders
-from tests.core.test_training import TINY
+from tests.app.test_training import TINY
 
 app = application()
 CUDA = torch.cuda.is_available()

@@ -12,17 +12,17 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.codec import train_model, variable_effects
+from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.capacity import predict
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.image_io import save_gray
-from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.morphable import INVISIBLE, MorphableDrawing
 from deepmorph_core.networks import Encoder, spread_weights
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg
-from deepmorph_core.train import train_model, variable_effects
 from deepmorph_detect.locate import Locator
 from tests.conftest import make_svg
 
@@ -311,7 +311,7 @@ def test_a_cnn_that_learns_trains_as_without_the_readout(
     """A dormant readout changes nothing: where stage 1 does not stall, the run equals one
     without the readout weight for weight, and the bundle holds none (nor does one written
     before the readout existed, the bundled ghost)."""
-    monkeypatch.setattr("deepmorph_core.train.READOUT_STALL", 0.0)
+    monkeypatch.setattr("deepmorph.training.codec.READOUT_STALL", 0.0)
     cfg = {**FAST, "steps": 30, "plateau_window": 10, "seed": 4}
     models = {}
     for readout in (True, False):
@@ -556,7 +556,7 @@ def test_training_starts_from_spread_weights_unless_asked_not_to(tiny_svg: Path,
 def test_small_print_captures_are_blurred_enlargements_and_still_train(tiny_svg: Path, tmp_path: Path) -> None:
     """``small_prints``: part of each batch is corrupted at 55-95 % of the width and enlarged
     again, as a small print in a photo is. Training with half the batch so still learns."""
-    from deepmorph_core.train import SMALL_PRINT_SCALE, CodecRun, TrainConfig
+    from deepmorph.training.codec import SMALL_PRINT_SCALE, CodecRun, TrainConfig
 
     out = tmp_path / "small.dmm"
     train_model(tiny_svg, out, payload_bits=8, crc_bits=8, ecc_t=0, train={**FAST, "steps": 150, "small_prints": 0.5})
@@ -613,7 +613,7 @@ def test_tune_decoder_keeps_the_encoder_and_records_the_run(trained: Path, tmp_p
 def test_an_interrupted_tuning_writes_what_it_has(
     trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from deepmorph_core.train import CodecRun, tune_decoder
+    from deepmorph.training.codec import CodecRun, tune_decoder
 
     real_step = CodecRun.step
 

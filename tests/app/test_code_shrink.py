@@ -1,5 +1,5 @@
 """Training shrinks a ``--payload-bits auto`` code its drawing does not carry
-(:mod:`deepmorph_core.code_shrink`), and never a size the user gave."""
+(:mod:`deepmorph.training.code_shrink`), and never a size the user gave."""
 
 from __future__ import annotations
 
@@ -12,14 +12,14 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.code_shrink import information, read_share, shrink_networks, smaller_code
+from deepmorph.training.codec import train_model
+from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundle import AutoPayload
-from deepmorph_core.code_shrink import information, read_share, shrink_networks, smaller_code
 from deepmorph_core.codec import choose_codec
-from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
-from deepmorph_core.train import train_model
-from tests.core.test_training import FAST, TINY, _interrupt_at
+from tests.app.test_training import FAST, TINY, _interrupt_at
 
 #: Full corruption from the first step at ``hard``, a short window: an untrained decoder reads
 #: almost no code word of the first windows, so an auto-sized code is shrunk at step 20.

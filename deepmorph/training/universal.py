@@ -1,6 +1,6 @@
 """Training the universal detector (:mod:`deepmorph_detect.universal`) on many drawings.
 
-    python -m deepmorph_detect.universal_training DRAWING_FOLDER... --out universal-detector.safetensors
+    python -m deepmorph.training.universal DRAWING_FOLDER... --out universal-detector.safetensors
 
 Every step draws a fresh batch of scenes (the one capture simulator, :mod:`deepmorph_detect.scenes`,
 at ``medium`` and ``hard``): zero to four prints of drawings drawn from the folders (each folder
@@ -14,7 +14,7 @@ the capacity panel and its held-out icons of ``bench/capacity.py``, and the ghos
 drawing in eight of every set, by the first byte of the SHA-256 of its name (below 32).
 
 Steps, log, checkpoints (the detector file itself, with the optimiser's state until it is
-finished), ``--resume`` and Ctrl-C are :mod:`deepmorph_core.loop`'s, as for ``train-detector``.
+finished), ``--resume`` and Ctrl-C are :mod:`deepmorph.training.loop`'s, as for ``train-detector``.
 """
 
 from __future__ import annotations
@@ -34,22 +34,22 @@ import numpy as np
 import torch
 from pydantic import Field
 
-from deepmorph_core.bundle import TrainingRecord
-from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
-from deepmorph_core.graphs import GraphError
-from deepmorph_core.loop import TrainingLoop
-from deepmorph_core.render import render_svg_rgb
-from deepmorph_core.severity import PHOTO_SIZE
-from deepmorph_core.svg.reader import viewbox_of
-from deepmorph_core.svg.secure import SvgError, parse_svg_bytes, read_svg_bytes
-from deepmorph_detect.centrenet import detector_graph
-from deepmorph_detect.detector_training import (
+from deepmorph.training.detector import (
     DetectorRun,
     SceneBatches,
     SceneTrainingConfig,
     optimiser_tensors,
     restore_optimiser,
 )
+from deepmorph.training.loop import TrainingLoop
+from deepmorph_core.bundle import TrainingRecord
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
+from deepmorph_core.graphs import GraphError
+from deepmorph_core.render import render_svg_rgb
+from deepmorph_core.severity import PHOTO_SIZE
+from deepmorph_core.svg.reader import viewbox_of
+from deepmorph_core.svg.secure import SvgError, parse_svg_bytes, read_svg_bytes
+from deepmorph_detect.centrenet import detector_graph
 from deepmorph_detect.network import INPUT_SIZE
 from deepmorph_detect.scenes import Scene, SceneMaker
 from deepmorph_detect.universal import (
@@ -188,7 +188,7 @@ class PoolSceneMaker(SceneMaker):
 
 
 class PoolBatches(SceneBatches):
-    """:class:`~deepmorph_detect.detector_training.SceneBatches` of pool scenes."""
+    """:class:`~deepmorph.training.detector.SceneBatches` of pool scenes."""
 
     def __init__(self, pool: DrawingPool, config: UniversalConfig, start: int, stop: int) -> None:
         super().__init__(None, config, start, stop)

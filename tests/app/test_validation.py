@@ -11,12 +11,12 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.validation import TARGET_RATE, validate_renders, validation_warning
 from deepmorph_core import hookimpl
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.errors import PluginError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import load_registry
-from deepmorph_core.validation import TARGET_RATE, validate_renders, validation_warning
 from tests.conftest import BUNDLED_MODEL, make_svg
 
 app = application()

@@ -6,7 +6,7 @@ the network's input size: zero to three payload morphs of the model's drawing, o
 hard severity. Batches are seeded by ``(seed, step)`` and made in a worker process (the other
 core), so a run is reproducible and ``--resume`` continues exactly where a checkpoint stopped.
 
-The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph_core.loop`'s;
+The steps, the log, checkpoints, resume and interrupts are :mod:`deepmorph.training.loop`'s;
 checkpoints are the bundle itself plus optimiser state, written atomically.
 """
 
@@ -24,15 +24,15 @@ import torch
 from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
+from deepmorph.training.detector_settings import DetectorSettings, SceneSettings
+from deepmorph.training.loop import Panel, TrainingLoop
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
-from deepmorph_core.loop import Panel, TrainingLoop
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
-from deepmorph_detect.detector_settings import DetectorSettings, SceneSettings
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, Scene, SceneMaker
 from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
@@ -40,14 +40,14 @@ from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 
 class SceneTrainingConfig(BaseModel, SceneSettings):
     """Settings of a detector network trained on scenes, validated (stored with it): the fields,
-    defaults and bounds are :class:`~deepmorph_detect.detector_settings.SceneSettings`'."""
+    defaults and bounds are :class:`~deepmorph.training.detector_settings.SceneSettings`'."""
 
     model_config = ConfigDict(extra="forbid")
 
 
 class DetectorConfig(BaseModel, DetectorSettings):
     """A model's own detector's training settings, validated (stored in the bundle): the
-    fields, defaults and bounds are :class:`~deepmorph_detect.detector_settings.DetectorSettings`',
+    fields, defaults and bounds are :class:`~deepmorph.training.detector_settings.DetectorSettings`',
     which ``deepmorph train-detector`` reads too."""
 
     model_config = ConfigDict(extra="forbid")
@@ -169,7 +169,7 @@ class DetectorSummary:
 
 class DetectorRun:
     """Training (or resuming) the detector of a bundle, for the shared loop
-    (:class:`~deepmorph_core.loop.Run`); every checkpoint writes the bundle ``out``."""
+    (:class:`~deepmorph.training.loop.Run`); every checkpoint writes the bundle ``out``."""
 
     panels = DETECTOR_PANELS
 
@@ -362,7 +362,7 @@ def _validate_close_ups_again(out: Path, seed: int) -> None:
     """Replace the bundle's close-up validation by one through the chain as it now is, with its
     detector (the one stored after training found prints by framing the whole image), and warn
     when it is weak. A bundle never validated (``--validation 0``) is left so."""
-    from deepmorph_core import validation
+    from deepmorph.training import validation
     from deepmorph_detect.photo_validation import validate_close_ups
 
     photos = validation.default_samples()[1]

@@ -13,11 +13,11 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.detector import DetectorConfig, SceneBatches, quad_loss, targets_for, train_detector
+from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.loop import Interrupted
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.detector_training import DetectorConfig, SceneBatches, quad_loss, targets_for, train_detector
 from deepmorph_detect.network import (
     INPUT_SIZE,
     STRIDE,
@@ -252,9 +252,9 @@ def test_the_commands_options_are_the_declared_settings() -> None:
     import inspect
 
     from deepmorph.cli.photo_commands import train_detector_cmd
-    from deepmorph_core.train_settings import exposed
-    from deepmorph_detect.detector_settings import DetectorSettings
-    from tests.project.test_train_settings import declared
+    from deepmorph.training.detector_settings import DetectorSettings
+    from deepmorph.training.settings import exposed
+    from tests.app.test_train_settings import declared
 
     options, config = declared(train_detector_cmd), DetectorConfig()
     for field, setting in exposed(DetectorSettings).items():
@@ -274,9 +274,9 @@ def test_the_commands_options_are_the_declared_settings() -> None:
 
 DETECTOR_CHANGED = """
 import dataclasses, json
-import deepmorph_detect.detector_settings as settings
+import deepmorph.training.detector_settings as settings
 settings.DETECTOR_DEFAULTS = dataclasses.replace(settings.DETECTOR_DEFAULTS, steps=301, lr=7e-4)
-from tests.project.test_train_settings import declared
+from tests.app.test_train_settings import declared
 from deepmorph.cli.photo_commands import train_detector_cmd
 cli = declared(train_detector_cmd)
 print(json.dumps([cli["steps"].default, cli["lr"].default]))
