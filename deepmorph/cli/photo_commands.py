@@ -452,7 +452,7 @@ def export_cmd(
     """Write the model's networks as ONNX graphs with a manifest, for apps that decode without Python."""
     if out_dir is None and bundle is None:
         raise typer.BadParameter("give --out (a folder for the files), --bundle, or both", param_hint="'--out'")
-    from deepmorph_detect.export import export_model
+    from deepmorph.export import export_model
 
     summary = export_model(model, out_dir, bundle)
     if as_json:

@@ -160,7 +160,7 @@ def test_the_network_is_loaded_once_per_process() -> None:
 def test_a_model_without_its_own_detector_exports_the_universal_one(tmp_path: Path) -> None:
     import json
 
-    from deepmorph_detect.export import export_model
+    from deepmorph.export import export_model
 
     model = DeepMorphModel.load(BUNDLED_MODEL)
     model.meta.detector = None
