@@ -3,7 +3,7 @@ bundles) and ``checkouts.py`` (two checkouts of the code).
 
 Each script supplies ``locate(k, image, camera) -> (ms, detections)`` for ``k`` in ``"a"``,
 ``"b"`` (detections with ``corners`` and ``result.payload``/``result.ok``, as
-:func:`~deepmorph_detect.benchmark.matched_detections` reads them); this module makes the
+:func:`~deepmorph_detect.metrics.matched_detections` reads them); this module makes the
 scenes, calls both in alternating order with QR's ``detectAndDecode`` timed between them,
 scores them, runs the scenes without the drawing, and prints and writes the report.
 """

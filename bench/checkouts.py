@@ -75,7 +75,7 @@ def _editable_mapping(finder: Any) -> dict[str, str]:
 
 
 def _as_detections(found: list[dict[str, Any]]) -> list[Any]:
-    """Worker answers in the shape :func:`~deepmorph_detect.benchmark.matched_detections` reads."""
+    """Worker answers in the shape :func:`~deepmorph_detect.metrics.matched_detections` reads."""
     return [
         SimpleNamespace(corners=f["corners"], result=SimpleNamespace(payload=f["payload"], ok=f["ok"])) for f in found
     ]

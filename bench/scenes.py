@@ -36,7 +36,7 @@ def main() -> None:
     ap.add_argument("--tracking", type=int, default=12, help="moving 10-frame videos per severity (medium, hard)")
     args = ap.parse_args()
     model_path, model = load_scene_model(args)
-    from deepmorph_detect.benchmark import bench_scenes, morph_check_rates, tracking_rates
+    from deepmorph.measure.scene_bench import bench_scenes, morph_check_rates, tracking_rates
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scene_folders import write_scenes
     from deepmorph_detect.scenes import SceneMaker

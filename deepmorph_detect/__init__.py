@@ -6,8 +6,9 @@
   homography and pose; :mod:`~deepmorph_detect.refine`: sub-pixel alignment and verification.
 * :mod:`~deepmorph_detect.camera`: intrinsics, calibration files and PnP.
 * :mod:`~deepmorph_detect.fusion`: fusing a drawing's bits over the frames of a video.
-* :mod:`~deepmorph_detect.scenes` and :mod:`~deepmorph_detect.benchmark`: the capture
-  simulator (``deepmorph synth``) and the scene benchmark (``deepmorph bench-scenes``).
+* :mod:`~deepmorph_detect.scenes`: the capture simulator (``deepmorph synth``); what scores the
+  chain on its scenes and on labelled photos (``bench-scenes``, ``bench-photos``) is the
+  application layer's (:mod:`deepmorph.measure`).
 
 Detectors implement :class:`deepmorph_core.protocols.Detector` and register through the
 ``deepmorph_register_detectors`` hook like every other plugin.

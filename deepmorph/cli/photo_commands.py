@@ -286,9 +286,9 @@ def bench_scenes_cmd(
     """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
     if report_path is not None:
         refuse_to_overwrite(report_path, "--out", [("model file", model), ("scene index", scenes / "index.json")])
+    from deepmorph.measure.scene_bench import bench_scenes
+    from deepmorph.measure.scene_report import format_report
     from deepmorph_core.model import DeepMorphModel
-    from deepmorph_detect.benchmark import bench_scenes
-    from deepmorph_detect.report import format_report
     from deepmorph_detect.scene_folders import read_scenes
 
     n_threads = use_threads(threads)
@@ -328,11 +328,11 @@ def bench_photos_cmd(
     threads: ThreadsOpt = None,
 ) -> None:
     """Score a model on your own labelled photos: read rate, wrong payloads, corner error, time, and a report."""
+    from deepmorph.measure.photo_bench import bench_photos, photo_files
+    from deepmorph.measure.photo_report import NO_PLOTS, format_summary, write_report
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.camera import parse_camera
     from deepmorph_detect.labels import LABELS_NAME
-    from deepmorph_detect.photo_bench import bench_photos, photo_files
-    from deepmorph_detect.photo_report import NO_PLOTS, format_summary, write_report
 
     labels_path = labels if labels is not None else photos / LABELS_NAME
     photo_files(photos)  # a folder, checked first

@@ -18,13 +18,13 @@ from typer.testing import CliRunner
 
 import deepmorph_detect.locate as locate_module
 from deepmorph.cli import application
+from deepmorph.measure.scene_bench import morph_check_rates
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.codec import PayloadCodec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_detect.align import WEAK_ALIGNMENT
-from deepmorph_detect.benchmark import morph_check_rates
 from deepmorph_detect.camera import (
     Camera,
     homography_from_pose,

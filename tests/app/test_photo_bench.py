@@ -12,10 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.measure.photo_report import NO_PLOTS, write_report
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import format_payload
-from deepmorph_detect.photo_report import NO_PLOTS, write_report
 from deepmorph_detect.scenes import SceneMaker
 
 app = application()

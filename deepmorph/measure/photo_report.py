@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from deepmorph.measure.photo_bench import STATUSES
 from deepmorph_core.fileio import atomic_write_all, output_folder
-from deepmorph_detect.photo_bench import STATUSES
 
 #: (file stem, key of a code's measure, title, fixed bin edges or None for quartiles)
 PLOTS = (
