@@ -84,7 +84,7 @@ def deepmorph_register_commands(cli: typer.Typer) -> None:
 def deepmorph_validate_model(model: DeepMorphModel, samples: int, seed: int) -> ValidationRecord | None:
     """Validate a trained model on fresh payloads, in a way of the plugin's own.
 
-    Called after training and tuning (and by ``deepmorph validate``), after core's own
+    Called after training and tuning (and by ``deepmorph validate``), after the built-in
     validation on real renders (:mod:`deepmorph.training.validation`). Draw ``samples`` random
     payloads from ``seed``, read them back the plugin's way (the photo chain reads simulated
     photos), and return a :class:`~deepmorph_core.bundle.ValidationRecord`, or ``None`` to add

@@ -15,7 +15,7 @@ from deepmorph_core.bundled import BUNDLED_DRAWING
 from deepmorph_core.drawing import load_drawing
 from tests.conftest import FEATHER
 
-app = application()  # core's commands and every installed plugin's
+app = application()  # the command line's own commands and every installed plugin's
 
 runner = CliRunner()
 

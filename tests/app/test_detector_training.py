@@ -29,7 +29,7 @@ from deepmorph_detect.network import (
 )
 from deepmorph_detect.scenes import SceneMaker
 
-app = application()  # core's commands and every installed plugin's
+app = application()  # the command line's own commands and every installed plugin's
 
 runner = CliRunner()
 

@@ -26,7 +26,7 @@ from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
 from tests.conftest import make_svg
 
-app = application()  # core's commands and every installed plugin's
+app = application()  # the command line's own commands and every installed plugin's
 
 #: A tiny drawing with generous bounds: fast to render, easy to learn.
 TINY = make_svg(

@@ -45,7 +45,7 @@ from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
 from tests.conftest import shaken_clip
 
-app = application()  # core's commands and every installed plugin's
+app = application()  # the command line's own commands and every installed plugin's
 
 runner = CliRunner()
 

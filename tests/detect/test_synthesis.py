@@ -27,7 +27,7 @@ from deepmorph_detect.refine import ImagePyramid
 from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.synthesis import MAX_CONTRADICTED, MIN_WEAKEST_SUM, WEAKEST_BITS, BitEvidence, disagreement
 
-app = application()  # core's commands and every installed plugin's
+app = application()  # the command line's own commands and every installed plugin's
 
 runner = CliRunner()
 PHOTOS = Path(__file__).parent.parent / "data" / "photos"
