@@ -179,9 +179,10 @@ class PayloadChecker:
         :data:`CHECK_BELOW_CONFIDENCE` (``bitwise`` None), or any when ``bitwise`` is True, is
         then checked bit by bit (:class:`~deepmorph_detect.synthesis.MorphSynthesis`): the
         photo must show its code bits (:attr:`~deepmorph_detect.synthesis.BitEvidence.agrees`:
-        few contradicted, the weakest still supported). A CRC collision near the true payload
-        differs from it in six code bits or more; one correlation over the whole drawing passes
-        such near misses about half the time, the bits rarely. Confident readings without
+        few contradicted, the weakest still supported, the photo explained where they act). A
+        CRC collision near the true payload differs from it in six code bits or more; one
+        correlation over the whole drawing passes such near misses about half the time, the bits
+        rarely. Confident readings without
         corrections skip it (about 50 ms): a misread that lands on a valid word without
         corrections has several bits wrong, and those pull its confidence down.
         """

@@ -46,6 +46,12 @@ MAX_CONTRADICTED = 2  # a checked code word may have at most this many bits the 
 # show only two bits flipped and several barely supported
 WEAKEST_BITS = 5
 MIN_WEAKEST_SUM = 0.5
+# ... and its bits' evidence must sit near +1: at most this median distance from it. A print of the
+# word leaves the photo's evidence within about half of a bit's own change of +1 (at most 0.52
+# on 358 right readings of six drawings, medium and hard); a photo of something else, aligned
+# well enough to be checked, leaves residuals many times a bit's change (8.9 on the one wrong
+# payload a negative scene gave), which the two rules above can miss on a short code
+MAX_DEVIATION = 1.0
 # a bit whose evidence on the word's own real-renderer render falls below this is one the soft
 # rasterizer models wrongly (MorphSynthesis.evidence); its evidence is corrected by that error
 MIN_OWN_EVIDENCE = 0.5
@@ -86,31 +92,49 @@ class BitEvidence:
         return float(np.sort(self.evidence)[:WEAKEST_BITS].sum())
 
     @property
+    def deviation(self) -> float:
+        """The median distance of the bits' evidence from +1, in units of a bit's own change:
+        how much of the photo the word's morph leaves unexplained where its bits act (about
+        0.1-0.5 on a print of the word, several on a photo of something else)."""
+        return float(np.median(np.abs(self.evidence - 1.0)))
+
+    @property
     def agrees(self) -> bool:
         """Whether the photo shows this code word: at most :data:`MAX_CONTRADICTED` bits
-        contradicted, and its weakest bits still supported (:attr:`weakest_sum` at least
-        :data:`MIN_WEAKEST_SUM`)."""
-        return self.contradicted <= MAX_CONTRADICTED and self.weakest_sum >= MIN_WEAKEST_SUM
+        contradicted, its weakest bits still supported (:attr:`weakest_sum` at least
+        :data:`MIN_WEAKEST_SUM`), and its morph explaining the photo where its bits act
+        (:attr:`deviation` at most :data:`MAX_DEVIATION`)."""
+        return not self.reason
 
     def to_json(self) -> dict[str, Any]:
         """The per-bit check's fields of a detection's JSON (``docs/detection.md``)."""
-        return {"bits_contradicted": self.contradicted, "weakest_bits_support": round(self.weakest_sum, 3)}
+        return {
+            "bits_contradicted": self.contradicted,
+            "weakest_bits_support": round(self.weakest_sum, 3),
+            "bits_deviation": round(self.deviation, 3),
+        }
 
     @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
-        return disagreement(self.contradicted, self.weakest_sum)
+        return disagreement(self.contradicted, self.weakest_sum, self.deviation)
 
 
-def disagreement(contradicted: int, weakest_sum: float) -> str:
-    """Which half of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
-    too many bits shown flipped, or its weakest bits barely shown."""
+def disagreement(contradicted: int, weakest_sum: float, deviation: float = 0.0) -> str:
+    """Which part of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
+    too many bits shown flipped, its weakest bits barely shown, or a photo its morph does not
+    explain."""
     if contradicted > MAX_CONTRADICTED:
         return f"the photo shows {contradicted} of its code bits flipped"
     if weakest_sum < MIN_WEAKEST_SUM:
         return (
             f"the photo barely shows its {WEAKEST_BITS} weakest code bits "
             f"(support {weakest_sum:.2f}, at least {MIN_WEAKEST_SUM} needed)"
+        )
+    if deviation > MAX_DEVIATION:
+        return (
+            f"its morph does not explain the photo where its bits act "
+            f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
         )
     return ""
 
@@ -276,6 +300,7 @@ def morph_template(
 __all__ = [
     "BLUR_SIGMAS",
     "MAX_CONTRADICTED",
+    "MAX_DEVIATION",
     "MIN_OWN_EVIDENCE",
     "MIN_WEAKEST_SUM",
     "SYNTH_WIDTH",

@@ -25,7 +25,14 @@ from deepmorph_detect.locate import Locator
 from deepmorph_detect.read import Reader, Reading
 from deepmorph_detect.refine import ImagePyramid
 from deepmorph_detect.scenes import SceneMaker
-from deepmorph_detect.synthesis import MAX_CONTRADICTED, MIN_WEAKEST_SUM, WEAKEST_BITS, BitEvidence, disagreement
+from deepmorph_detect.synthesis import (
+    MAX_CONTRADICTED,
+    MAX_DEVIATION,
+    MIN_WEAKEST_SUM,
+    WEAKEST_BITS,
+    BitEvidence,
+    disagreement,
+)
 
 app = application()  # the command line's own commands and every installed plugin's
 
@@ -207,6 +214,24 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert disagreement(3, 2.0) == "the photo shows 3 of its code bits flipped"
 
 
+def test_a_photo_the_morph_does_not_explain_does_not_pass_the_bits() -> None:
+    """A wrong payload from a scene without any print (a bar chart's 3-bit code, 16 code bits,
+    read off another drawing aligned at 0.68) had only two bits contradicted and strong support
+    on its weakest five: the first two rules passed it. Its evidence scatters far from +1, which
+    a print of the word never does."""
+    scattered = np.array([3.77, 29.89, 4.3, 15.77, 7.83, -2.48, 2.78, 13.06, 9.97, 13.08, 10.13, 9.86, 19.15, 16.45,
+                          0.2, -1.04], np.float32)  # fmt: skip
+    said = BitEvidence(np.zeros(16, np.uint8), scattered, 0.7, 1.0)
+    assert said.contradicted <= MAX_CONTRADICTED and said.weakest_sum >= MIN_WEAKEST_SUM
+    assert said.deviation == pytest.approx(8.91, abs=0.01) and said.deviation > MAX_DEVIATION
+    assert not said.agrees
+    assert said.reason == "its morph does not explain the photo where its bits act (deviation 8.91, at most 1.0)"
+    assert said.to_json()["bits_deviation"] == pytest.approx(8.91, abs=0.01)
+    # a print read with noise of +-0.5 about +1 on every bit still agrees
+    noisy = 1.0 + 0.5 * np.cos(np.arange(16, dtype=np.float32))
+    assert BitEvidence(np.zeros(16, np.uint8), noisy, 0.9, 1.0).agrees
+
+
 def test_a_fused_payload_reports_its_own_per_bit_check(model: DeepMorphModel, locator: Locator) -> None:
     """A sequence's entry carries the check of the payload fused over its frames, not the last
     frame's: its morph fit and per-bit fields are replaced, or dropped when that check has none."""
@@ -235,7 +260,7 @@ def test_a_fused_payload_reports_its_own_per_bit_check(model: DeepMorphModel, lo
                 "the photo shows 3"
             )
         else:
-            assert "bits_contradicted" not in entry and "weakest_bits_support" not in entry
+            assert not {"bits_contradicted", "weakest_bits_support", "bits_deviation"} & set(entry)
 
 
 def test_a_steeply_tilted_blurred_print_gives_no_wrong_payload(locator: Locator) -> None:

@@ -13,7 +13,11 @@ from typer.testing import CliRunner
 
 from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.codec import DecodeResult
+from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg
+from deepmorph_detect.locate import Locator
+from deepmorph_detect.results import Located
 from deepmorph_detect.scenes import close_up_photo
 
 app = application()
@@ -50,6 +54,21 @@ def test_unread_small_prints_are_too_small_and_read_ones_are_not(model, locator)
     assert wide.width_px > 96 and not wide.too_small
 
 
+def test_an_unread_print_filling_little_of_a_photo_is_not_called_too_small(model) -> None:
+    """The whole image framed by its ink reports an unread print as too small only where the
+    print fills at least half the image's width (a tiny scan). In a photo three times as wide
+    such an alignment (0.68 here) is no better than the one a patch of another drawing's ink got
+    in a scene without any print (0.64): neither is reported."""
+    whole_only = Locator(model, detector="none")
+    unread = [photo for photo, _ in small_prints(model) if any(f.too_small for f in whole_only.locate(photo))]
+    assert len(unread) >= 3
+    for photo in unread:
+        h, w = photo.shape[:2]
+        wide = np.full((3 * h, 3 * w, *photo.shape[2:]), np.median(photo), dtype=photo.dtype)
+        wide[h : 2 * h, w : 2 * w] = photo
+        assert not [f for f in whole_only.locate(wide) if not f.result.ok]
+
+
 def test_decode_says_a_print_is_too_small(model, locator, tmp_path: Path) -> None:
     photo = next(p for p, _ in small_prints(model) if any(f.too_small for f in locator.locate(p)))
     path = tmp_path / "small.png"
@@ -67,3 +86,28 @@ def test_info_gives_the_smallest_print() -> None:
     assert data["smallest_print_px"] == 96 == data["image_size"][1]
     shown = CliRunner().invoke(app, ["info", str(BUNDLED_MODEL)], env={"COLUMNS": "200"})
     assert "96 px across in a photo" in shown.output
+
+
+def test_which_unread_drawings_are_reported(locator) -> None:
+    """An unread drawing is reported on its alignment alone: never a blind proposer's; the whole
+    image's only where it fills half the image (at 0.8, or 0.6 when too small); a detector's
+    that knows the drawing from 0.6. Cases from 640-px-wide photos unless said."""
+    unread = DecodeResult(np.zeros(5, np.uint8), False, -1, 0.9)
+
+    def located(width: float, correlation: float) -> Located:
+        corners = np.array([[0, 0], [width, 0], [width, width], [0, width]], np.float64)
+        return Located(unread, np.full(5, 0.5, np.float32), corners=corners, correlation=correlation, needs_px=96.0)
+
+    def proposal(whole: bool = False, blind: bool = False) -> Candidate:
+        return Candidate(np.zeros((4, 2)), 1.0, (0, 0, 1, 1), np.eye(3) if whole else None, blind=blind)
+
+    reports = locator.reports_unread
+    assert not reports(located(400, 0.99), proposal(blind=True), 640)
+    # a patch of another drawing's ink a third of the frame wide (0.82 in a scene without any print)
+    assert not reports(located(218, 0.82), proposal(whole=True), 640)
+    assert reports(located(400, 0.82), proposal(whole=True), 640)
+    assert not reports(located(5493, 0.81), proposal(whole=True), 640)  # a degenerate frame, 8.6 times the image
+    assert not reports(located(400, 0.75), proposal(whole=True), 640)
+    assert reports(located(41, 0.72), proposal(whole=True), 64)  # a tiny scan, too small to read
+    assert not reports(located(41, 0.64), proposal(whole=True), 640)
+    assert reports(located(150, 0.62), proposal(), 640) and not reports(located(150, 0.58), proposal(), 640)
