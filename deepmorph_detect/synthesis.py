@@ -120,7 +120,7 @@ class BitEvidence:
         return disagreement(self.contradicted, self.weakest_sum, self.deviation)
 
 
-def disagreement(contradicted: int, weakest_sum: float, deviation: float = 0.0) -> str:
+def disagreement(contradicted: int, weakest_sum: float, deviation: float) -> str:
     """Which part of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
     too many bits shown flipped, its weakest bits barely shown, or a photo its morph does not
     explain."""

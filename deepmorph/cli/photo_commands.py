@@ -216,7 +216,7 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
             elif d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             elif d.get("morph_check") == "contradicted":
-                why = disagreement(d["bits_contradicted"], d["weakest_bits_support"], d.get("bits_deviation", 0.0))
+                why = disagreement(d["bits_contradicted"], d["weakest_bits_support"], d["bits_deviation"])
                 status = f"NOT VERIFIED (the CRC passed, but {why})"
             where = ""
             if "pose" in d:

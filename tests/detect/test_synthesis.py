@@ -211,7 +211,7 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     # and the reason given is the half of the rule that failed, not a count of flipped bits
     assert said.reason == "the photo barely shows its 5 weakest code bits (support -0.10, at least 0.5 needed)"
     assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
-    assert disagreement(3, 2.0) == "the photo shows 3 of its code bits flipped"
+    assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
 
 
 def test_a_photo_the_morph_does_not_explain_does_not_pass_the_bits() -> None:
@@ -256,9 +256,9 @@ def test_a_fused_payload_reports_its_own_per_bit_check(model: DeepMorphModel, lo
         assert entry["morph_check"] == status and entry["ok"] is False and "morph_fit" not in entry
         if status == "contradicted":
             assert entry["bits_contradicted"] == 3 and entry["weakest_bits_support"] == pytest.approx(-1.5 + 2)
-            assert disagreement(entry["bits_contradicted"], entry["weakest_bits_support"]).startswith(
-                "the photo shows 3"
-            )
+            assert disagreement(
+                entry["bits_contradicted"], entry["weakest_bits_support"], entry["bits_deviation"]
+            ).startswith("the photo shows 3")
         else:
             assert not {"bits_contradicted", "weakest_bits_support", "bits_deviation"} & set(entry)
 
