@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS
+from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS, chosen
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -243,6 +243,7 @@ def train(
     Raises:
         DeepMorphError: the drawing, a setting or the output refused, in one line.
     """
+    settings = chosen(locals(), keywords=True)  # first: the keywords alone
     import warnings
 
     from deepmorph.training.codec import train_model
@@ -257,23 +258,7 @@ def train(
         crc_bits=crc_bits,
         ecc_t=ecc_t,
         bounds={"move": move, "shift": shift, "scale": scale, "rotate": rotate},
-        train={
-            "steps": steps,
-            "batch": batch,
-            "width": image_width,
-            "severity": severity,
-            "hard_fraction": real_render_share,
-            "small_prints": small_prints,
-            "seed": seed,
-            "encoder_init": encoder_init,
-            "spatial_transformer": spatial_transformer,
-            "readout": readout,
-            "early_stop": early_stop,
-            "device": device,
-            "shards": shards,
-            "threads": threads,
-            "checkpoint_every": checkpoint_every,
-        },
+        train=settings,
         resume=resume,
         on_start=(lambda total, done: on_log) if on_log else None,
         on_warning=on_warning or warn,

@@ -48,6 +48,7 @@ from deepmorph.training.settings import (
     RENDER_SAMPLES,
     TUNE_DEFAULTS,
     TuneSettings,
+    chosen,
 )
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import refuse_to_overwrite
@@ -384,6 +385,7 @@ def train(
     Under `torchrun --nproc_per_node N -m deepmorph train ...` the N processes train it together
     (docs/training.md); the first alone writes and prints.
     """
+    settings = chosen(locals())  # first: the options alone
     from deepmorph.training.codec import train_model
     from deepmorph.training.distributed import world_from_env
 
@@ -409,23 +411,7 @@ def train(
                 "scale": parse_pair(scale, "scale"),
                 "rotate": parse_pair(rotate, "rotate"),
             },
-            train={
-                "steps": steps,
-                "batch": batch,
-                "width": width,
-                "severity": severity,
-                "seed": seed,
-                "encoder_init": encoder_init,
-                "spatial_transformer": spatial_transformer,
-                "readout": readout,
-                "early_stop": early_stop,
-                "device": device,
-                "shards": shards,
-                "threads": threads,
-                "hard_fraction": hard_fraction,
-                "small_prints": small_prints,
-                "checkpoint_every": checkpoint_every,
-            },
+            train=settings,
             on_start=on_start,
             on_warning=lambda text: err.print(f"warning: {text}"),
             drop_unsupported=drop,
@@ -478,6 +464,7 @@ def train_many(
     """Train every drawing in a folder: done bundles are skipped, checkpoints resumed, one
     process per device; a drawing that fails is reported and the others go on. Exits with 1
     when a drawing failed."""
+    settings = chosen(locals())  # first: the options alone
     from deepmorph.training.many import train_many as run
 
     def progress(result: DrawingResult, finished: int, total: int) -> None:
@@ -491,7 +478,7 @@ def train_many(
         out_dir,
         payload_bits=_payload_bits(payload_bits),
         bounds={"move": move},
-        train={"steps": steps, "batch": batch, "width": width, "severity": severity, "seed": seed, "threads": threads},
+        train=settings,
         device=device,
         jobs=jobs,
         validation_samples=_validation_samples(validation),

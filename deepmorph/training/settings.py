@@ -4,7 +4,8 @@
 validated settings a bundle stores) inherits its fields; ``deepmorph train`` and
 ``deepmorph train-many`` take their options' defaults, bounds and help from it
 (:func:`exposed`, :data:`DEFAULTS`), :func:`deepmorph.train` its keywords' defaults, and the
-studio its Train form's. Changing a default here changes it in all of them.
+studio its Train form's. Changing a default here changes it in all of them, and :func:`chosen`
+hands what each face was given on to training, so a new setting is passed on with no more code.
 
 Nothing here imports torch or pydantic: building the command line (``deepmorph --help``) reads
 it. Bounds are :mod:`annotated_types` constraints, which pydantic validates and the command line
@@ -14,6 +15,7 @@ turns into its options' ranges.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from typing import Annotated, Any, Literal, get_args, get_origin, get_type_hints
@@ -232,6 +234,29 @@ def exposed(settings: type = TrainSettings) -> dict[str, Exposed]:
     return found
 
 
+def chosen(arguments: Mapping[str, Any], *, keywords: bool = False) -> dict[str, Any]:
+    """The training settings a face was given, as
+    :func:`~deepmorph.training.codec.train_model` takes them (``train=``) and a bundle stores
+    them: by field name.
+
+    Args:
+        arguments: a face's arguments by name (its ``locals()`` on entry): a command's
+            parameters, named after the fields (``deepmorph train``), or, with ``keywords``,
+            :func:`deepmorph.train`'s keywords (``image_width`` for ``width``).
+        keywords: ``arguments`` are named by :attr:`Exposed.keyword`.
+
+    Returns:
+        Each :func:`exposed` setting found among ``arguments`` (a command may expose only some,
+        as ``train-many`` does); the other arguments are left out.
+    """
+    found = {}
+    for field, setting in exposed().items():
+        name = setting.keyword if keywords else field
+        if name in arguments:
+            found[field] = arguments[name]
+    return found
+
+
 __all__ = [
     "DEFAULTS",
     "EARLY_STOP_RATE",
@@ -244,6 +269,7 @@ __all__ = [
     "Exposed",
     "TrainSettings",
     "TuneSettings",
+    "chosen",
     "exposed",
     "setting",
 ]

@@ -155,6 +155,54 @@ def _another(field: str, default: Any) -> Any:
     return default + 1
 
 
+#: The settings ``deepmorph train-many`` takes as options (besides ``--device``).
+MANY = ("steps", "batch", "width", "severity", "seed", "threads")
+
+
+def test_each_setting_given_reaches_training_under_its_field(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Every setting given to ``deepmorph train`` as an option, or to ``deepmorph.train`` as a
+    keyword, other than its default, is what training is handed under the setting's field (and
+    those ``train-many`` takes, under theirs)."""
+    import torch
+
+    import deepmorph.training.codec
+    import deepmorph.training.many
+
+    changed = {field: _another(field, getattr(DEFAULTS, field)) for field in exposed()}
+    calls: list[dict[str, Any]] = []
+
+    def recorded(*args: Any, **kwargs: Any) -> None:  # where the faces hand over
+        calls.append(kwargs["train"])
+        raise DeepMorphError("recorded")
+
+    monkeypatch.setattr(deepmorph.training.codec, "train_model", recorded)
+    monkeypatch.setattr(deepmorph.training.many, "train_many", recorded)
+    options = []
+    for field, value in changed.items():
+        setting = exposed()[field]
+        if setting.switch:
+            options.append(f"--{'' if value else 'no-'}{setting.option}")
+        else:
+            options += [f"--{setting.option}", str(value)]
+    threads = torch.get_num_threads()  # --threads sets this process's
+    try:
+        res = CliRunner().invoke(application(), ["train", str(BUNDLED_DRAWING), "--out", str(tmp_path / "m.dmm"),
+                                                 *options])  # fmt: skip
+        assert res.exit_code == 1 and "error: recorded" in res.output, res.output
+        many_options = [a for f in MANY for a in (f"--{exposed()[f].option}", str(changed[f]))]
+        res = CliRunner().invoke(application(), ["train-many", str(tmp_path), "--out", str(tmp_path / "models"),
+                                                 *many_options])  # fmt: skip
+        assert res.exit_code == 1 and "error: recorded" in res.output, res.output
+    finally:
+        torch.set_num_threads(threads)
+    with pytest.raises(DeepMorphError, match="recorded"):
+        deepmorph.train(BUNDLED_DRAWING, tmp_path / "api.dmm",
+                        **{exposed()[field].keyword: value for field, value in changed.items()})  # fmt: skip
+    from_cli, from_many, from_api = calls
+    assert from_cli == from_api == changed
+    assert from_many == {**{f: changed[f] for f in MANY}, "device": DEFAULTS.device}
+
+
 CHANGED = """
 import dataclasses, inspect, json, sys
 import deepmorph.training.settings as settings
