@@ -573,14 +573,7 @@ def train_model(
     _, joined = join(world, config.device)
     try:
         run = CodecRun(model, config, out, world)
-        loop = TrainingLoop(
-            out.with_suffix(".log.jsonl"),
-            config.log_every,
-            config.checkpoint_every,
-            f"checkpoint written to {out} (continue with --resume)",
-            main=world.main,
-            checkpoint_on_interrupt=not world.distributed,
-        )
+        loop = TrainingLoop(out, config, main=world.main, checkpoint_on_interrupt=not world.distributed)
         on_log = on_start(config.steps, model.meta.record.step) if on_start else None
         shrunk_before = len(model.meta.record.shrunk)
         summary: LoopSummary = loop.run(run, on_log)
@@ -846,12 +839,7 @@ def tune_decoder(
     except ValidationError as exc:
         raise _settings_error("tuning settings", exc) from None
     run = TuningRun(model, config, out)
-    loop = TrainingLoop(
-        out.with_suffix(".tune.log.jsonl"),
-        config.log_every,
-        config.checkpoint_every,
-        f"the decoder tuned so far is in {out}",
-    )
+    loop = TrainingLoop(out, config, ".tune.log.jsonl", f"the decoder tuned so far is in {out}")
     loop.run(run, on_start(config.steps, 0) if on_start else None)
     model.encoder.cpu()
     model.decoder.cpu()

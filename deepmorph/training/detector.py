@@ -347,12 +347,7 @@ def train_detector(
         config = DetectorConfig(**meta.config)
     config = config or DetectorConfig()
     run = DetectorRun(model, config, Path(out))
-    loop = TrainingLoop(
-        Path(out).with_suffix(".detector.log.jsonl"),
-        config.log_every,
-        config.checkpoint_every,
-        f"checkpoint written to {out} (continue with --resume)",
-    )
+    loop = TrainingLoop(out, config, ".detector.log.jsonl")
     summary = loop.run(run, on_log)
     _validate_close_ups_again(Path(out), config.seed)
     return DetectorSummary(Path(out), summary.log, summary.plot, summary.steps, summary.elapsed_s)

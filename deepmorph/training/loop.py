@@ -95,14 +95,23 @@ class LoopSummary:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
+class Cadence(Protocol):
+    """How often a run logs and writes a checkpoint, in steps (every run's settings say it)."""
+
+    log_every: int
+    checkpoint_every: int
+
+
 class TrainingLoop:
     """Runs a :class:`Run` to its record's ``total_steps``.
 
     Args:
-        log_path: the JSONL log (created, or continued when the record has steps).
-        log_every, checkpoint_every: in steps.
+        out: the file the run checkpoints to; its log goes beside it.
+        cadence: how often to log and checkpoint (the run's settings).
+        log_suffix: the JSONL log is ``out`` with this suffix (created, or continued when the
+            record has steps).
         resume_hint: what the interrupt message says after the step: where the checkpoint is
-            and how to go on.
+            and how to go on (default: continue ``out`` with ``--resume``).
         main: whether this process writes the log and the plot (rank 0 of a torchrun).
         checkpoint_on_interrupt: write a checkpoint on Ctrl-C or SIGTERM (not in a run of
             several processes: the last periodic checkpoint stands).
@@ -110,17 +119,17 @@ class TrainingLoop:
 
     def __init__(
         self,
-        log_path: Path,
-        log_every: int,
-        checkpoint_every: int,
-        resume_hint: str,
+        out: str | Path,
+        cadence: Cadence,
+        log_suffix: str = ".log.jsonl",
+        resume_hint: str | None = None,
         main: bool = True,
         checkpoint_on_interrupt: bool = True,
     ) -> None:
-        self.log_path = Path(log_path)
-        self.log_every = log_every
-        self.checkpoint_every = checkpoint_every
-        self.resume_hint = resume_hint
+        self.log_path = Path(out).with_suffix(log_suffix)
+        self.log_every = cadence.log_every
+        self.checkpoint_every = cadence.checkpoint_every
+        self.resume_hint = resume_hint or f"checkpoint written to {out} (continue with --resume)"
         self.main = main
         self.checkpoint_on_interrupt = checkpoint_on_interrupt
         self._last_checkpoint = 0

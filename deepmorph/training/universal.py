@@ -271,12 +271,7 @@ def train_universal(  # noqa: PLR0913
     pool = load_pool(folders, limit)
     print(f"pool: {pool.summary()} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     run = UniversalRun(pool, config, out, resume_from)
-    loop = TrainingLoop(
-        out.with_suffix(".log.jsonl"),
-        config.log_every,
-        config.checkpoint_every,
-        f"checkpoint written to {out} (continue with --resume)",
-    )
+    loop = TrainingLoop(out, config)
     summary = loop.run(run, on_log)
     return out, summary.elapsed_s
 

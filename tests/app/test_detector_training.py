@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from typer.testing import CliRunner
 
 from deepmorph.cli import application
 from deepmorph.training.detector import DetectorConfig, SceneBatches, quad_loss, targets_for, train_detector
-from deepmorph.training.loop import Interrupted
+from deepmorph.training.loop import Interrupted, read_log
 from deepmorph_core.bundle import ValidationRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.model import DeepMorphModel
@@ -118,8 +119,9 @@ def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
         if m["step"] == 2:
             raise KeyboardInterrupt
 
-    with pytest.raises(Interrupted, match="--resume"):
+    with pytest.raises(Interrupted, match=rf"checkpoint written to {re.escape(str(cut))} \(continue with --resume\)$"):
         train_detector(BUNDLED_MODEL, cut, _config(4), on_log=stop_at_2)
+    assert [line["step"] for line in read_log(cut.with_suffix(".detector.log.jsonl"))] == [1, 2]
     half = DeepMorphModel.load(cut)
     assert half.meta.detector is not None and half.meta.detector.record.step == 2
     assert set(half.graphs) == {"decoder"}  # the decoder's is kept; a detector graph comes at the end

@@ -4,6 +4,7 @@ small trained model survives encode -> real renderer -> decode."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from typer.testing import CliRunner
 
 from deepmorph.cli import application
 from deepmorph.training.codec import train_model, variable_effects
-from deepmorph.training.loop import Interrupted
+from deepmorph.training.loop import Interrupted, read_log
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.capacity import predict
 from deepmorph_core.errors import DeepMorphError
@@ -96,8 +97,10 @@ def test_interrupt_and_resume_equal_an_uninterrupted_run(tiny_svg: Path, tmp_pat
 
         return on_log
 
-    with pytest.raises(Interrupted, match="interrupted at step 30/60"):
+    hint = rf"interrupted at step 30/60; checkpoint written to {re.escape(str(broken))} \(continue with --resume\)$"
+    with pytest.raises(Interrupted, match=hint):
         train_model(tiny_svg, broken, payload_bits=4, crc_bits=8, ecc_t=0, train=cfg, on_start=stop_at_30)
+    assert [line["step"] for line in read_log(broken.with_suffix(".log.jsonl"))] == [10, 20, 30]
     checkpoint = DeepMorphModel.load(broken)
     assert checkpoint.meta.record.step == 30 and not checkpoint.meta.record.finished
     with pytest.raises(DeepMorphError, match="already exists"):
@@ -624,8 +627,9 @@ def test_an_interrupted_tuning_writes_what_it_has(
 
     monkeypatch.setattr(CodecRun, "step", step_then_stop)
     out = tmp_path / "part.dmm"
-    with pytest.raises(Interrupted, match="step 7/50"):
+    with pytest.raises(Interrupted, match=rf"step 7/50; the decoder tuned so far is in {re.escape(str(out))}$"):
         tune_decoder(trained, out, steps=50, threads=1)
+    assert out.with_suffix(".tune.log.jsonl").exists() and not out.with_suffix(".log.jsonl").exists()
     part = DeepMorphModel.load(out)
     (run,) = part.meta.tuning
     assert run["steps"] == 7 and not run["finished"]

@@ -4,13 +4,14 @@ shipped network finding drawings it was never trained on."""
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-from deepmorph.training.loop import Interrupted
+from deepmorph.training.loop import Interrupted, read_log
 from deepmorph.training.universal import (
     PANEL_DRAWINGS,
     PoolSceneMaker,
@@ -90,8 +91,9 @@ def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
         if m["step"] == 2:
             raise KeyboardInterrupt
 
-    with pytest.raises(Interrupted, match="--resume"):
+    with pytest.raises(Interrupted, match=rf"checkpoint written to {re.escape(str(cut))} \(continue with --resume\)$"):
         train_universal(FOLDERS, cut, _config(4), limit=5, on_log=stop_at_2)
+    assert [line["step"] for line in read_log(cut.with_suffix(".log.jsonl"))] == [1, 2]
     _, graph, meta, _ = load_universal(cut)
     assert meta.record.step == 2 and not meta.record.finished and graph is None
     train_universal(FOLDERS, cut, _config(4), resume=True, limit=5)
