@@ -12,10 +12,12 @@ truncated or foreign file) is one :class:`~deepmorph_core.errors.DeepMorphError`
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
+import numpy as np
 import torch
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from safetensors import SafetensorError
@@ -135,6 +137,24 @@ class ValidationRecord(BaseModel):
     def rate(self) -> float:
         """Share of payloads read whole."""
         return self.read / self.samples
+
+
+@dataclass
+class PayloadTally:
+    """Payloads read back, counted as a :class:`ValidationRecord` counts them."""
+
+    read: int = 0
+    wrong: int = 0
+
+    def add(self, vouched: Iterable[np.ndarray], sent: np.ndarray) -> None:
+        """Count one capture: ``vouched`` are the payloads the codec vouched for in it (none:
+        neither read nor wrong), ``sent`` the one hidden. It is read when one of them is
+        ``sent``, wrong when none is."""
+        vouched = list(vouched)
+        if vouched:
+            same = any(np.array_equal(payload, sent) for payload in vouched)
+            self.read += same
+            self.wrong += not same
 
 
 class DetectorMeta(BaseModel):

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import torch
 
-from deepmorph_core.bundle import ValidationRecord
+from deepmorph_core.bundle import PayloadTally, ValidationRecord
 from deepmorph_core.corruption import AugmentPipeline, build_pipeline
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -69,7 +69,8 @@ def validate_close_ups(  # noqa: PLR0913
     added = model_added_steps(model)
     photo_px = PHOTO_PX if print_px is None else photo_for_print(print_px)
     low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
-    read = wrong = right_bits = missed = 0
+    tally = PayloadTally()
+    right_bits = missed = 0
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
         art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
@@ -79,18 +80,14 @@ def validate_close_ups(  # noqa: PLR0913
             missed += 1
             continue
         right_bits += int(((found[0].probabilities > 0.5) == (code == 1)).sum())
-        vouched = [f for f in found if f.result.ok]
-        if vouched:
-            same = any(np.array_equal(f.result.payload, payload) for f in vouched)
-            read += same
-            wrong += not same
+        tally.add([f.result.payload for f in found if f.result.ok], payload)
     return ValidationRecord(
         name="close-ups",
         description=f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain",
         severity=severity,
         samples=samples,
-        read=read,
-        wrong=wrong,
+        read=tally.read,
+        wrong=tally.wrong,
         bit_accuracy=right_bits / ((samples - missed) * codec.spec.code_bits) if missed < samples else None,
         missed=missed,
         seconds=round(time.perf_counter() - start, 2),

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from deepmorph.training.settings import PHOTO_SAMPLES, RENDER_SAMPLES
-from deepmorph_core.bundle import ValidationRecord
+from deepmorph_core.bundle import PayloadTally, ValidationRecord
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.framing import frame_renders
 from deepmorph_core.luminance import stretch_ink
@@ -67,19 +67,16 @@ def validate_renders(
     codes = codec.encode(payloads)
     probs = read_renders(model, codes, severity, seed, batch, device)
     right_bits = int(((probs > 0.5) == (codes == 1)).sum())
-    read = wrong = 0
+    tally = PayloadTally()
     for result, payload in zip(codec.decode_batch(probs), payloads):
-        if result.ok:
-            same = bool(np.array_equal(result.payload, payload))
-            read += same
-            wrong += not same
+        tally.add([result.payload] if result.ok else [], payload)
     return ValidationRecord(
         name="renders",
         description=f"resvg renders at {model.width} px under the training corruption",
         severity=severity,
         samples=samples,
-        read=read,
-        wrong=wrong,
+        read=tally.read,
+        wrong=tally.wrong,
         bit_accuracy=right_bits / (samples * codec.spec.code_bits),
         seconds=round(time.perf_counter() - start, 2),
     )

@@ -7,13 +7,14 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
 from deepmorph.training.validation import TARGET_RATE, validate_renders, validation_warning
 from deepmorph_core import hookimpl
-from deepmorph_core.bundle import ValidationRecord
+from deepmorph_core.bundle import PayloadTally, ValidationRecord
 from deepmorph_core.errors import PluginError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import load_registry
@@ -35,6 +36,18 @@ def test_the_bundled_model_reads_fresh_renders() -> None:
     assert record.rate >= 0.96 and record.bit_accuracy > 0.99
     again = validate_renders(model, samples=150, seed=5)
     assert (again.read, again.bit_accuracy) == (record.read, record.bit_accuracy)  # seeded
+
+
+def test_a_payload_counts_as_read_when_a_vouched_one_is_it_and_as_wrong_when_none_is() -> None:
+    sent, other = np.array([1, 0, 1, 1], np.uint8), np.array([1, 0, 1, 0], np.uint8)
+    tally = PayloadTally()
+    tally.add([], sent)  # nothing vouched for: neither
+    assert (tally.read, tally.wrong) == (0, 0)
+    tally.add([sent.copy()], sent)
+    tally.add([other], sent)
+    tally.add([other, sent.copy()], sent)  # several prints in a photo, one of them the code sent
+    tally.add(iter([other, other]), sent)
+    assert (tally.read, tally.wrong) == (2, 2)
 
 
 def test_training_ends_with_a_stored_validation(tmp_path: Path) -> None:
