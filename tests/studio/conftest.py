@@ -39,12 +39,14 @@ CLIP_PRINT = 16  # ... for this many frames; the clip loops
 
 @dataclass
 class Server:
-    """A running studio: its address, token and data folder."""
+    """A running studio: its address, token and data folder, and how long it took from the
+    command's start to answer."""
 
     base: str
     token: str
     data: Path
     process: subprocess.Popen[str]
+    ready_s: float
 
     @property
     def url(self) -> str:
@@ -62,6 +64,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data = tmp_path_factory.mktemp("studio-data")
     port = free_port()
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    started = time.monotonic()
     process = subprocess.Popen(
         [sys.executable, "-m", "deepmorph", "studio", "--no-browser", "--port", str(port), "--data", str(data)],
         stdout=subprocess.PIPE,
@@ -73,16 +76,17 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     line = process.stdout.readline()
     match = re.search(r"(http://127\.0\.0\.1:\d+)/\?token=(\S+)", line)
     assert match, f"the studio printed {line!r}"
-    server = Server(match.group(1), match.group(2), data, process)
+    base, token = match.group(1), match.group(2)
     deadline = time.monotonic() + 30
     while True:
         try:
-            urllib.request.urlopen(f"{server.base}/api/check?token={server.token}", timeout=2)
+            urllib.request.urlopen(f"{base}/api/check?token={token}", timeout=2)
             break
         except OSError:
             if time.monotonic() > deadline or process.poll() is not None:
                 raise
             time.sleep(0.1)
+    server = Server(base, token, data, process, time.monotonic() - started)
     yield server
     process.terminate()
     try:

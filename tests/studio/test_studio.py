@@ -1,8 +1,10 @@
-"""The studio end to end: requests without the token fail; in headless Chromium, bounds set by
-clicking reach the downloaded SVG, capacity is predicted, a registry entry shows when an
-uploaded photo is decoded, a PDF of the bundled ghost is printed in a counted number of clicks,
-a short training run's progress reaches the page (and survives a reload, and a run can be
-cancelled), and the scan tab reads a fake camera. Each tab's screenshot goes to docs/studio/."""
+"""The studio end to end: requests without the token fail; runs queue one after another; in
+headless Chromium, a dropped drawing opens and its morphs stay inside its bounds, bounds set by
+clicking reach the downloaded SVG, capacity is predicted and its limiting shapes outlined, a
+registry entry shows when an uploaded photo is decoded and an unread one says why, a PDF of the
+bundled ghost is printed in a counted number of clicks and seconds, a short training run's
+progress reaches the page (and survives a reload, and a run can be cancelled), and the scan tab
+reads a fake camera fast enough. Each tab's screenshot goes to docs/studio/."""
 
 from __future__ import annotations
 
@@ -155,6 +157,38 @@ def test_a_run_cancelled_as_it_starts_says_cancelled(tmp_path: Path) -> None:
         queue.cancel(job["id"])
 
 
+def test_a_second_drawing_waits_for_the_first_run(tmp_path: Path) -> None:
+    from deepmorph.studio.jobs import JobQueue
+
+    def now(job: dict) -> dict:
+        return next(j for j in queue.list() if j["id"] == job["id"])
+
+    def status(job: dict) -> str:
+        return now(job)["status"]
+
+    def wait(job: dict, wanted: tuple[str, ...]) -> str:
+        deadline = time.monotonic() + 60
+        while status(job) not in wanted and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return status(job)
+
+    queue = JobQueue(tmp_path / "jobs", tmp_path / "models", min_free_bytes=0)
+    train = {"batch": 8, "width": 40, "log_every": 1, "threads": 1}
+    first = queue.submit("first.svg", TINY.decode(), {"payload_bits": 4, "validation": [0, 0],
+                                                      "train": {**train, "steps": 100_000}})  # fmt: skip
+    second = queue.submit("second.svg", TINY.decode(), {"payload_bits": 4, "validation": [0, 0],
+                                                        "train": {**train, "steps": 3}})  # fmt: skip
+    assert wait(first, ("running",)) == "running"
+    deadline = time.monotonic() + 60
+    while not now(first)["step"] and time.monotonic() < deadline:  # the first run trains ...
+        time.sleep(0.05)
+    assert status(second) == "queued"  # ... and the second waits
+    queue.cancel(first["id"])
+    assert wait(first, ("cancelled", "failed")) == "cancelled"
+    assert wait(second, ("finished", "failed", "cancelled")) == "finished", queue.list()
+    assert Path(second["out"]).is_file()
+
+
 def test_the_validation_is_said_in_plain_words() -> None:
     from deepmorph.studio.jobs import validation_words
 
@@ -231,12 +265,145 @@ def test_bounds_set_by_clicking_are_in_the_downloaded_svg(page, server: Server, 
     assert b"<script" not in path.read_bytes()
 
 
+def _drop_file(page, selector: str, name: str, text: str) -> None:  # noqa: ANN001
+    """A file dropped on an element, as a file dragged from the desktop arrives."""
+    page.evaluate(
+        """([selector, name, text]) => {
+             const files = new DataTransfer();
+             files.items.add(new File([text], name, { type: "image/svg+xml" }));
+             const target = document.querySelector(selector);
+             for (const type of ["dragover", "drop"]) {
+               target.dispatchEvent(new DragEvent(type, { dataTransfer: files, bubbles: true, cancelable: true }));
+             }
+           }""",
+        [selector, name, text],
+    )
+
+
+def _moves(server: Server, src: str) -> list[float]:
+    """How far each point of the ghost's lines and polylines is from its place in the morph the
+    page shows at ``src``; the fixed eyes must be where they are."""
+    status, svg = request(server, src, token=server.token)
+    assert status == 200, svg
+
+    def points(root: etree._Element) -> list[tuple[float, float]]:
+        found = []
+        for e in root.iter():
+            name = etree.QName(e).localname
+            if name == "polyline":
+                numbers = [float(n) for n in e.get("points").replace(",", " ").split()]
+                found += list(zip(numbers[::2], numbers[1::2], strict=True))
+            elif name == "line":
+                found += [(float(e.get("x1")), float(e.get("y1"))), (float(e.get("x2")), float(e.get("y2")))]
+        return found
+
+    def eyes(root: etree._Element) -> list[tuple[str | None, ...]]:
+        return [(e.get("cx"), e.get("cy"), e.get("r")) for e in root.iter() if etree.QName(e).localname == "circle"]
+
+    base, morphed = etree.parse(str(GHOST)).getroot(), etree.fromstring(svg)
+    assert eyes(morphed) == eyes(base) and len(eyes(base)) == 2
+    pairs = list(zip(points(base), points(morphed), strict=True))
+    return [((x - u) ** 2 + (y - v) ** 2) ** 0.5 for (x, y), (u, v) in pairs]
+
+
+def test_a_dropped_drawing_morphs_inside_its_bounds(page, server: Server) -> None:
+    """An SVG dropped on the Drawing tab opens; Random morph, Extremes and Animate show morphs
+    that keep every point within its ``dm:move`` (1.4 units in the ghost), the extremes on it."""
+    open_studio(page, server)
+    _drop_file(page, "#stage", "dropped-ghost.svg", GHOST.read_text())
+    page.wait_for_function("() => state.drawing && state.drawing.name === 'dropped-ghost.svg'")
+    assert page.is_hidden("#error")
+
+    def shown(click: str, seed: int) -> str:
+        page.click(click)
+        page.wait_for_function(
+            "(seed) => { const i = document.querySelector('#drawing-img');"
+            " return i.src.includes(`morph.svg?seed=${seed}&`) && i.complete && i.naturalWidth > 0; }",
+            arg=seed,
+        )
+        return page.get_attribute("#drawing-img", "src")
+
+    first, second = _moves(server, shown("#morph-random", 1)), _moves(server, shown("#morph-random", 2))
+    assert first != second  # each click a new morph
+    for moves in (first, second):
+        assert max(moves) <= 1.4 + 1e-3 and sum(m > 0.1 for m in moves) > len(moves) / 2, moves
+    extremes = _moves(server, shown("#morph-extreme", 3))
+    assert all(abs(m - 1.4) < 1e-3 for m in extremes), extremes  # every point on the edge of its disk
+
+    # Animate: morphs follow each other with no more clicks, until Stop
+    page.click("#morph-animate")
+    page.wait_for_function("() => /morph.svg\\?seed=7&extreme=1/.test(document.querySelector('#drawing-img').src)",
+                           timeout=10_000)  # fmt: skip
+    assert page.text_content("#morph-animate") == "Stop"
+    page.click("#morph-animate")
+    assert page.text_content("#morph-animate") == "Animate"
+    page.wait_for_function("() => document.querySelector('#drawing-img').src.includes('/api/drawing.svg')")
+    time.sleep(1.0)  # longer than a frame of the animation: it has stopped
+    assert "/api/drawing.svg" in page.get_attribute("#drawing-img", "src")
+
+
 def test_capacity_tab_predicts_the_ghosts_payload(page, server: Server) -> None:
     request(server, "/api/drawing/bundled", token=server.token, data=b"{}")
     open_studio(page, server, "capacity")  # opening the tab predicts, for the bounds as they are
     page.wait_for_selector("#capacity-bits")
     assert "bits read from 99 % of captures" in page.text_content("#capacity-bits")
     screenshot(page, "capacity")
+
+
+def test_the_limiting_shapes_are_highlighted_as_the_bounds_change(page, server: Server) -> None:
+    """A mouth that may barely move limits what the ghost carries: the Capacity tab says so and the
+    Drawing tab outlines it; given room to move, it is no longer outlined."""
+    request(server, "/api/drawing/bundled", token=server.token, data=b"{}")
+    open_studio(page, server)
+    page.wait_for_function("() => state.drawing && state.drawing.name === 'ghost.svg'")
+
+    def weak_after_move(move: str) -> tuple[list[str], str]:
+        page.click("#tabs button[data-tab=drawing]")
+        _click_shape(page, 3)  # the mouth
+        page.wait_for_function("() => document.querySelector('#sel-index').textContent === '#3'")
+        page.fill("#bounds-form input[name=move]", move)
+        with page.expect_response("**/api/drawing/bounds"):
+            page.click("#apply-bounds")
+        with page.expect_response("**/api/capacity?**"):
+            page.click("#tabs button[data-tab=capacity]")
+        page.wait_for_selector("#capacity-sizes tr.yours")
+        limits = page.text_content("#capacity-limits")
+        page.click("#tabs button[data-tab=drawing]")
+        return page.eval_on_selector_all("#overlay .shape.weak", "gs => gs.map(g => g.dataset.index)"), limits
+
+    weak, limits = weak_after_move("0.25")
+    assert weak == ["3"] and "shape 3 (" in limits and "2 of its 2 visible variables show only a little" in limits
+    weak, limits = weak_after_move("3")
+    assert weak == [] and "shape 3" not in limits
+
+
+def test_an_unread_or_too_small_print_says_so(page, server: Server, tmp_path: Path) -> None:
+    import numpy as np
+
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.image_io import save_bgr
+    from deepmorph_core.model import DeepMorphModel
+    from tests.detect.test_too_small import small_prints
+
+    blank = tmp_path / "desk.png"
+    save_bgr(np.full((240, 320, 3), 150, np.uint8), blank)
+    open_studio(page, server, "scan")
+    page.wait_for_function("() => document.querySelector('#scan-model').options.length > 0")
+    page.set_input_files("#photo-file", str(blank))
+    page.wait_for_function("() => document.querySelector('#scan-result').textContent.length > 0")
+    assert "no drawing found: is the print in view" in page.text_content("#scan-result")
+    notes = []
+    for photo, _ in small_prints(DeepMorphModel.load(BUNDLED_MODEL)):  # prints about 40 px wide
+        path = tmp_path / "small.png"
+        save_bgr(photo, path)
+        status, body = request(server, "/api/models/ghost/scan", token=server.token, data=path.read_bytes())
+        assert status == 200, body
+        result = json.loads(body)
+        read = any(d["ok"] for d in result["detections"])
+        assert bool(result["note"]) != read, result  # a note exactly where nothing was read
+        notes.append(result["note"])
+    small = [n for n in notes if "too small to read (needs 96): move closer" in n]
+    assert len(small) >= 3, notes
 
 
 def test_a_registry_entry_appears_when_an_uploaded_photo_is_decoded(page, server: Server, tmp_path: Path) -> None:
@@ -288,7 +455,7 @@ def test_a_printed_pdf_of_the_ghost_in_two_clicks(page, server: Server, tmp_path
         clicks += 1
         page.click(selector)
 
-    started = time.monotonic()
+    started = time.monotonic()  # the studio is up: server.ready_s after `deepmorph studio`
     open_studio(page, server)
     click("#tabs button[data-tab=print]")
     page.wait_for_function("() => document.querySelector('#print-payload').value.startsWith('0x')")
@@ -297,11 +464,13 @@ def test_a_printed_pdf_of_the_ghost_in_two_clicks(page, server: Server, tmp_path
         click("#print-pdf")
     path = tmp_path / "ghost.pdf"
     download.value.save_as(path)
-    seconds = time.monotonic() - started
+    seconds = server.ready_s + time.monotonic() - started
     assert path.read_bytes().startswith(b"%PDF")
     assert payload in download.value.suggested_filename
-    assert clicks == 2, clicks
-    print(f"studio to a printed PDF of the ghost: {clicks} clicks, {seconds:.1f} s")
+    print(f"studio to a printed PDF of the ghost: {clicks} clicks, {seconds:.1f} s "
+          f"({server.ready_s:.1f} s of it the studio starting)")  # fmt: skip
+    assert clicks == 2, clicks  # the target: under 10
+    assert seconds < 120, seconds
     page.wait_for_function("() => document.querySelector('#print-preview').complete")
     screenshot(page, "print")
 
@@ -387,7 +556,11 @@ def test_the_scan_tab_reads_the_fake_camera(page, server: Server) -> None:
             if shown is not None:
                 delays.append((shown - log[i - 1]["grabbed"]) / 1000)
     empty = sum(f["found"] == 0 for f in log)
-    print(f"scan tab, fake camera: {fps:.1f} frames/s; the print came into view {len(delays)} times, "
+    # the frames that show the print alone (a bare desk is quicker to read): grabbed to shown
+    with_print = [(f["shown"] - f["grabbed"]) / 1000 for f in log if f["found"] > 0]
+    print_fps = len(with_print) / sum(with_print)
+    print(f"scan tab, fake camera: {fps:.1f} frames/s ({print_fps:.1f} over the frames showing the print); "
+          f"the print came into view {len(delays)} times, "
           f"payload shown within {max(delays, default=float('nan')):.2f} s (each: "
           f"{', '.join(f'{d:.2f}' for d in delays)}); {empty} of {len(log)} frames without the print")  # fmt: skip
     read = [hex_ for f in log for hex_ in f["read"]]
@@ -396,6 +569,7 @@ def test_the_scan_tab_reads_the_fake_camera(page, server: Server) -> None:
     assert len(delays) >= 2
     assert max(delays) < 1.0, delays
     assert fps >= 10.0, f"{fps:.1f} frames/s; the studio's target is 10 on two cores"
+    assert print_fps >= 10.0, f"{print_fps:.1f} frames/s with the print in view; the target is 10"
 
 
 def _capacity_rows(page) -> list[list[str]]:  # noqa: ANN001

@@ -5,6 +5,7 @@
 const $ = (sel) => document.querySelector(sel);
 const SVGNS = "http://www.w3.org/2000/svg";
 const state = { drawing: null, selected: null, weak: new Set(), models: [], live: null };
+const ANIMATION_MS = 700; // between two morphs of the animation
 
 function showError(message) {
   const box = $("#error");
@@ -52,6 +53,7 @@ function openTab(name) {
   document.querySelectorAll(".tab").forEach((s) => (s.hidden = s.id !== `tab-${name}`));
   location.hash = name;
   if (name !== "scan") stopCamera();
+  if (name !== "drawing") stopAnimation();
   if (["payloads", "print", "scan"].includes(name)) loadModels();
   if (name === "payloads") loadEntries();
   if (name === "capacity" && state.drawing) runCapacity(); // the bounds as they are now
@@ -179,8 +181,7 @@ $("#overlay").addEventListener("click", () => selectShape(null));
 $("#bounds-form").group.addEventListener("change", () => selectShape(state.selected));
 $("#width-mm").addEventListener("input", () => selectShape(state.selected));
 
-$("#svg-file").addEventListener("change", async (event) => {
-  const file = event.target.files[0];
+async function openDrawing(file) {
   if (!file) return;
   const data = await api("/api/drawing", {
     method: "POST",
@@ -189,7 +190,27 @@ $("#svg-file").addEventListener("change", async (event) => {
   });
   state.weak = new Set();
   showDrawing(data);
-  event.target.value = "";
+}
+
+$("#svg-file").addEventListener("change", async (event) => {
+  try {
+    await openDrawing(event.target.files[0]);
+  } finally {
+    event.target.value = "";
+  }
+});
+
+// an SVG dragged onto the tab opens as if chosen with "Open an SVG"
+const drawingTab = $("#tab-drawing");
+drawingTab.addEventListener("dragover", (event) => {
+  event.preventDefault();
+  drawingTab.classList.add("dropping");
+});
+drawingTab.addEventListener("dragleave", () => drawingTab.classList.remove("dropping"));
+drawingTab.addEventListener("drop", (event) => {
+  event.preventDefault();
+  drawingTab.classList.remove("dropping");
+  openDrawing(event.dataTransfer.files[0]);
 });
 
 $("#use-ghost").addEventListener("click", async () => {
@@ -205,6 +226,28 @@ function morph(extreme) {
 }
 $("#morph-random").addEventListener("click", () => morph(false));
 $("#morph-extreme").addEventListener("click", () => morph(true));
+
+// Animate: a random morph and the extremes in turn, each a new seed, until Stop
+let animation = null;
+function stopAnimation() {
+  if (animation === null) return;
+  clearInterval(animation);
+  animation = null;
+  $("#morph-animate").textContent = "Animate";
+  if (state.drawing) $("#drawing-img").src = `/api/drawing.svg?v=${Date.now()}`; // the drawing as it is
+}
+$("#morph-animate").addEventListener("click", () => {
+  if (animation !== null) {
+    stopAnimation();
+    return;
+  }
+  if (!state.drawing) return;
+  let frame = 0;
+  const next = () => morph(frame++ % 2 === 1);
+  next();
+  animation = setInterval(next, ANIMATION_MS);
+  $("#morph-animate").textContent = "Stop";
+});
 
 // -- capacity ---------------------------------------------------------------------------------
 function clearCapacity() {
