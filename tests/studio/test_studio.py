@@ -475,6 +475,20 @@ def test_a_printed_pdf_of_the_ghost_in_two_clicks(page, server: Server, tmp_path
     screenshot(page, "print")
 
 
+def test_the_page_fetches_nothing_beyond_the_studio(page, server: Server) -> None:
+    """The page works offline: every tab, opened in turn, asks the studio alone (no CDN, no font
+    or script from elsewhere)."""
+    asked: list[str] = []
+    page.on("request", lambda r: asked.append(r.url))
+    open_studio(page, server)
+    for tab in ("capacity", "train", "payloads", "print", "scan", "drawing"):
+        page.click(f"#tabs button[data-tab={tab}]")
+        page.wait_for_load_state("networkidle")
+    elsewhere = [url for url in asked if not url.startswith((server.base + "/", "data:", "blob:"))]
+    assert asked and not elsewhere, elsewhere
+    assert any(url.endswith("/static/studio.js") for url in asked) and any("/api/models" in url for url in asked)
+
+
 def test_the_train_form_starts_at_the_training_defaults(page, server: Server) -> None:
     """The page keeps no copy of the training defaults: its form shows the server's (the
     training settings', :func:`deepmorph.studio.app.train_form`), ranges included."""
