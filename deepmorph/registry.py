@@ -28,7 +28,7 @@ import os
 import sqlite3
 import time
 import urllib.parse
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -538,6 +538,49 @@ class PayloadRegistry:
         return DeepMorphError(f"{self.path}: cannot use the registry ({text})")
 
 
+#: A detection as ``Detection.to_json()`` writes it, to its payload's entry (``Entry.to_json()``)
+#: or ``None``: what :func:`detection_lookup` returns.
+DetectionLookup = Callable[[Mapping[str, Any]], "dict[str, Any] | None"]
+
+
+def detection_lookup(registry: PayloadRegistry, model: ModelLike, *, missing_ok: bool = False) -> DetectionLookup:
+    """What decoded payloads mean: the lookup ``deepmorph decode --registry`` and the studio's
+    Scan tab run on each detection of ``model``.
+
+    The registry is checked once, before any photo is read: a file that is not a registry is
+    one clear error, and so is a registry that does not exist unless ``missing_ok`` (then
+    nothing is found). The lookup gives a verified detection's entry; a detection that is not
+    verified (``ok`` false) is never looked up, since a misread must not show a URL.
+
+    Args:
+        registry: the payload registry.
+        model: the model that decoded the detections (:data:`ModelLike`).
+        missing_ok: a registry that does not exist yet finds nothing instead of failing.
+
+    Returns:
+        A function from a detection's JSON (``{"ok", "payload": {"hex", ...}, ...}``) to its
+        entry's JSON, or ``None`` when it is not verified or has no entry.
+
+    Raises:
+        DeepMorphError: no registry at ``registry.path`` (unless ``missing_ok``), a file that is
+            not a registry, or a model that is not usable.
+    """
+    if not registry.path.exists():
+        if missing_ok:
+            return lambda detection: None
+        raise DeepMorphError(f"{registry.path}: no payload registry there (add entries with `deepmorph registry add`)")
+    key = model_key(model)
+    registry.count(key)  # a file that is not a registry fails here, before any work
+
+    def look_up(detection: Mapping[str, Any]) -> dict[str, Any] | None:
+        if not detection.get("ok"):
+            return None
+        entry = registry.get(key, detection["payload"]["hex"])
+        return None if entry is None else entry.to_json()
+
+    return look_up
+
+
 def _entry(row: tuple[Any, ...]) -> Entry:
     return Entry(*row)
 
@@ -560,11 +603,13 @@ __all__ = [
     "KINDS",
     "MAX_NOTE_CHARS",
     "MAX_TARGET_CHARS",
+    "DetectionLookup",
     "Entry",
     "ModelKey",
     "ModelLike",
     "PayloadRegistry",
     "check_target",
     "default_path",
+    "detection_lookup",
     "model_key",
 ]

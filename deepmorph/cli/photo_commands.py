@@ -140,9 +140,9 @@ def decode(
     m = DeepMorphModel.load(model)
     look_up = None
     if registry or db is not None:
-        from deepmorph.cli.registry_commands import decode_lookup
+        from deepmorph.registry import PayloadRegistry, detection_lookup
 
-        look_up = decode_lookup(db, m)  # a missing or foreign registry is refused before any work
+        look_up = detection_lookup(PayloadRegistry(db), m)  # a missing or foreign registry: refused before any work
     locator = Locator(m, detector=detector)
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []

@@ -1,14 +1,12 @@
 """``deepmorph registry``: the payload registry's commands (``add``, ``list``, ``show``,
 ``remove``, ``export``), added to the command line through the ``deepmorph_register_commands``
-hook (:mod:`deepmorph.plugin`), and the lookup ``decode --registry`` runs
-(:mod:`deepmorph.cli.photo_commands`). Each parses its arguments and calls the library."""
+hook (:mod:`deepmorph.plugin`). Each parses its arguments and calls the library."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
@@ -17,7 +15,6 @@ from deepmorph_core.errors import DeepMorphError
 
 if TYPE_CHECKING:
     from deepmorph.registry import Entry, ModelKey, PayloadRegistry
-    from deepmorph_core.model import DeepMorphModel
 
 HELP = """The payload registry: what each payload of a model means (a URL or a text), shown by decode --registry.
 
@@ -151,27 +148,6 @@ def export(
     out.print(f"wrote {out_path} ({n} entries, {fmt.upper()})")
 
 
-def decode_lookup(db: Path | None, model: DeepMorphModel) -> Callable[[dict[str, Any]], dict[str, Any] | None]:
-    """What ``decode --registry`` runs: opens the registry and checks it before any work (one
-    clear error for a missing or foreign file), then looks each verified detection's payload
-    up. A detection that is not verified is never looked up: a misread must not show a URL."""
-    registry = _registry(db)
-    if not registry.path.exists():
-        raise DeepMorphError(f"{registry.path}: no payload registry there (add entries with `deepmorph registry add`)")
-    from deepmorph.registry import model_key
-
-    key = model_key(model)
-    registry.count(key)
-
-    def look_up(detection: dict[str, Any]) -> dict[str, Any] | None:
-        if not detection.get("ok"):
-            return None
-        entry = registry.get(key, detection["payload"]["hex"])
-        return None if entry is None else entry.to_json()
-
-    return look_up
-
-
 def register(cli: typer.Typer) -> None:
     """Add the ``registry`` commands to ``cli``."""
     group = typer.Typer(name="registry", help=HELP, no_args_is_help=True)
@@ -188,4 +164,4 @@ def register(cli: typer.Typer) -> None:
     cli.add_typer(group, name="registry", rich_help_panel=PANEL_CODES)
 
 
-__all__ = ["decode_lookup", "register"]
+__all__ = ["register"]

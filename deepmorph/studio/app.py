@@ -653,10 +653,11 @@ def read_photo(
     previous one; ``restart``: the first of a new stream), with each verified payload's registry
     entry. The photo goes through the same
     reader as ``deepmorph decode`` (a temporary file: size, pixel and format checks)."""
-    from deepmorph.registry import model_key
+    from deepmorph.registry import detection_lookup
     from deepmorph_core.image_io import read_image_bgr
 
     m = studio.model(model_id)
+    look_up = detection_lookup(studio.registry(), m, missing_ok=True)
     with tempfile.TemporaryDirectory(prefix="deepmorph-studio-") as tmp:
         path = Path(tmp) / "upload"
         path.write_bytes(data)
@@ -669,13 +670,10 @@ def read_photo(
         dets = reader.add(str(reader.frames), image)
     else:
         dets = studio.locator(model_id).locate(image)
-    registry = studio.registry()
-    key = model_key(m) if registry.path.exists() else None
     found = []
     for d in dets:
         row = d.to_json()
-        entry = registry.get(key, row["payload"]["hex"]) if key is not None and row["ok"] else None
-        row["registry"] = entry.to_json() if entry else None
+        row["registry"] = look_up(row)
         cube = [[float(x), float(y)] for x, y in d.pose.cube()] if d.pose is not None else []
         if cube and all(math.isfinite(v) and abs(v) < 1e6 for point in cube for v in point):  # drawn over the photo
             row["cube"] = [[round(x, 1), round(y, 1)] for x, y in cube]

@@ -28,6 +28,7 @@ from deepmorph.registry import (
     ModelKey,
     PayloadRegistry,
     default_path,
+    detection_lookup,
     model_key,
 )
 from deepmorph_core.bundled import BUNDLED_MODEL
@@ -415,6 +416,25 @@ def test_decode_shows_each_verified_payloads_entry(app: typer.Typer, tmp_path: P
     one_error(run(app, "decode", BUNDLED_MODEL, tmp_path / "a.png", "--db", tmp_path / "a.png", "--overlay",
                   tmp_path / "o.png"), "not a DeepMorph registry")  # fmt: skip
     assert not (tmp_path / "o.png").exists()
+
+
+def test_one_lookup_for_decoded_payloads(key: ModelKey, tmp_path: Path) -> None:
+    """``detection_lookup``, what ``decode --registry`` and the studio's Scan tab both run: a
+    verified payload's entry, nothing for a misread; the registry checked before any work."""
+    registry = PayloadRegistry(tmp_path / "registry.sqlite3")
+    with pytest.raises(DeepMorphError, match="no payload registry there"):
+        detection_lookup(registry, key)
+    assert detection_lookup(registry, key, missing_ok=True)({"ok": True, "payload": {"hex": "0xA1B2C3"}}) is None
+    registry.add(key, 0xA1B2C3, URL)
+    look_up = detection_lookup(registry, key)
+    assert look_up({"ok": True, "payload": {"hex": "0xA1B2C3"}}) == registry.get(key, 0xA1B2C3).to_json()
+    assert look_up({"ok": False, "payload": {"hex": "0xA1B2C3"}}) is None  # a misread never shows a URL
+    assert look_up({"ok": True, "payload": {"hex": "0x000001"}}) is None
+    foreign = tmp_path / "notes.txt"
+    foreign.write_text("not a database, but long enough to be read as one " * 20)
+    for missing_ok in (False, True):
+        with pytest.raises(DeepMorphError, match="not a DeepMorph registry"):
+            detection_lookup(PayloadRegistry(foreign), key, missing_ok=missing_ok)
 
 
 def test_the_installed_command_line_has_the_registry_and_lists_without_torch(tmp_path: Path) -> None:
