@@ -59,8 +59,9 @@ class Model:
         Args:
             payload: exactly :attr:`payload_bits` bits, as an ``int`` (``0 <= payload <
                 2**payload_bits``), hex text with ``0x`` and ``ceil(payload_bits / 4)`` digits,
-                a string of ``payload_bits`` binary digits, ``ceil(payload_bits / 8)`` big-endian
-                ``bytes``, or a sequence or array of ``payload_bits`` zeros and ones.
+                a decimal number after ``0d``, a string of ``payload_bits`` binary digits,
+                ``ceil(payload_bits / 8)`` big-endian ``bytes``, or a sequence or array of
+                ``payload_bits`` zeros and ones.
 
         Returns:
             A :class:`~deepmorph_core.code.Code`: ``.svg`` (the morphed SVG), ``.svg_at(width_mm)``,

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from lxml import etree
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.payload import Payload, PayloadLike
+from deepmorph_core.payload import Payload, PayloadLike, TextForm
 
 if TYPE_CHECKING:
     from deepmorph_core.code import Code, FileFormat
@@ -146,10 +146,17 @@ class Sheet:
 
 
 def batch_payloads(
-    payload_bits: int, *, start: PayloadLike | None = None, count: int | None = None, lines: str | None = None
+    payload_bits: int,
+    *,
+    start: PayloadLike | None = None,
+    count: int | None = None,
+    lines: str | None = None,
+    form: TextForm | None = None,
 ) -> list[Payload]:
     """The payloads of a sheet: ``count`` consecutive ones from ``start``, or one per non-empty
-    line of ``lines`` (hex with ``0x``, as the Print tab and ``deepmorph encode`` take them).
+    line of ``lines``. Text is read as ``deepmorph encode`` reads it (``0x`` hex, ``0d`` a
+    number, or bits), or as ``form`` says (``"hex"``, ``"number"``: what the Print tab's user
+    chose to type; :func:`~deepmorph_core.payload.parse_payload_text`).
 
     Raises:
         DeepMorphError: both or neither way given, no payload, more than :data:`MAX_CODES`, a
@@ -164,12 +171,12 @@ def batch_payloads(
         out = []
         for number, text in rows:
             try:
-                out.append(Payload.of(text, payload_bits))
+                out.append(Payload.parse(text, payload_bits, form))
             except DeepMorphError as exc:
                 raise DeepMorphError(f"line {number}: {exc}") from None
         return out
     n = _check_count(count if count is not None else 0)
-    first = Payload.of(start, payload_bits)
+    first = Payload.parse(start, payload_bits, form) if isinstance(start, str) else Payload.of(start, payload_bits)
     last = first.int + n - 1
     if last >= 2**payload_bits:
         largest = Payload.of(2**payload_bits - 1, payload_bits)

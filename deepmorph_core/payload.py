@@ -1,9 +1,9 @@
 """Payloads: the bits a user hides, and every form a user may hand them in or want them out.
 
 A :class:`Payload` is a fixed number of bits, most significant first. It is made from an
-``int``, hex text (``"0xA1B2C3"``), a string of binary digits, ``bytes`` (big-endian, the
-value right-aligned in the payload), or a sequence of 0/1 (a list or an array), and it gives
-each of those back. Anything that does not fit the payload's size, or is not one of those
+``int``, text (hex ``"0xA1B2C3"``, a decimal number ``"0d10597059"``, or binary digits),
+``bytes`` (big-endian, the value right-aligned in the payload), or a sequence of 0/1 (a list
+or an array), and it gives each of those back. Anything that does not fit the payload's size, or is not one of those
 types, is one clear :class:`~deepmorph_core.errors.DeepMorphError`.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any, Literal, Union
 
 import numpy as np
 
@@ -22,6 +22,10 @@ MAX_PAYLOAD_BITS = 256
 
 #: What :meth:`Payload.of` accepts.
 PayloadLike = Union["Payload", int, str, bytes, Sequence[int], np.ndarray]
+#: How a payload is written as text (:func:`parse_payload_text`): hex digits, a decimal number,
+#: or binary digits.
+TextForm = Literal["hex", "number", "bits"]
+TEXT_FORMS: tuple[TextForm, ...] = ("hex", "number", "bits")
 
 
 def check_payload_bits(payload_bits: int) -> None:
@@ -75,8 +79,9 @@ class Payload:
         """A payload of exactly ``payload_bits`` bits from any accepted form.
 
         * ``int``: the value, ``0 <= value < 2**payload_bits``;
-        * ``str``: hex with the ``0x`` prefix and ``ceil(payload_bits / 4)`` digits, or exactly
-          ``payload_bits`` binary digits;
+        * ``str``: hex with the ``0x`` prefix and ``ceil(payload_bits / 4)`` digits, a decimal
+          number with the ``0d`` prefix, or exactly ``payload_bits`` binary digits
+          (:func:`parse_payload_text`);
         * ``bytes``: a big-endian value of exactly ``ceil(payload_bits / 8)`` bytes that fits
           (what :attr:`bytes` gives back);
         * a sequence or array of ``payload_bits`` zeros and ones.
@@ -107,6 +112,12 @@ class Payload:
                 raise DeepMorphError(f"{exc}; {_expected(payload_bits)}") from None
         what = "None" if value is None else f"a {type(value).__name__}"
         raise DeepMorphError(f"a payload cannot be {what}; {_expected(payload_bits)}")
+
+    @classmethod
+    def parse(cls, text: str, payload_bits: int, form: TextForm | None = None) -> Payload:
+        """A payload from text, written as ``form`` says or, with none, as its prefix says
+        (:func:`parse_payload_text`)."""
+        return cls(parse_payload_text(text, payload_bits, form))
 
     def __len__(self) -> int:
         return int(self.bits.shape[0])
@@ -150,8 +161,15 @@ def _expected(payload_bits: int) -> str:
     example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
     return (
         f"expected a {payload_bits}-bit payload: an int below 2**{payload_bits}, hex with {digits} digits like "
-        f"{example}, {payload_bits} binary digits, {math.ceil(payload_bits / 8)} bytes, or {payload_bits} bits"
+        f"{example}, a number like 0d{_example_value(payload_bits)}, {payload_bits} binary digits, "
+        f"{math.ceil(payload_bits / 8)} bytes, or {payload_bits} bits"
     )
+
+
+def _example_value(payload_bits: int) -> int:
+    """A decimal example that fits ``payload_bits`` bits: the hex example's value."""
+    digits = hex_digits(payload_bits)
+    return int("A1B2C3D4E5F6"[:digits].ljust(digits, "0"), 16) & ((1 << payload_bits) - 1)
 
 
 def _int_bits(value: int, payload_bits: int, shown: str) -> np.ndarray:
@@ -164,50 +182,87 @@ def _int_bits(value: int, payload_bits: int, shown: str) -> np.ndarray:
     return int_to_bits(value, payload_bits)
 
 
-def parse_payload_text(text: str, payload_bits: int) -> np.ndarray:
-    """Read a payload written as hex (``0xA1B2C3``) or as exactly ``payload_bits`` binary digits.
+def parse_payload_text(text: str, payload_bits: int, form: TextForm | None = None) -> np.ndarray:
+    """Read a payload written as text: hex, a decimal number, or binary digits.
 
-    Hex needs the ``0x`` prefix and exactly ``ceil(payload_bits / 4)`` digits, and its value must
-    fit in ``payload_bits`` bits. Bits are most significant first: with 24 bits ``0xA1B2C3`` is
-    ``101000011011001011000011``.
+    With no ``form`` the text says which, as ``deepmorph encode --payload`` takes it: ``0x`` and
+    exactly ``ceil(payload_bits / 4)`` hex digits (``0xA1B2C3``), ``0d`` and a decimal number
+    (``0d10597059``), or exactly ``payload_bits`` binary digits. A ``form`` says what the text is
+    instead, for a field whose kind the user chose: ``"hex"`` (the ``0x`` may be left out),
+    ``"number"`` (the ``0d`` may be left out) or ``"bits"``. The value must fit in
+    ``payload_bits`` bits. Bits are most significant first: with 24 bits ``0xA1B2C3`` is
+    ``0d10597059`` and ``101000011011001011000011``.
 
     Returns:
         ``(payload_bits,)`` uint8 array of 0/1.
 
     Raises:
-        DeepMorphError: anything else, saying what was expected.
+        DeepMorphError: anything else, saying what was expected (a number too large for the
+            payload says the largest there is).
     """
     check_payload_bits(payload_bits)
+    if form is not None and form not in TEXT_FORMS:
+        raise DeepMorphError(f"a payload is written as {', '.join(TEXT_FORMS)}, not {form!r}")
     digits = hex_digits(payload_bits)
     example = "0x" + "A1B2C3D4E5F6"[:digits].ljust(digits, "0")
-    expected = (
-        f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, "
-        f"or {payload_bits} binary digits"
-    )
+    largest = (1 << payload_bits) - 1
+    expected = {
+        None: f"expected a {payload_bits}-bit payload: hex with {digits} digits like {example}, a number like "
+        f"0d{_example_value(payload_bits)}, or {payload_bits} binary digits",
+        "hex": f"expected {digits} hex digits like {example} (a {payload_bits}-bit payload)",
+        "number": f"expected a whole number from 0 to {largest} (a {payload_bits}-bit payload)",
+        "bits": f"expected {payload_bits} binary digits (a {payload_bits}-bit payload)",
+    }[form]
     if not isinstance(text, str):
         raise DeepMorphError(f"payload must be text, got {type(text).__name__}; {expected}")
     s = text.strip()
     if not s:
         raise DeepMorphError(f"empty payload; {expected}")
-    if s[:2] in ("0x", "0X"):
-        body = s[2:]
-        bad = [c for c in body if c not in "0123456789abcdefABCDEF"]
-        if bad:
-            raise DeepMorphError(f"payload {s!r}: {bad[0]!r} is not a hex digit; {expected}")
-        if len(body) != digits:
-            raise DeepMorphError(f"payload {s!r} has {len(body)} hex digits; {expected}")
-        value = int(body, 16)
-        if value >> payload_bits:
-            raise DeepMorphError(
-                f"payload {s!r} needs {value.bit_length()} bits, more than {payload_bits}; {expected} "
-                f"(at most 0x{(1 << payload_bits) - 1:0{digits}X})"
-            )
-        return int_to_bits(value, payload_bits)
-    if set(s) <= {"0", "1"}:
+    prefix = s[:2].lower()
+    if form == "hex" or (form is None and prefix == "0x"):
+        return _hex_bits(s, s[2:] if prefix == "0x" else s, payload_bits, expected)
+    if form == "number" or (form is None and prefix == "0d"):
+        return _number_bits(s, s[2:] if prefix == "0d" else s, payload_bits, expected)
+    if form == "bits" or set(s) <= {"0", "1"}:
+        if not set(s) <= {"0", "1"}:
+            raise DeepMorphError(f"payload {s[:40]!r} holds digits other than 0 and 1; {expected}")
         if len(s) != payload_bits:
             raise DeepMorphError(f"payload has {len(s)} binary digits; {expected}")
         return np.frombuffer(s.encode(), dtype=np.uint8) - ord("0")
-    raise DeepMorphError(f"payload {s[:40]!r} is neither 0x-prefixed hex nor binary digits; {expected}")
+    raise DeepMorphError(
+        f"payload {s[:40]!r} is neither 0x-prefixed hex, a 0d-prefixed number nor binary digits; {expected}"
+    )
+
+
+def _hex_bits(shown: str, body: str, payload_bits: int, expected: str) -> np.ndarray:
+    digits = hex_digits(payload_bits)
+    bad = [c for c in body if c not in "0123456789abcdefABCDEF"]
+    if bad:
+        raise DeepMorphError(f"payload {shown!r}: {bad[0]!r} is not a hex digit; {expected}")
+    if len(body) != digits:
+        raise DeepMorphError(f"payload {shown!r} has {len(body)} hex digits; {expected}")
+    value = int(body, 16)
+    if value >> payload_bits:
+        raise DeepMorphError(
+            f"payload {shown!r} needs {value.bit_length()} bits, more than {payload_bits}; {expected} "
+            f"(at most 0x{(1 << payload_bits) - 1:0{digits}X})"
+        )
+    return int_to_bits(value, payload_bits)
+
+
+def _number_bits(shown: str, body: str, payload_bits: int, expected: str) -> np.ndarray:
+    largest = (1 << payload_bits) - 1
+    bad = [c for c in body if c not in "0123456789"]
+    if bad or not body:
+        what = f"{bad[0]!r} is not a decimal digit" if bad else "no digits"
+        raise DeepMorphError(f"payload {shown[:40]!r}: {what}; {expected}")
+    # compared as text first: no huge int is ever made from a long string
+    if len(body.lstrip("0")) > len(str(largest)) or int(body) > largest:
+        raise DeepMorphError(
+            f"payload {shown[:40]!r} is too large for {payload_bits} bits: the largest is {largest} "
+            f"(0x{largest:0{hex_digits(payload_bits)}X})"
+        )
+    return int_to_bits(int(body), payload_bits)
 
 
 def format_payload(bits: np.ndarray) -> dict[str, str]:
@@ -221,4 +276,13 @@ def random_payloads(n: int, payload_bits: int, generator: np.random.Generator) -
     return generator.integers(0, 2, size=(n, payload_bits), dtype=np.uint8)
 
 
-__all__ = ["MAX_PAYLOAD_BITS", "Payload", "PayloadLike", "format_payload", "parse_payload_text", "random_payloads"]
+__all__ = [
+    "MAX_PAYLOAD_BITS",
+    "TEXT_FORMS",
+    "Payload",
+    "PayloadLike",
+    "TextForm",
+    "format_payload",
+    "parse_payload_text",
+    "random_payloads",
+]

@@ -745,7 +745,11 @@ def validate(
 def encode(
     model: ModelArg,
     payload: Annotated[
-        str, typer.Option("--payload", help="Hex (0x...) or a bit string of exactly the model's payload length.")
+        str,
+        typer.Option(
+            "--payload",
+            help="Hex (0x...), a decimal number (0d...) or a bit string of exactly the model's payload length.",
+        ),
     ],
     out_path: Annotated[
         Path, typer.Option("--out", help="The code to write: .svg, .pdf (vector) or .png, by its extension.")

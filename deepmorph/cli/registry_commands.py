@@ -23,8 +23,8 @@ A local SQLite file that several processes may write at once: --db, else ~/.deep
 
 PayloadArg = Annotated[
     str,
-    typer.Argument(help="The payload: hex (0x...) or a bit string of exactly the model's payload length.",
-                   show_default=False),
+    typer.Argument(help="The payload: hex (0x...), a decimal number (0d...) or a bit string of exactly the model's "
+                        "payload length.", show_default=False),
 ]  # fmt: skip
 DbOpt = Annotated[
     Optional[Path],

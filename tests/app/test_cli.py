@@ -170,3 +170,21 @@ def test_no_output_replaces_an_input(tmp_path: Path) -> None:
     # a writable --png next to the SVG is written whole
     res = run(*enc, "--out", tmp_path / "code.svg", "--png", tmp_path / "code.png")
     assert res.exit_code == 0 and Image.open(tmp_path / "code.png").size[0] == 591
+
+
+def test_encode_takes_a_decimal_number_after_0d(tmp_path: Path) -> None:
+    """``--payload`` reads hex after ``0x``, a decimal number after ``0d`` and bits otherwise;
+    a number too large for the model's payload is one error line."""
+    from deepmorph_core.bundled import BUNDLED_MODEL
+
+    codes = {}
+    for payload in ("0xA1B2C3", "0d10597059", "101000011011001011000011"):
+        res = run("encode", BUNDLED_MODEL, "--payload", payload, "--out", tmp_path / f"{payload}.svg", "--json")
+        assert res.exit_code == 0, res.output
+        assert json.loads(res.stdout)["payload"]["hex"] == "0xA1B2C3"
+        codes[payload] = (tmp_path / f"{payload}.svg").read_text()
+    assert len(set(codes.values())) == 1
+    res = run("encode", BUNDLED_MODEL, "--payload", "0d16777216", "--out", tmp_path / "big.svg")
+    assert res.exit_code == 1 and not (tmp_path / "big.svg").exists()
+    assert res.stderr == "error: payload '0d16777216' is too large for 24 bits: the largest is 16777215 (0xFFFFFF)\n"
+    assert "0d..." in " ".join(run("encode", "--help").output.split())

@@ -19,7 +19,7 @@ from pydantic import ValidationError
 
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, choose_codec, format_codec_error
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.payload import format_payload, parse_payload_text, random_payloads
+from deepmorph_core.payload import Payload, TextForm, format_payload, parse_payload_text, random_payloads
 
 DOCS = Path(__file__).parents[2] / "docs" / "codec.md"
 
@@ -311,6 +311,10 @@ def test_constant_outputs_are_never_accepted(spec: CodecSpec) -> None:
         ("0x1", 1, "1"),
         ("0101", 4, "0101"),
         ("000", 3, "000"),
+        ("0d10597059", 24, "101000011011001011000011"),
+        ("0D0005", 4, "0101"),
+        ("0d1023", 10, "1111111111"),
+        ("0d0", 3, "000"),
     ],
 )
 def test_parse_payload_accepts(text: str, bits: int, expect: str) -> None:
@@ -328,7 +332,12 @@ def test_parse_payload_accepts(text: str, bits: int, expect: str) -> None:
         ("0x7FF", 10, "needs 11 bits, more than 10"),
         ("0x", 8, "has 0 hex digits"),
         ("0101", 24, "payload has 4 binary digits; expected a 24-bit payload"),
-        ("A1B2C3", 24, "neither 0x-prefixed hex nor binary digits"),
+        ("A1B2C3", 24, "neither 0x-prefixed hex, a 0d-prefixed number nor binary digits"),
+        ("0d16777216", 24, "payload '0d16777216' is too large for 24 bits: the largest is 16777215 (0xFFFFFF)"),
+        ("0d" + "9" * 5000, 24, "is too large for 24 bits"),
+        ("0d-1", 24, "'-' is not a decimal digit"),
+        ("0d1e3", 24, "'e' is not a decimal digit"),
+        ("0d", 24, "no digits"),
         ("0b0101", 4, "neither"),
         ("", 8, "empty payload"),
         ("0101", 0, "payload_bits must be between 1 and 256"),
@@ -338,6 +347,47 @@ def test_parse_payload_rejects(text: str, bits: int, message: str) -> None:
     with pytest.raises(DeepMorphError) as info:
         parse_payload_text(text, bits)
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "text, form, expect",
+    [
+        ("10597059", "number", 0xA1B2C3),
+        ("0d10597059", "number", 0xA1B2C3),
+        ("000101", "number", 101),  # digits a user chose to give as a number are never bits
+        ("A1B2C3", "hex", 0xA1B2C3),
+        ("0xa1b2c3", "hex", 0xA1B2C3),
+        ("000101", "hex", 0x101),
+        ("000000000000000100000001", "bits", 0x101),
+    ],
+)
+def test_a_chosen_form_says_what_the_text_is(text: str, form: TextForm, expect: int) -> None:
+    assert Payload.parse(text, 24, form).int == expect
+
+
+@pytest.mark.parametrize(
+    "text, form, message",
+    [
+        ("16777216", "number", "payload '16777216' is too large for 24 bits: the largest is 16777215 (0xFFFFFF)"),
+        ("0xA1", "number", "'x' is not a decimal digit; expected a whole number from 0 to 16777215"),
+        ("-3", "number", "'-' is not a decimal digit"),
+        ("A1B2", "hex", "has 4 hex digits; expected 6 hex digits like 0xA1B2C3"),
+        ("A1.B2C", "hex", "'.' is not a hex digit"),
+        ("0102", "bits", "holds digits other than 0 and 1"),
+        ("12", "octal", "a payload is written as hex, number, bits, not 'octal'"),
+    ],
+)
+def test_a_chosen_form_refuses_other_text(text: str, form: str, message: str) -> None:
+    with pytest.raises(DeepMorphError) as info:
+        parse_payload_text(text, 24, form)  # type: ignore[arg-type]
+    assert message in str(info.value), str(info.value)
+
+
+@given(st.integers(1, 256).flatmap(lambda n: st.tuples(st.just(n), st.integers(0, 2**n - 1))))
+def test_a_number_reads_back_as_its_value(case: tuple[int, int]) -> None:
+    bits, value = case
+    assert Payload.parse(f"0d{value}", bits).int == value == Payload.parse(str(value), bits, "number").int
+    assert Payload.parse(f"0d{value}", bits) == Payload.of(value, bits)
 
 
 @given(st.lists(st.integers(0, 1), min_size=1, max_size=256))

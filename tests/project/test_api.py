@@ -73,7 +73,7 @@ def test_every_payload_form_gives_the_same_code(ghost: deepmorph.Model, payload:
         ("0xA1B2", "has 4 hex digits"),
         ("0xA1B2C3D", "has 7 hex digits"),
         ("1010", "has 4 binary digits"),
-        ("hello", "neither 0x-prefixed hex nor binary digits"),
+        ("hello", "neither 0x-prefixed hex, a 0d-prefixed number nor binary digits"),
         (b"\xa1\xb2", "payload of 2 bytes"),
         (b"\x00\xa1\xb2\xc3", "payload of 4 bytes"),
         (b"", "payload of 0 bytes"),

@@ -139,7 +139,7 @@ def test_a_duplicate_is_refused_unless_replaced(key: ModelKey, tmp_path: Path) -
         ("0x1234", "has 4 hex digits"),
         ("1" * 25, "has 25 binary digits"),
         (b"\x01\x02\x03\x04", "payload of 4 bytes"),
-        ("ghost", "neither 0x-prefixed hex nor binary digits"),
+        ("ghost", "neither 0x-prefixed hex, a 0d-prefixed number nor binary digits"),
         (None, "cannot be None"),
     ],
 )

@@ -30,6 +30,11 @@ def test_a_batch_is_consecutive_payloads_or_a_list() -> None:
     listed = batch_payloads(24, lines="0xA1B2C3\n\n  0x000001  \n")
     assert [p.hex for p in listed] == ["0xA1B2C3", "0x000001"]
     assert len(batch_payloads(24, start="0x000000", count=MAX_CODES)) == MAX_CODES
+    # numbers, after 0d or where the user chose to type numbers
+    assert batch_payloads(24, start="0d254", count=3) == run
+    assert batch_payloads(24, start="254", count=3, form="number") == run
+    assert [p.int for p in batch_payloads(24, lines="10\n0101\n", form="number")] == [10, 101]
+    assert [p.int for p in batch_payloads(24, lines="00000A\n000101", form="hex")] == [10, 0x101]
 
 
 @pytest.mark.parametrize(
@@ -42,6 +47,8 @@ def test_a_batch_is_consecutive_payloads_or_a_list() -> None:
         ({"start": "0xFFFFFE", "count": 3}, "3 payloads from 0xFFFFFE pass the model's largest payload, 0xFFFFFF"),
         ({"start": "0x1000000", "count": 1}, "0x1000000"),
         ({"lines": "0x000001\n0x12"}, "line 2: "),
+        ({"lines": "1\n16777216", "form": "number"}, "line 2: payload '16777216' is too large for 24 bits"),
+        ({"start": "16777215", "count": 2, "form": "number"}, "2 payloads from 0xFFFFFF pass the model's largest"),
         ({"start": "0x000001", "count": 2, "lines": "0x000001"}, "not both"),
     ],
 )
