@@ -48,6 +48,7 @@ if TYPE_CHECKING:
     from deepmorph_core.code import FileFormat
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.morphable import MorphableDrawing
+    from deepmorph_core.payload import Payload, TextForm
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.reading import SequenceReader
 
@@ -385,8 +386,8 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         from deepmorph_core.payload import Payload, random_payloads
 
         m = await run_in_threadpool(studio.model, request.path_params["model"])
-        bits = random_payloads(1, m.codec.spec.payload_bits, np.random.default_rng())[0]
-        return JSONResponse(Payload(bits).to_json())
+        payload = Payload(random_payloads(1, m.codec.spec.payload_bits, np.random.default_rng())[0])
+        return JSONResponse({**payload.to_json(), "number": str(payload.int)})
 
     async def entries(request: Request) -> Response:
         m = await run_in_threadpool(studio.model, request.path_params["model"])
@@ -436,7 +437,8 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         if fmt == "png":
             print_pixels(width_mm, dpi)  # refused before any work when too large
         m = await run_in_threadpool(studio.model, request.path_params["model"])
-        code = await run_in_threadpool(m.code, q.get("payload", "").strip())
+        payload = typed_payload(q.get("payload", ""), m.codec.spec.payload_bits, q.get("payload_as"))
+        code = await run_in_threadpool(m.code, payload)
         data = await run_in_threadpool(lambda: code.file(fmt.upper(), width_mm, dpi))
         if q.get("preview") == "1" and fmt == "svg":
             return svg_image(data.decode())
@@ -526,6 +528,27 @@ def number(value: object, what: str, default: float) -> float:
     return x
 
 
+def payload_form(value: object) -> TextForm | None:
+    """How the Print tab's user chose to type payloads (``payload_as``): ``number``, ``hex`` or
+    ``bits``; none: as ``deepmorph encode --payload`` reads them (``0x`` hex, ``0d`` a number,
+    or bits). An entry picked from the registry is sent as its hex."""
+    from deepmorph_core.payload import TEXT_FORMS
+
+    if value in (None, ""):
+        return None
+    if value not in TEXT_FORMS:
+        raise HttpError(400, f"payload_as: {value!r}; a payload is typed as {', '.join(TEXT_FORMS)}")
+    return value  # type: ignore[return-value]
+
+
+def typed_payload(text: str, payload_bits: int, form: object) -> Payload:
+    """The payload the Print tab's user typed, read in the form they chose (:func:`payload_form`):
+    a number too large for the model, or text that is not that form, is one clear error."""
+    from deepmorph_core.payload import Payload
+
+    return Payload.parse(text, payload_bits, payload_form(form))
+
+
 def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, distance_cm: float) -> dict[str, Any]:
     """What ``deepmorph capacity --print-mm --distance-cm`` adds to the prediction: the print's
     width in a 1080p phone's photo (:func:`~deepmorph_core.print_size.pixels_across`) and how
@@ -559,15 +582,16 @@ def sheet_file(
 
     m = studio.model(model_id)
     bits = m.codec.spec.payload_bits
+    form = payload_form(data.get("payload_as"))
     if data.get("mode") == "list":
-        payloads = batch_payloads(bits, lines=str(data.get("lines") or ""))
+        payloads = batch_payloads(bits, lines=str(data.get("lines") or ""), form=form)
     else:
         count = data.get("count", 12)
         try:
             n = int(str(count).strip())
         except ValueError:
             raise HttpError(400, f"number of codes: expected a whole number, got {count!r}") from None
-        payloads = batch_payloads(bits, start=str(data.get("start") or "").strip(), count=n)
+        payloads = batch_payloads(bits, start=str(data.get("start") or "").strip(), count=n, form=form)
     registry = studio.registry()
     texts: list[str | None] = [None] * len(payloads)
     if registry.path.exists():

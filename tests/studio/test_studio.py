@@ -2,9 +2,10 @@
 headless Chromium, a dropped drawing opens and its morphs stay inside its bounds, bounds set by
 clicking reach the downloaded SVG, capacity is predicted and its limiting shapes outlined, a
 registry entry shows when an uploaded photo is decoded and an unread one says why, a PDF of the
-bundled ghost is printed in a counted number of clicks and seconds, a short training run's
-progress reaches the page (and survives a reload, and a run can be cancelled), and the scan tab
-reads a fake camera fast enough. Each tab's screenshot goes to docs/studio/."""
+bundled ghost is printed in a counted number of clicks and seconds, a payload typed as a number
+or hex or picked from the registry is printed as an SVG and a PNG that read back to it, a short
+training run's progress reaches the page (and survives a reload, and a run can be cancelled),
+and the scan tab reads a fake camera fast enough. Each tab's screenshot goes to docs/studio/."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from tests.studio.conftest import CAMERA_PAYLOAD, Server, open_studio, screensho
 ROOT = Path(__file__).resolve().parents[2]
 GHOST = ROOT / "deepmorph_core" / "data" / "ghost.svg"
 DM = "{urn:deepmorph:1}"
+TOO_LARGE = "payload '16777216' is too large for 24 bits: the largest is 16777215 (0xFFFFFF)"  # a ghost's payload
 TINY = b"""<svg xmlns="http://www.w3.org/2000/svg" xmlns:dm="urn:deepmorph:1" viewBox="0 0 24 24">
 <g stroke="black" stroke-width="2.5" stroke-linecap="round" stroke-linejoin="round" fill="none" dm:move="2.5">
   <polyline points="4 6 12 4 20 6"/>
@@ -92,6 +94,31 @@ def test_bad_input_is_one_clear_message(server: Server) -> None:
     assert status == 400 and "not an image" in json.loads(body)["error"]
     status, body = request(server, "/api/models/ghost/print?payload=0x12&format=pdf", token=server.token)
     assert status == 400 and "0x12" in json.loads(body)["error"]
+
+
+def test_the_print_routes_read_payloads_as_the_user_chose(server: Server) -> None:
+    """``payload_as`` says what the Print tab's payload text is; without it the text is read as
+    ``deepmorph encode --payload`` reads it (``0x`` hex, ``0d`` a number, else bits)."""
+
+    def printed(query: str) -> tuple[int, str]:
+        req = urllib.request.Request(f"{server.base}/api/models/ghost/print?format=svg&{query}",
+                                     headers={"X-DeepMorph-Token": server.token})  # fmt: skip
+        try:
+            with urllib.request.urlopen(req, timeout=60) as response:
+                return response.status, response.headers["X-DeepMorph-Payload"]
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read())["error"]
+
+    for query in ("payload=10597059&payload_as=number", "payload=0d10597059", "payload=A1B2C3&payload_as=hex",
+                  "payload=0xA1B2C3"):  # fmt: skip
+        assert printed(query) == (200, "0xA1B2C3"), query
+    assert printed("payload=0101&payload_as=number") == (200, "0x000065")  # a number, never bits
+    assert printed("payload=16777216&payload_as=number") == (400, TOO_LARGE)
+    status, error = printed("payload=12&payload_as=octal")
+    assert status == 400 and error == "payload_as: 'octal'; a payload is typed as hex, number, bits"
+    sheet = {"payload_as": "number", "start": "16777214", "count": 3}
+    status, body = request(server, "/api/models/ghost/sheet", token=server.token, data=json.dumps(sheet).encode())
+    assert status == 400 and "3 payloads from 0xFFFFFE pass the model's largest payload" in json.loads(body)["error"]
 
 
 def test_served_svgs_are_inert(server: Server) -> None:
@@ -669,6 +696,96 @@ def _download(page, selector: str, path: Path) -> Path:  # noqa: ANN001
         page.click(selector)
     download.value.save_as(path)
     return path
+
+
+def _reads(image) -> list[tuple[str, bool]]:  # noqa: ANN001 - a gray uint8 array
+    """What the bundled ghost reads in a code's image, given a white margin."""
+    import numpy as np
+
+    import deepmorph
+    from deepmorph_core.bundled import BUNDLED_MODEL
+
+    return [(f.payload.hex, f.ok) for f in deepmorph.load(BUNDLED_MODEL).decode(np.pad(image, 40, constant_values=255))]
+
+
+def _png_reads(path: Path) -> list[tuple[str, bool]]:
+    import numpy as np
+    from PIL import Image
+
+    return _reads(np.asarray(Image.open(path).convert("L")))
+
+
+def _svg_reads(path: Path) -> list[tuple[str, bool]]:
+    import numpy as np
+
+    from deepmorph_core.render import render_svg
+
+    return _reads((render_svg(path.read_text(), 400) * 255).astype(np.uint8))
+
+
+def test_a_payload_typed_as_a_number_or_hex_or_picked_from_the_registry(page, server: Server,
+                                                                       tmp_path: Path) -> None:  # fmt: skip
+    """The Print tab's payload is a number, hex, or one of the model's registry entries (listed
+    by what they stand for); each code downloaded as SVG or PNG reads back to it."""
+    entries = [("0x00BEEF", "url", "https://example.com/menu", "menu"), ("0x0C0FFE", "text", "Ask at the desk", "")]
+    for payload, kind, target, note in entries:
+        entry = {"payload": payload, "kind": kind, "target": target, "note": note, "replace": True}
+        status, body = request(server, "/api/models/ghost/entries", token=server.token,
+                               data=json.dumps(entry).encode(), headers={"Content-Type": "application/json"})  # fmt: skip
+        assert status == 200, body
+    open_studio(page, server, "print")
+    page.wait_for_function("() => document.querySelector('#print-payload').value.startsWith('0x')")
+    drawn = page.input_value("#print-payload")
+
+    # a number: the payload above is shown as one, and a number typed is printed
+    page.check("#print-form input[name=payload_as][value=number]")
+    assert page.input_value("#print-payload") == str(int(drawn, 16))
+    page.click("#print-random")
+    page.wait_for_function("(v) => /^[0-9]+$/.test(document.querySelector('#print-payload').value) && "
+                           "document.querySelector('#print-payload').value !== v", arg=str(int(drawn, 16)))  # fmt: skip
+    page.fill("#print-payload", "10597059")
+    png = _download(page, "#print-png", tmp_path / "number.png")
+    assert _png_reads(png) == [("0xA1B2C3", True)]
+    page.fill("#print-payload", "101")  # a number, never bits
+    assert _svg_reads(_download(page, "#print-svg", tmp_path / "101.svg")) == [("0x000065", True)]
+    # too large for the model's 24 bits: one line
+    page.fill("#print-payload", "16777216")
+    page.click("#print-svg")
+    page.wait_for_selector("#error:not([hidden])")
+    assert page.text_content("#error") == TOO_LARGE
+    # a sheet from a number: the payloads typed as numbers too
+    page.fill("#sheet-form input[name=start]", "10597059")
+    page.fill("#sheet-form input[name=count]", "2")
+    sheet = etree.parse(str(_download(page, "#sheet-svg", tmp_path / "numbers.svg"))).getroot()
+    assert [e.text for e in sheet if etree.QName(e).localname == "text"] == ["0xA1B2C3", "0xA1B2C4"]
+    page.fill("#sheet-form input[name=start]", "")
+
+    # hex: the number shown in hex; the 0x may be left out
+    page.fill("#print-payload", "10597059")
+    page.check("#print-form input[name=payload_as][value=hex]")
+    assert page.input_value("#print-payload") == "0xA1B2C3"
+    page.fill("#print-payload", "5A3C96")
+    svg = _download(page, "#print-svg", tmp_path / "hex.svg")
+    assert etree.parse(str(svg)).getroot().get("width") == "50mm"
+    assert _svg_reads(svg) == [("0x5A3C96", True)]
+
+    # a registry entry, picked by what it stands for
+    page.check("#print-form input[name=payload_as][value=registry]")
+    page.wait_for_selector("#print-entry-field:not([hidden])")
+    assert page.is_hidden("#print-payload-field")
+    labels = page.eval_on_selector_all("#print-entry option", "os => os.map(o => o.textContent)")
+    assert {"https://example.com/menu (menu): 0x00BEEF", "Ask at the desk: 0x0C0FFE"} <= set(labels), labels
+    page.select_option("#print-entry", label="Ask at the desk: 0x0C0FFE")
+    png = _download(page, "#print-png", tmp_path / "entry.png")
+    assert _png_reads(png) == [("0x0C0FFE", True)]
+    screenshot(page, "print-payload")
+    # a sheet of every entry, each labelled with what it stands for
+    page.check("#sheet-form input[value=registry]")
+    _, listed = request(server, "/api/models/ghost/entries", token=server.token)
+    hexes = [e["payload"]["hex"] for e in json.loads(listed)]
+    sheet = etree.parse(str(_download(page, "#sheet-svg", tmp_path / "entries.svg"))).getroot()
+    texts = [e.text for e in sheet if etree.QName(e).localname == "text"]
+    assert [t for t in texts if t.startswith("0x")] == hexes and "Ask at the desk" in texts
 
 
 def test_a_sheet_of_labelled_codes(page, server: Server, tmp_path: Path) -> None:

@@ -57,7 +57,7 @@ function openTab(name) {
   if (["payloads", "print", "scan"].includes(name)) loadModels();
   if (name === "payloads") loadEntries();
   if (name === "capacity" && state.drawing) runCapacity(); // the bounds as they are now
-  if (name === "print") printPreview();
+  if (name === "print") loadPrintEntries().then(printPreview, () => {});
 }
 document.querySelectorAll("#tabs button").forEach((b) => b.addEventListener("click", () => openTab(b.dataset.tab)));
 
@@ -452,25 +452,97 @@ $("#entry-form").addEventListener("submit", async (event) => {
 });
 
 // -- print ------------------------------------------------------------------------------------
+// A payload is typed as a number or as hex, or picked from the model's registry entries; the
+// studio reads typed text in the form chosen (deepmorph_core.payload.parse_payload_text).
+const printState = { as: "hex", entries: [] };
+
+function printModel() {
+  return $("#print-model").value || "ghost";
+}
+
+function payloadBits() {
+  const model = state.models.find((m) => m.id === printModel());
+  return model ? model.payload_bits : 24;
+}
+
+// the payload to print and how the studio is to read it
+function chosenPayload() {
+  if (printState.as === "registry") return { payload: $("#print-entry").value, payload_as: "hex" };
+  return { payload: $("#print-payload").value.trim(), payload_as: printState.as };
+}
+
+// a payload typed as a number written as hex, or back (BigInt: payloads have up to 256 bits);
+// text that is not one is left as it is, for the studio to say what is wrong with it
+function convertPayload(text, from, to) {
+  const t = text.trim();
+  let value;
+  if (from === "number" && /^[0-9]+$/.test(t)) value = BigInt(t);
+  else if (from === "hex" && /^(0x)?[0-9a-f]+$/i.test(t)) value = BigInt(/^0x/i.test(t) ? t : `0x${t}`);
+  else return text;
+  if (to === "number") return value.toString();
+  return `0x${value.toString(16).toUpperCase().padStart(Math.ceil(payloadBits() / 4), "0")}`;
+}
+
+function showPayloadAs() {
+  const registry = printState.as === "registry";
+  $("#print-payload-field").hidden = registry;
+  $("#print-random").hidden = registry;
+  $("#print-entry-field").hidden = !registry || !printState.entries.length;
+  $("#print-entry-none").hidden = !registry || printState.entries.length > 0;
+  const typed = printState.as === "number" ? "a number" : "0x…";
+  $("#print-payload").placeholder = typed;
+  $("#print-payload").inputMode = printState.as === "number" ? "numeric" : "text";
+  $("#sheet-form").lines.placeholder = typed;
+}
+
+document.querySelectorAll("#print-form input[name=payload_as]").forEach((radio) =>
+  radio.addEventListener("change", () => {
+    const before = printState.as;
+    printState.as = radio.value;
+    if (before !== "registry" && printState.as !== "registry") {
+      $("#print-payload").value = convertPayload($("#print-payload").value, before, printState.as);
+    }
+    showPayloadAs();
+  }));
+
+// the model's registry entries, listed by what they stand for
+async function loadPrintEntries() {
+  const rows = await api(`/api/models/${encodeURIComponent(printModel())}/entries`);
+  const select = $("#print-entry");
+  const keep = select.value;
+  printState.entries = rows;
+  select.replaceChildren(...rows.map((e) => {
+    const o = document.createElement("option");
+    o.value = e.payload.hex;
+    o.textContent = `${e.target}${e.note ? ` (${e.note})` : ""}: ${e.payload.hex}`;
+    return o;
+  }));
+  if (rows.some((e) => e.payload.hex === keep)) select.value = keep;
+  $("#sheet-entries").textContent = String(rows.length);
+  showPayloadAs();
+}
+
 async function newPayload() {
-  const model = $("#print-model").value || "ghost";
-  const p = await api(`/api/models/${encodeURIComponent(model)}/random`);
-  $("#print-payload").value = p.hex;
+  const p = await api(`/api/models/${encodeURIComponent(printModel())}/random`);
+  $("#print-payload").value = printState.as === "number" ? p.number : p.hex;
   printPreview();
 }
 $("#print-random").addEventListener("click", newPayload);
-$("#print-model").addEventListener("change", newPayload);
+$("#print-model").addEventListener("change", async () => {
+  await loadPrintEntries();
+  await newPayload();
+});
 
 function printQuery(format) {
   const form = $("#print-form");
   const q = new URLSearchParams({
-    payload: form.payload.value, width_mm: form.width_mm.value, dpi: form.dpi.value, format,
+    ...chosenPayload(), width_mm: form.width_mm.value, dpi: form.dpi.value, format,
   });
-  return `/api/models/${encodeURIComponent(form.model.value || "ghost")}/print?${q}`;
+  return `/api/models/${encodeURIComponent(printModel())}/print?${q}`;
 }
 
 function printPreview() {
-  if (!$("#print-payload").value) return;
+  if (!chosenPayload().payload) return;
   $("#print-preview").src = printQuery("svg") + "&preview=1";
   sheetPreview();
 }
@@ -489,27 +561,36 @@ function saveBlob(blob, name) {
 document.querySelectorAll("#tab-print [data-format]").forEach((button) =>
   button.addEventListener("click", async () => {
     const format = button.dataset.format;
+    const { payload } = chosenPayload();
+    if (!payload) {
+      showError(printState.as === "registry" ? "no registry entry to print: add one in the Payloads tab"
+        : "no payload: type one, or draw a new random payload");
+      return;
+    }
     const blob = await api(printQuery(format));
-    saveBlob(blob, `${$("#print-model").value}-${$("#print-payload").value}-${$("#print-form").width_mm.value}mm.${format}`);
+    saveBlob(blob, `${printModel()}-${payload}-${$("#print-form").width_mm.value}mm.${format}`);
   }));
 
 // a sheet of labelled codes: N consecutive payloads from a first one (the payload above unless
-// given), or a list, one a line
+// given), a list, one a line (typed as the payload above is), or every registry entry
 function sheetRequest(format, preview = false, quiet = false) {
   const f = $("#sheet-form");
-  const model = $("#print-model").value || "ghost";
+  const chosen = chosenPayload();
+  const fromRegistry = f.mode.value === "registry";
   const body = {
-    mode: f.mode.value, count: f.count.value, start: f.start.value || $("#print-payload").value,
-    lines: f.lines.value, page: f.page.value, code_mm: f.code_mm.value, margin_mm: f.margin_mm.value,
+    mode: fromRegistry ? "list" : f.mode.value, count: f.count.value, start: f.start.value || chosen.payload,
+    lines: fromRegistry ? printState.entries.map((e) => e.payload.hex).join("\n") : f.lines.value,
+    payload_as: fromRegistry ? "hex" : chosen.payload_as,
+    page: f.page.value, code_mm: f.code_mm.value, margin_mm: f.margin_mm.value,
     dpi: $("#print-form").dpi.value, format, preview,
   };
-  return postJson(`/api/models/${encodeURIComponent(model)}/sheet`, body, quiet);
+  return postJson(`/api/models/${encodeURIComponent(printModel())}/sheet`, body, quiet);
 }
 
 let sheetShown = null;
 async function sheetPreview() {
   const img = $("#sheet-preview");
-  if (!$("#print-payload").value) return;
+  if (!chosenPayload().payload && $("#sheet-form").mode.value === "range") return;
   try {
     const blob = await newest("sheet", () => sheetRequest("svg", true, true));
     if (blob === null) return;
@@ -527,7 +608,7 @@ document.querySelectorAll("#sheet-form [data-sheet]").forEach((button) =>
     const format = button.dataset.sheet;
     const blob = await sheetRequest(format);
     const f = $("#sheet-form");
-    saveBlob(blob, `${$("#print-model").value || "ghost"}-sheet-${f.page.value}-${f.code_mm.value}mm.${format}`);
+    saveBlob(blob, `${printModel()}-sheet-${f.page.value}-${f.code_mm.value}mm.${format}`);
   }));
 
 // -- scan -------------------------------------------------------------------------------------
