@@ -292,6 +292,54 @@ def test_bounds_set_by_clicking_are_in_the_downloaded_svg(page, server: Server, 
     assert b"<script" not in path.read_bytes()
 
 
+def test_shift_scale_and_rotation_set_by_clicking_are_in_the_downloaded_svg(page, server: Server,
+                                                                          tmp_path: Path) -> None:  # fmt: skip
+    """``dm:shift``, ``dm:scale`` and ``dm:rotate`` set in the shape panel: drawn (the shift's
+    box), read back by the reader (a range it refuses is refused at once) and downloaded."""
+    open_studio(page, server)
+    with page.expect_response("**/api/drawing"):
+        page.set_input_files("#svg-file", str(GHOST))
+    page.wait_for_function("() => state.drawing && state.drawing.name === 'ghost.svg' && state.selected === null")
+
+    def apply(index: int, **fields: str) -> None:
+        _click_shape(page, index)
+        page.wait_for_function("(i) => document.querySelector('#sel-index').textContent === `#${i}`", arg=index)
+        for name in ("shift", "scale", "rotate"):
+            page.fill(f"#bounds-form input[name={name}]", fields.get(name, ""))
+        with page.expect_response("**/api/drawing/bounds"):
+            page.click("#apply-bounds")
+
+    apply(4, shift="1.5 0.5")  # the left arm
+    apply(5, scale="0.9 1.1")  # the right arm
+    apply(3, rotate="-8 8")  # the mouth
+    page.wait_for_function("() => state.drawing.primitives[3].own && state.drawing.primitives[3].own.rotate")
+    assert page.evaluate("() => state.drawing.primitives[4].shift") == [1.5, 0.5]
+    assert page.locator("#overlay .shape[data-index='4'] rect.shift").count() == 1  # the shift's box
+    own = page.evaluate("() => [4, 5, 3].map(i => state.drawing.primitives[i].own)")
+    assert [o.get(k) for o, k in zip(own, ("shift", "scale", "rotate"), strict=True)] == ["1.5 0.5", "0.9 1.1", "-8 8"]
+    _click_shape(page, 5)  # the panel shows what is set
+    page.wait_for_function("() => document.querySelector('#sel-index').textContent === '#5'")
+    assert page.input_value("#bounds-form input[name=scale]") == "0.9 1.1"
+
+    # a range the reader refuses is one line in the red bar, and nothing is written
+    page.fill("#bounds-form input[name=scale]", "1.1 0.9")
+    page.click("#apply-bounds")
+    page.wait_for_selector("#error:not([hidden])")
+    assert "lower bound 1.1 is above upper bound 0.9" in page.text_content("#error")
+    assert "Traceback" not in page.text_content("#error")
+
+    with page.expect_download() as download:
+        page.click("#download-svg")
+    path = tmp_path / "annotated.svg"
+    download.value.save_as(path)
+    root = etree.parse(str(path)).getroot()
+    arms = [e for e in root.iter() if etree.QName(e).localname == "polyline"][:2]
+    mouth = [e for e in root.iter() if etree.QName(e).localname == "path"][1]
+    assert arms[0].get(f"{DM}shift") == "1.5 0.5" and arms[0].get(f"{DM}scale") is None
+    assert arms[1].get(f"{DM}scale") == "0.9 1.1"
+    assert mouth.get(f"{DM}rotate") == "-8 8" and mouth.get(f"{DM}move") == "0.9"
+
+
 def _drop_file(page, selector: str, name: str, text: str) -> None:  # noqa: ANN001
     """A file dropped on an element, as a file dragged from the desktop arrives."""
     page.evaluate(
