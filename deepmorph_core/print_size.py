@@ -52,6 +52,68 @@ def pixels_across(
     return frame_px * print_mm / seen_mm
 
 
+def farthest_cm(
+    print_mm: float, needs_px: float, frame_px: int = PHONE_FRAME_PX, fov_deg: float = PHONE_FOV_DEG
+) -> float:
+    """The distance in cm at which a ``print_mm`` print spans ``needs_px`` photo pixels: the
+    farthest a camera may be for the print to read (:func:`pixels_across` solved for the distance).
+
+    Raises:
+        DeepMorphError: as :func:`pixels_across`, or ``needs_px`` not positive.
+    """
+    if not needs_px > 0:
+        raise DeepMorphError(f"the pixels a print needs must be positive (got {needs_px})")
+    return pixels_across(print_mm, 1.0, frame_px, fov_deg) / needs_px
+
+
+@dataclass(frozen=True)
+class Legibility:
+    """Whether a print is wide enough in a photo for a model to read it.
+
+    Attributes:
+        pixels: the print's width in the photo.
+        needs_px: the narrowest print the model reads: its decoder's frame (a narrower one
+            loses the detail its bits are in, and ``decode`` calls it too small).
+        farthest_cm: with a camera and a print size, the farthest distance at which the print
+            still spans ``needs_px``; ``None`` when only pixels were given.
+    """
+
+    pixels: float
+    needs_px: float
+    farthest_cm: float | None = None
+
+    @property
+    def reads(self) -> bool:
+        """Whether the print is at least :attr:`needs_px` wide."""
+        return self.pixels >= self.needs_px
+
+    def sentence(self) -> str:
+        """The verdict in a user's words."""
+        where = ""
+        if self.farthest_cm is not None:
+            reach = f"{self.farthest_cm:.0f} cm" if self.farthest_cm < 100 else f"{self.farthest_cm / 100:.1f} m"
+            where = f"; it reads up to {reach} away" if self.reads else f"; hold the camera within {reach}"
+        if self.reads:
+            return f"wide enough to read: {self.pixels:.0f} px across, {self.needs_px:.0f} needed{where}"
+        return f"too small to read: {self.pixels:.0f} px across, needs {self.needs_px:.0f}{where}, or print it wider"
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "reads": self.reads}
+
+
+def legibility(
+    pixels: float,
+    needs_px: float,
+    print_mm: float | None = None,
+    frame_px: int = PHONE_FRAME_PX,
+    fov_deg: float = PHONE_FOV_DEG,
+) -> Legibility:
+    """The :class:`Legibility` of a print ``pixels`` wide in a photo, for a model that needs
+    ``needs_px``; with ``print_mm``, also how far away the camera may be."""
+    far = farthest_cm(print_mm, needs_px, frame_px, fov_deg) if print_mm is not None else None
+    return Legibility(float(pixels), float(needs_px), far)
+
+
 def movement(drawing: MorphableDrawing) -> np.ndarray:
     """``(N_v,)`` how far each variable moves the drawing: the largest distance any control
     point travels as the variable sweeps its whole range (every other one neutral), as a share

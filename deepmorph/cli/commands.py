@@ -203,7 +203,7 @@ def capacity(
     variables move in a photo at 96, 150, 200 and 300 px across (and at --pixels, or at the
     width a --print-mm print has at --distance-cm)."""
     from deepmorph_core.capacity import predict
-    from deepmorph_core.print_size import pixels_across, plan, plan_sizes, rows_to_json
+    from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
 
     if crc not in (None, 8, 16):
         raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
@@ -217,8 +217,15 @@ def capacity(
     report = predict(drawing, crc_bits=crc)
     sizes = plan(drawing, report.visible_mask, plan_sizes(pixels))
     camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
+    # a model reads prints at least as wide as its decoder's frame (the default one before training)
+    legible = None if pixels is None else legibility(pixels, DEFAULTS.width, print_mm, frame_px, fov_deg)
     if as_json:
-        plan_json = {"pixels": pixels, "camera": camera if print_mm is not None else None, "sizes": rows_to_json(sizes)}
+        plan_json = {
+            "pixels": pixels,
+            "camera": camera if print_mm is not None else None,
+            "legibility": None if legible is None else legible.to_json(),
+            "sizes": rows_to_json(sizes),
+        }
         print_json({"svg": str(svg), **report.to_json(), "print_size": plan_json})
         return
     spec = report.codec
@@ -244,6 +251,8 @@ def capacity(
     for line in report.limits():
         out.print(f"limit: {safe(line)}")
     _print_sizes(sizes, pixels, print_mm, distance_cm, frame_px, fov_deg)
+    if legible is not None:
+        out.print(safe(legible.sentence()))
 
 
 def _print_sizes(

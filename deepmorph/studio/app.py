@@ -553,10 +553,22 @@ def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, dista
     """What ``deepmorph capacity --print-mm --distance-cm`` adds to the prediction: the print's
     width in a 1080p phone's photo (:func:`~deepmorph_core.print_size.pixels_across`) and how
     far the visible variables move there and at 96, 150, 200 and 300 px
-    (:func:`~deepmorph_core.print_size.plan`), in the command's words."""
-    from deepmorph_core.print_size import PHONE_FOV_DEG, PHONE_FRAME_PX, pixels_across, plan, plan_sizes, rows_to_json
+    (:func:`~deepmorph_core.print_size.plan`), and whether a print that wide reads
+    (:func:`~deepmorph_core.print_size.legibility`), in the command's words."""
+    from deepmorph.training.settings import DEFAULTS
+    from deepmorph_core.print_size import (
+        PHONE_FOV_DEG,
+        PHONE_FRAME_PX,
+        legibility,
+        pixels_across,
+        plan,
+        plan_sizes,
+        rows_to_json,
+    )
 
     pixels = pixels_across(print_mm, distance_cm)
+    # a model reads prints at least as wide as its decoder's frame (the default one before training)
+    legible = legibility(pixels, DEFAULTS.width, print_mm)
     return {
         "print_mm": print_mm,
         "distance_cm": distance_cm,
@@ -566,6 +578,8 @@ def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, dista
         "sizes": rows_to_json(plan(md, visible, plan_sizes(pixels))),
         "span": f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {PHONE_FRAME_PX}-px, "
         f"{PHONE_FOV_DEG:g}° frame",
+        "legibility": legible.to_json(),
+        "verdict": legible.sentence(),
         "note": "models read every print in their decoder's frame (96 px unless trained with --image-width), so "
         "the payload above is the same for every print at least that wide",
     }

@@ -13,7 +13,16 @@ from typer.testing import CliRunner
 from deepmorph.cli import application
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
-from deepmorph_core.print_size import PHONE_FOV_DEG, PHONE_FRAME_PX, movement, pixels_across, plan, plan_sizes
+from deepmorph_core.print_size import (
+    PHONE_FOV_DEG,
+    PHONE_FRAME_PX,
+    farthest_cm,
+    legibility,
+    movement,
+    pixels_across,
+    plan,
+    plan_sizes,
+)
 from tests.conftest import FEATHER, make_svg
 
 app = application()
@@ -65,17 +74,46 @@ def test_moves_grow_with_the_pixels_and_with_the_bounds() -> None:
     assert [r.sub_pixel for r in rows] == sorted((r.sub_pixel for r in rows), reverse=True)
 
 
+def test_the_farthest_distance_is_where_the_print_spans_what_it_needs() -> None:
+    """A 50 mm print spans 96 px at about 78 cm; nearer it spans more and reads, farther it is
+    too small, and the verdict says which and how near to hold the camera."""
+    far = farthest_cm(50, 96)
+    assert far == pytest.approx(78.5, abs=0.1)
+    assert pixels_across(50, far) == pytest.approx(96.0)
+    assert farthest_cm(50, 96, frame_px=3840) == pytest.approx(2 * far)
+    near = legibility(pixels_across(50, 30), 96, print_mm=50)
+    assert near.reads and near.farthest_cm == pytest.approx(far)
+    assert near.sentence() == "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away"
+    distant = legibility(pixels_across(50, 120), 96, print_mm=50)
+    assert not distant.reads
+    assert (
+        distant.sentence()
+        == "too small to read: 63 px across, needs 96; hold the camera within 78 cm, or print it wider"
+    )
+    assert legibility(96, 96).reads and not legibility(95.9, 96).reads  # exactly the frame reads
+    assert legibility(60, 96).to_json() == {"pixels": 60.0, "needs_px": 96.0, "farthest_cm": None, "reads": False}
+    assert "1.6 m" in legibility(pixels_across(100, 30), 96, print_mm=100).sentence()
+    with pytest.raises(DeepMorphError, match="must be positive"):
+        farthest_cm(50, 0)
+
+
 def test_capacity_plans_a_print_from_its_size_and_distance(tmp_path) -> None:
     svg = FEATHER / "airplay.svg"
     shown = CliRunner().invoke(app, ["capacity", str(svg), "--move", "0.5", "--print-mm", "50", "--distance-cm", "30"])
     assert shown.exit_code == 0, shown.output
     assert "a 50 mm print at 30 cm spans 251 px of a 1920-px, 65° frame" in shown.output
     assert "251 px ←" in shown.output
+    assert "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away" in shown.output
+    distant = CliRunner().invoke(app, ["capacity", str(svg), "--print-mm", "20", "--distance-cm", "100"])
+    assert "too small to read: 30 px across, needs 96; hold the camera within 31 cm, or print it wider" in " ".join(
+        distant.output.split()
+    )
     data = json.loads(
         CliRunner().invoke(app, ["capacity", str(svg), "--move", "0.5", "--pixels", "200", "--json"]).output
     )
     plan_json = data["print_size"]
     assert plan_json["pixels"] == 200 and plan_json["camera"] is None
+    assert plan_json["legibility"] == {"pixels": 200.0, "needs_px": 96.0, "farthest_cm": None, "reads": True}
     assert [row["pixels"] for row in plan_json["sizes"]] == [96.0, 150.0, 200.0, 300.0]
     assert "visible_mask" not in data
     for args, message in (

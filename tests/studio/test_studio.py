@@ -695,6 +695,11 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
         f"a 50 mm print at 30 cm spans {pixels:.0f} px of a 1920-px, 65° frame"
     )
     assert _capacity_rows(page) == rows and [r[0] for r in rows].count(f"{pixels:.0f} px ←") == 1
+    assert (
+        page.text_content("#capacity-reads")
+        == "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away"
+    )
+    assert "bits read from 99 % of captures" in page.text_content("#capacity-bits")
     assert "models read every print in their decoder's frame" in page.text_content("#capacity-note")
     assert "the payload above is the same for every print at least that wide" in page.text_content("#capacity-note")
 
@@ -707,6 +712,23 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
     pixels, rows = _expected_rows(server, 80, 20)
     assert f"spans {pixels:.0f} px" in page.text_content("#capacity-span")
     assert _capacity_rows(page) == rows
+
+    # too far for the print's size: no payload at that distance, and how near to come
+    page.fill("#capacity-form input[name=print_mm]", "20")
+    page.fill("#capacity-form input[name=distance_cm]", "100")
+    with page.expect_response("**/api/capacity?print_mm=20&distance_cm=100"):
+        page.click("#capacity-run")
+    page.wait_for_function("() => document.querySelector('#capacity-span').textContent.startsWith('a 20 mm')")
+    assert page.text_content("#capacity-reads") == (
+        "too small to read: 30 px across, needs 96; hold the camera within 31 cm, or print it wider"
+    )
+    assert page.get_attribute("#capacity-reads", "class") == "warn"
+    assert page.text_content("#capacity-bits") == "none at this print size and distance: too small to read"
+    page.fill("#capacity-form input[name=print_mm]", "80")
+    page.fill("#capacity-form input[name=distance_cm]", "20")
+    with page.expect_response("**/api/capacity?print_mm=80&distance_cm=20"):
+        page.click("#capacity-run")
+    page.wait_for_function("() => document.querySelector('#capacity-span').textContent.startsWith('a 80 mm')")
 
     # a wider move for the ghost's mouth (the least-moving shape), set in the Drawing tab: the
     # smallest move grows

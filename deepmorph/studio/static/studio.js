@@ -251,7 +251,8 @@ $("#morph-animate").addEventListener("click", () => {
 
 // -- capacity ---------------------------------------------------------------------------------
 function clearCapacity() {
-  for (const id of ["#capacity-table", "#capacity-limits", "#capacity-sizes", "#capacity-span", "#capacity-note"]) {
+  for (const id of ["#capacity-table", "#capacity-limits", "#capacity-sizes", "#capacity-span", "#capacity-reads",
+    "#capacity-note"]) {
     $(id).replaceChildren();
   }
 }
@@ -273,7 +274,8 @@ async function runCapacity() {
     ["variables", `${r.n_variables} (${r.visible} visible)`],
     ["readable", `${r.readable_groups}`],
     ["code bits", `${r.code_bits}`],
-    ["payload", r.payload_bits ? `${r.payload_bits} bits read from 99 % of captures` : "none predicted to read"],
+    ["payload", !r.print_size.legibility.reads ? "none at this print size and distance: too small to read"
+      : r.payload_bits ? `${r.payload_bits} bits read from 99 % of captures` : "none predicted to read"],
   ];
   for (const [k, v] of rows) {
     const tr = document.createElement("tr");
@@ -295,6 +297,8 @@ async function runCapacity() {
 // how far the visible variables move in a photo, as `deepmorph capacity --print-mm --distance-cm` says it
 function showPrintSize(p) {
   $("#capacity-span").textContent = p.span;
+  $("#capacity-reads").textContent = p.verdict;
+  $("#capacity-reads").className = p.legibility.reads ? "" : "warn";
   const table = $("#capacity-sizes");
   table.appendChild(Object.assign(document.createElement("caption"),
     { textContent: "moves in the photo (control points across each variable's range)" }));
