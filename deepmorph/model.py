@@ -32,11 +32,19 @@ class Model:
     Args:
         bundle: the loaded bundle (:func:`load` makes one from a file).
         detector: the photo chain's detector by name (default: the one the bundle names).
+        device: where the photo chain's networks run: ``auto`` (CUDA where present, else the
+            CPU), ``cpu`` or ``cuda``.
+
+    Raises:
+        DeepMorphError: an unknown device, or ``cuda`` where there is none.
     """
 
-    def __init__(self, bundle: DeepMorphModel, detector: str | None = None) -> None:
+    def __init__(self, bundle: DeepMorphModel, detector: str | None = None, device: str = "auto") -> None:
+        from deepmorph_core.device import resolve_device
+
         self.bundle = bundle
         self._detector = detector
+        self._device = resolve_device(device)
         self._locator: Locator | None = None
 
     @property
@@ -80,7 +88,7 @@ class Model:
         if self._locator is None:
             from deepmorph_detect.locate import Locator
 
-            self._locator = Locator(self.bundle, detector=self._detector)
+            self._locator = Locator(self.bundle, detector=self._detector, device=self._device)
         return self._locator
 
     def decode(self, image: ImageLike, *, bgr: bool = False, camera: Camera | None = None) -> list[Located]:
@@ -162,15 +170,16 @@ class Model:
         return f"deepmorph.Model({self.drawing_name!r}, {self.payload_bits} payload bits)"
 
 
-def load(path: str | Path, *, detector: str | None = None) -> Model:
-    """A trained model from its bundle file.
+def load(path: str | Path, *, detector: str | None = None, device: str = "auto") -> Model:
+    """A trained model from its bundle file; its photo chain's networks run on ``device``
+    (``auto``: CUDA where present, else the CPU).
 
     Raises:
         DeepMorphError: a missing, corrupt or foreign file, in one line.
     """
     from deepmorph_core.model import DeepMorphModel
 
-    return Model(DeepMorphModel.load(path), detector=detector)
+    return Model(DeepMorphModel.load(path), detector=detector, device=device)
 
 
 def train(

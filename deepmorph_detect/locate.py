@@ -19,13 +19,16 @@
 
 from __future__ import annotations
 
+import inspect
+import warnings
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from deepmorph_core.codec import DecodeResult
-from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.device import resolve_device
+from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.image_io import MIN_IMAGE_SIDE
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
@@ -62,10 +65,14 @@ DEFAULT_DETECTOR = "universal"
 NO_DETECTOR = "none"
 
 
-def detector_for(model: DeepMorphModel, detector: Detector | str | None, registry: Registry) -> Detector | None:
+def detector_for(
+    model: DeepMorphModel, detector: Detector | str | None, registry: Registry, device: str = "cpu"
+) -> Detector | None:
     """The detector a locator uses: ``detector`` itself, the registered detector of that name,
     or (``None``) the one the bundle names, else :data:`DEFAULT_DETECTOR`; ``None`` for
-    :data:`NO_DETECTOR`.
+    :data:`NO_DETECTOR`. Its network runs on ``device`` where its ``from_model`` takes a
+    ``device`` (the built-in ones do); a plugin's that does not runs where it chooses, and a
+    warning says so.
 
     Raises:
         PluginError: no detector of that name is installed.
@@ -76,7 +83,15 @@ def detector_for(model: DeepMorphModel, detector: Detector | str | None, registr
     name = detector if detector is not None else (model.meta.detector.name if model.meta.detector else DEFAULT_DETECTOR)
     if name == NO_DETECTOR:
         return None
-    found = registry.detector(name).from_model(model)
+    kind = registry.detector(name)
+    if device == "cpu":
+        found = kind.from_model(model)
+    elif "device" in inspect.signature(kind.from_model).parameters:
+        found = kind.from_model(model, device=device)
+    else:
+        warnings.warn(DeepMorphWarning(f"detector {name!r} takes no device: it runs where it chooses, not on {device}"),
+                      stacklevel=3)  # fmt: skip
+        found = kind.from_model(model)
     if found is None and detector is not None:
         raise DeepMorphError(f"detector {name!r} has nothing trained for this model")
     return found
@@ -92,6 +107,9 @@ class Locator:
             ink are tried.
         min_correlation: the bar an alignment must reach to be this drawing.
         registry: where detector names are looked up (default: every installed plugin).
+        device: where the detector and decoder networks run (``auto``, ``cpu``, ``cuda``:
+            :func:`~deepmorph_core.device.resolve_device`); alignment, reading by synthesis and
+            the checks run on the CPU whatever it is.
     """
 
     def __init__(
@@ -100,9 +118,11 @@ class Locator:
         detector: Detector | str | None = None,
         min_correlation: float = MIN_CORRELATION,
         registry: Registry | None = None,
+        device: str = "cpu",
     ) -> None:
         self.model = model
-        self.detector = detector_for(model, detector, registry or default_registry())
+        self.device = resolve_device(device)
+        self.detector = detector_for(model, detector, registry or default_registry(), self.device)
         self.min_correlation = min_correlation
         md = model.drawing
         self.viewbox = md.drawing.viewbox
@@ -120,7 +140,7 @@ class Locator:
         thickness = ink_thickness(self.template, view_width)
         self.ink_share = thickness / view_width
         self.aligner = Aligner(self.template, min_correlation, thickness, view_width)
-        self.reader = Reader(model, self.template, self.morphs, self.synthesis, thickness)
+        self.reader = Reader(model, self.template, self.morphs, self.synthesis, thickness, self.device)
         self.checker = PayloadChecker(model, self.template, self.morphs, self.synthesis)
         self.placer = Placer(self.viewbox)
         self.frame_corners = self.aligner.frame_corners

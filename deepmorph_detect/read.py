@@ -52,6 +52,7 @@ class Reader:
         morphs: the drawing's morph templates (second looks align to a misread's morph).
         synthesis: reading by synthesis, for the last look.
         ink_thickness: the thickest ink feature in pixels of a rectified view (flat light).
+        device: where the decoder runs (a resolved torch device name; the CPU by ONNX Runtime).
     """
 
     def __init__(
@@ -61,6 +62,7 @@ class Reader:
         morphs: MorphTemplates,
         synthesis: MorphSynthesis,
         ink_thickness: float,
+        device: str = "cpu",
     ) -> None:
         self.model = model
         self.template = template
@@ -73,7 +75,7 @@ class Reader:
         generator = torch.Generator().manual_seed(0)
         examples = [torch.rand(1, 1, *model.image_size, generator=generator) for _ in range(2)]
         self.decoder = onnx_or_torch(
-            model, "decoder", fused_for_inference(model.decoder), examples, model.decoder_graph
+            model, "decoder", fused_for_inference(model.decoder), examples, model.decoder_graph, device=device
         )
 
     def rectify(self, pyramid: ImagePyramid, H: np.ndarray) -> np.ndarray:

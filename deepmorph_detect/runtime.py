@@ -6,6 +6,10 @@ its blocked layout and back). ONNX Runtime fuses each convolution with its ReLU,
 memory once and keeps one layout: on one core the decoder takes about half of PyTorch's time,
 with or without a spatial transformer.
 
+On a CUDA device (``Locator(..., device="cuda")``, ``decode --device``) both run in PyTorch
+on that device instead (:class:`DeviceNetwork`): ONNX Runtime's CPU build is what the package
+installs.
+
 The graphs come from the bundle, where training stored them (:mod:`deepmorph_core.graphs`). A
 bundle without one (written before graphs were stored, or by an interrupted run) has it
 exported once per process, kept with the loaded model, and a warning says how to store it.
@@ -19,7 +23,8 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 
-from torch import Tensor
+import torch
+from torch import Tensor, nn
 
 from deepmorph_core.errors import DeepMorphWarning
 from deepmorph_core.graphs import TOLERANCE, GraphError, OnnxNetwork, StoredGraph
@@ -45,6 +50,22 @@ def _checked(stored: StoredGraph, net: Network, examples: Sequence[Tensor]) -> t
     return None, f"its outputs differ from PyTorch's by {diff:.3g}"
 
 
+class DeviceNetwork:
+    """A PyTorch network run on a device (eval mode, no gradients): its input moved there, its
+    outputs brought back to the CPU, so that it is called as the CPU's networks are."""
+
+    def __init__(self, net: nn.Module, device: str) -> None:
+        self.device = torch.device(device)
+        self.net = net.to(self.device).eval()
+
+    def __call__(self, x: Tensor) -> Tensor | tuple[Tensor, ...]:
+        with torch.inference_mode():
+            out = self.net(x.to(self.device))
+        if isinstance(out, tuple):
+            return tuple(o.cpu() for o in out)
+        return out.cpu()
+
+
 def onnx_or_torch(
     model: DeepMorphModel | None,
     name: str,
@@ -52,8 +73,11 @@ def onnx_or_torch(
     examples: Sequence[Tensor],
     export: Callable[[], StoredGraph],
     graph: StoredGraph | None = None,
+    device: str = "cpu",
+    module: nn.Module | None = None,
 ) -> Network:
-    """The network ``name`` of ``model`` run by ONNX Runtime, or ``net`` (PyTorch) itself.
+    """The network ``name`` of ``model`` run by ONNX Runtime, or ``net`` (PyTorch) itself; on
+    another device than the CPU, ``module`` run there (:class:`DeviceNetwork`).
 
     The graph is the one ``model.graphs`` holds, else the one ``export`` makes (then kept in
     ``model.graphs``, so that other locators of the same model share it and a save stores it).
@@ -69,7 +93,14 @@ def onnx_or_torch(
         examples: inputs the graph is checked on.
         export: makes the graph from ``net``'s weights.
         graph: the stored graph to use for a network of no model (the universal detector's).
+        device: a resolved torch device name (:func:`~deepmorph_core.device.resolve_device`).
+        module: the network as a module called as ``net`` is, for ``device`` (default ``net``).
     """
+    if device != "cpu":
+        target = module if module is not None else net
+        if not isinstance(target, nn.Module):
+            raise TypeError(f"onnx_or_torch: {name} on {device} needs the network as a module")
+        return DeviceNetwork(target, device)
     label = (model.source if model is not None else None) or "the model"
     stored = model.graphs.get(name) if model is not None else graph
     if stored is not None:
@@ -98,4 +129,4 @@ def onnx_or_torch(
     return fast
 
 
-__all__ = ["onnx_or_torch"]
+__all__ = ["DeviceNetwork", "onnx_or_torch"]

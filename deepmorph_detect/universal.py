@@ -98,11 +98,12 @@ def load_universal(path: str | Path) -> tuple[DetectorNet, StoredGraph | None, U
 
 
 @functools.lru_cache(maxsize=4)
-def shared_runner(path: str = str(UNIVERSAL_PATH)) -> Runner:
-    """The universal network of ``path``, loaded once per process and run as the per-drawing
-    detector runs (ONNX Runtime from its stored graph, else PyTorch)."""
+def shared_runner(path: str = str(UNIVERSAL_PATH), device: str = "cpu") -> Runner:
+    """The universal network of ``path``, loaded once per process and device and run as the
+    per-drawing detector runs (ONNX Runtime from its stored graph, else PyTorch; PyTorch on a
+    device other than the CPU)."""
     net, graph, _, _ = load_universal(path)
-    return detector_runner(net, None, graph)
+    return detector_runner(net, None, graph, device)
 
 
 def ink_square(svg: str, viewbox: tuple[float, float, float, float]) -> np.ndarray:
@@ -155,8 +156,8 @@ class UniversalDetector(CentreNetDetector):
         self.frame = viewbox_corners(viewbox)
 
     @classmethod
-    def from_model(cls, model: DeepMorphModel) -> UniversalDetector:
-        """The universal detector for ``model`` (every model has one).
+    def from_model(cls, model: DeepMorphModel, device: str = "cpu") -> UniversalDetector:
+        """The universal detector for ``model`` (every model has one), its network on ``device``.
 
         Raises:
             DeepMorphError: the shipped detector file is missing or damaged.
@@ -168,7 +169,7 @@ class UniversalDetector(CentreNetDetector):
             )
         md = model.drawing
         viewbox = md.drawing.viewbox
-        return cls(ink_square(md.to_svg(md.neutral_values()[0]), viewbox), viewbox, shared_runner())
+        return cls(ink_square(md.to_svg(md.neutral_values()[0]), viewbox), viewbox, shared_runner(device=device))
 
     @classmethod
     def graph(cls, model: DeepMorphModel) -> StoredGraph | None:

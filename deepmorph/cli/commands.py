@@ -16,6 +16,7 @@ from deepmorph.cli.frame import (
     PANEL_CODES,
     PANEL_DRAWINGS,
     PANEL_MODELS,
+    DeviceOpt,
     DropOpt,
     JsonOpt,
     ModelArg,
@@ -58,12 +59,6 @@ if TYPE_CHECKING:
 
     from deepmorph.training.many import DrawingResult
     from deepmorph_core.morphable import MorphableDrawing
-
-
-DeviceOpt = Annotated[
-    Literal["auto", "cpu", "cuda"],
-    typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
-]
 
 
 BatchOpt = Annotated[int, setting_option("batch")]
@@ -728,9 +723,9 @@ def validate(
     as_json: JsonOpt = False,
 ) -> None:
     """Read fresh random payloads back from renders and photos: what the model really reads."""
-    from deepmorph.training.distributed import resolve_device
     from deepmorph.training.validation import validate as run_validation
     from deepmorph.training.validation import validation_warning
+    from deepmorph_core.device import resolve_device
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import default_registry
 

@@ -255,6 +255,12 @@ ModelArg = Annotated[Path, typer.Argument(help="A DeepMorph model bundle (.dmm).
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (reproducible runs).")]
 
 
+DeviceOpt = Annotated[
+    Literal["auto", "cpu", "cuda"],
+    typer.Option("--device", help="Where torch runs: auto is CUDA where a CUDA device is present, else the CPU."),
+]
+
+
 ThreadsOpt = Annotated[
     Optional[int],
     typer.Option(

@@ -16,6 +16,7 @@ from deepmorph.cli.frame import (
     PANEL_CODES,
     PANEL_MEASURE,
     PANEL_MODELS,
+    DeviceOpt,
     JsonOpt,
     ModelArg,
     PhotoSeverityName,
@@ -117,6 +118,7 @@ def decode(
     hard_only: HardOpt = False,
     detector: DetectorOpt = None,
     threads: ThreadsOpt = None,
+    device: DeviceOpt = "auto",
     registry: Annotated[
         bool, typer.Option("--registry", help="Show each verified payload's entry in the payload registry.")
     ] = False,
@@ -143,7 +145,7 @@ def decode(
         from deepmorph.registry import PayloadRegistry, detection_lookup
 
         look_up = detection_lookup(PayloadRegistry(db), m)  # a missing or foreign registry: refused before any work
-    locator = Locator(m, detector=detector)
+    locator = Locator(m, detector=detector, device=device)
     cam = parse_camera(camera) if camera else None
     jobs: list[tuple[str, Path, Any]] = []
     for path in inputs:  # every input is checked before any work

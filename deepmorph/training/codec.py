@@ -45,7 +45,6 @@ from deepmorph.training.distributed import (
     join,
     leave,
     rank_shards,
-    resolve_device,
     shard_seed,
     shard_sizes,
     sum_gradients,
@@ -59,6 +58,7 @@ from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, Valid
 from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
+from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders

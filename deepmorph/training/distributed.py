@@ -30,24 +30,6 @@ from torch import Tensor, nn
 
 from deepmorph_core.errors import DeepMorphError
 
-#: What ``--device`` takes: ``auto`` is CUDA where a CUDA device is present, else the CPU.
-DEVICES = ("auto", "cpu", "cuda")
-
-
-def resolve_device(name: str) -> str:
-    """``auto`` -> ``cuda`` when CUDA is available, else ``cpu``; ``cpu`` and ``cuda`` as they are.
-
-    Raises:
-        DeepMorphError: an unknown name, or ``cuda`` where no CUDA device is available.
-    """
-    if name not in DEVICES:
-        raise DeepMorphError(f"--device {name}: expected one of {', '.join(DEVICES)}")
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" and not torch.cuda.is_available():
-        raise DeepMorphError("--device cuda was asked for but no CUDA device is available (use --device cpu)")
-    return name
-
 
 @dataclass(frozen=True)
 class World:

@@ -23,8 +23,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from deepmorph.training.distributed import World, resolve_device
+from deepmorph.training.distributed import World
 from deepmorph_core.bundle import load_bundle
+from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 
 Status = Literal["trained", "resumed", "done", "failed"]

@@ -13,9 +13,9 @@ from typer.testing import CliRunner
 
 from deepmorph.cli import application
 from deepmorph.training.codec import train_model
-from deepmorph.training.distributed import resolve_device
 from deepmorph.training.loop import read_log
 from deepmorph.training.validation import validate_renders
+from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig

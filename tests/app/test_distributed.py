@@ -20,8 +20,9 @@ import pytest
 import torch
 
 from deepmorph.training.codec import train_model
-from deepmorph.training.distributed import World, rank_shards, resolve_device, shard_sizes, world_from_env
+from deepmorph.training.distributed import World, rank_shards, shard_sizes, world_from_env
 from deepmorph.training.loop import Interrupted, read_log
+from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from tests.app.test_training import TINY
