@@ -96,7 +96,7 @@ def render_moments(images: Tensor) -> Tensor:
 
 
 def align_to_frame(
-    gray: np.ndarray, size: tuple[int, int], target: Tensor
+    gray: np.ndarray, size: tuple[int, int], target: Tensor, moments: np.ndarray | None = None
 ) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
     """Bring a photo or scan into the decoder's frame, as training frames its renders.
 
@@ -104,6 +104,11 @@ def align_to_frame(
         gray: ``(h, w)`` float image, 1 = white.
         size: ``(H, W)`` of the decoder's frame.
         target: ``(4,)`` ink moments of the unmorphed drawing in that frame.
+        moments: ``(4,)`` where the drawing's ink is in ``gray`` (cx, cy, sx, sy), when that is
+            known better than the photo's ink shows it: a rectified view, where the unmorphed
+            drawing's ink lies wherever the alignment put it. A shadow's edge or a fill as dark
+            as the photo's ink threshold moves the measured moments, not these. Measured from
+            the ink mask when ``None``.
 
     Returns:
         The ``(H, W)`` float32 frame and the ink's bounding box in the input, or ``None`` when
@@ -116,7 +121,7 @@ def align_to_frame(
     if found is None:
         return None
     mask, box = found
-    moments = mask_moments_one(mask)
+    moments = mask_moments_one(mask) if moments is None else np.asarray(moments, dtype=np.float64)
     goal = target.detach().cpu().numpy() if isinstance(target, Tensor) else np.asarray(target)
     src, moments = shrink_to_frame(norm, moments, float(goal[2]))
     return canonicalize_one(np.ascontiguousarray(src, dtype=np.float32), moments, goal, size), box

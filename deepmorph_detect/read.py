@@ -7,8 +7,10 @@ one drawing in the order they are tried; the caller stops at the first payload t
 every check (:mod:`deepmorph_detect.check`):
 
 1. the first looks: each view (the most confident passing reading first);
-2. second looks (:meth:`Reader.read_again`), decoded with hard decisions;
-3. the last look by synthesis (:meth:`Reader.read_by_synthesis`), always checked bit by bit.
+2. the rectified view framed where the alignment puts the unmorphed drawing's ink rather than
+   by the photo's ink (:meth:`Reader.read_framed_by_template`);
+3. second looks (:meth:`Reader.read_again`), decoded with hard decisions;
+4. the last look by synthesis (:meth:`Reader.read_by_synthesis`), always checked bit by bit.
 
 A reading that passes the CRC but not the checks does not end the search: a near miss caught by
 the per-bit check at the first look is often read right by a later one.
@@ -23,7 +25,7 @@ import numpy as np
 import torch
 
 from deepmorph_core.codec import DecodeResult
-from deepmorph_core.framing import align_to_frame
+from deepmorph_core.framing import align_to_frame, mask_moments_one
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import fused_for_inference
 from deepmorph_core.photo import flatten_illumination
@@ -33,6 +35,7 @@ from deepmorph_detect.runtime import onnx_or_torch
 from deepmorph_detect.synthesis import MorphSynthesis
 
 RECTIFY_WIDTH_FACTOR = 2  # the rectified drawing is this many decoder widths wide
+TEMPLATE_INK = 0.5  # ink of the unmorphed drawing's render (contrast-stretched as photos are)
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,11 @@ class Reader:
         self.synthesis = synthesis
         self.ink_thickness = ink_thickness
         self.view_width = model.width * RECTIFY_WIDTH_FACTOR
+        # where the unmorphed drawing's ink lies in a rectified view (read_framed_by_template)
+        unmorphed = model.drawing.to_svg(model.drawing.neutral_values()[0])
+        self.template_moments = mask_moments_one(
+            synthesis.renderer(unmorphed, self.view_width, template.viewbox) < TEMPLATE_INK
+        )
         # the decoder's graph run by ONNX Runtime (PyTorch, batch norms folded, where there is
         # none): about half the time per reading
         generator = torch.Generator().manual_seed(0)
@@ -82,11 +90,12 @@ class Reader:
         """The drawing's viewBox seen head-on, :attr:`view_width` pixels wide."""
         return warp_to_template(pyramid, H, self.template, self.view_width)
 
-    def read(self, view: np.ndarray, soft: bool) -> Reading | None:
-        """The payload reading of one view (framed by its ink as in training), or ``None``
-        when the view shows no ink."""
+    def read(self, view: np.ndarray, soft: bool, moments: np.ndarray | None = None) -> Reading | None:
+        """The payload reading of one view, or ``None`` when the view shows no ink. The view is
+        framed by its ink as in training, or by ``moments`` (the ink's moments in the view)
+        where given."""
         model = self.model
-        aligned = align_to_frame(view, model.image_size, model.canonical_moments())
+        aligned = align_to_frame(view, model.image_size, model.canonical_moments(), moments)
         if aligned is None:
             return None
         with torch.inference_mode():
@@ -104,10 +113,21 @@ class Reader:
         firsts.sort(key=lambda r: (r.result.ok, r.result.confidence), reverse=True)
         for reading in firsts:
             yield reading, None
+        framed = self.read_framed_by_template(views[0], soft)
+        if framed is not None:
+            yield framed, None
         for reading in self.read_again(pyramid, H, views[0], firsts):
             yield reading, None
         if readings:
             yield self.read_by_synthesis(pyramid, H, readings), True
+
+    def read_framed_by_template(self, view: np.ndarray, soft: bool) -> Reading | None:
+        """The rectified view framed where the alignment puts the unmorphed drawing's ink
+        (:attr:`template_moments`), not where the photo's ink is: a shadow across a light fill,
+        or a fill as dark as the ink threshold, changes the photo's ink mask and with it the
+        framing the decoder was trained on. Decoded as the first looks are, and tried only when
+        none of them passed (``docs/design-notes.md``)."""
+        return self.read(view, soft, self.template_moments)
 
     def read_again(
         self, pyramid: ImagePyramid, H: np.ndarray, view: np.ndarray, readings: list[Reading]

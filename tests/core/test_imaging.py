@@ -71,6 +71,28 @@ def test_one_mask_moments_match_the_batched_ones(ghost) -> None:
         np.testing.assert_allclose(mask_moments_one(mask), expected, rtol=1e-9, atol=1e-9)
 
 
+def test_a_frame_set_by_given_moments_ignores_ink_a_shadow_adds(ghost) -> None:
+    """A dark band beside the drawing counts as ink and drags the framing by the photo's ink off; framed by the moments of the drawing's own ink (what a rectified view's alignment
+    gives), the frame is the clean render's frame. Given moments are used as they are: moved
+    by 6 px, the frame's content moves by 6 px times the frame's scale."""
+    md, base = ghost
+    target = render_moments(torch.from_numpy(base)[None, None])[0]
+    clean = np.pad(render_svg(md.to_svg(md.neutral_values()[0]), 192), 24, constant_values=1.0)
+    own = mask_moments_one(clean < 0.5)
+    shaded = clean.copy()
+    shaded[24:216, 4:20] *= 0.35  # a shadow's edge as dark as ink, in the margin (not at the border)
+    clean_frame, _ = align_to_frame(clean, (96, 96), target)
+    by_photo, _ = align_to_frame(shaded, (96, 96), target)
+    by_moments, _ = align_to_frame(shaded, (96, 96), target, moments=own)
+    inner = np.s_[:, 30:]  # away from the band, the two framings differ only by where they put the drawing
+    assert np.abs(by_moments - clean_frame)[inner].mean() < 0.01
+    assert np.abs(by_photo - clean_frame)[inner].mean() > 5 * np.abs(by_moments - clean_frame)[inner].mean()
+    moved, _ = align_to_frame(clean, (96, 96), target, moments=own + np.array([6.0, 0.0, 0.0, 0.0]))
+    scale = float(target[2]) / own[2]
+    shifts = [np.abs(np.roll(moved, s, axis=1) - clean_frame)[:, 10:-10].mean() for s in range(8)]
+    assert abs(int(np.argmin(shifts)) - 6 * scale) <= 1
+
+
 @pytest.mark.parametrize("width, pad, tol", [(96, 0, 0.03), (300, 40, 0.03), (57, 5, 0.06)])
 def test_photo_framing_matches_render_framing(ghost, width: int, pad: int, tol: float) -> None:
     """A larger (or smaller) render with a paper margin frames like the training render."""
