@@ -114,7 +114,7 @@ def test_the_locator_reads_by_synthesis_when_no_view_passes_the_crc(
     misread[wrong] = np.where(code[wrong] == 1, 0.02, 0.98)
     # every CNN reading, first and second looks, has the same five confident errors
     monkeypatch.setattr(
-        Reader, "read", lambda self, view, soft: Reading(model.codec.decode(misread, soft=False), misread)
+        Reader, "read", lambda self, view, soft, moments=None: Reading(model.codec.decode(misread, soft=False), misread)
     )
     (det,) = locator.locate(scene.image, camera=scene.camera)
     assert det.result.ok and np.array_equal(det.result.payload, truth.payload)
