@@ -131,7 +131,7 @@ def detector_runner(
     examples = [torch.rand(1, 1, H, W, generator=generator) for _ in range(2)]
     return onnx_or_torch(
         model, "detector", TorchDetector(eager), examples, lambda: detector_graph(net), graph, device,
-        DetectorGraph(fused_for_inference(net)),
+        lambda: DetectorGraph(fused_for_inference(net)),
     )  # fmt: skip
 
 

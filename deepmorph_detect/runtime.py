@@ -74,10 +74,10 @@ def onnx_or_torch(
     export: Callable[[], StoredGraph],
     graph: StoredGraph | None = None,
     device: str = "cpu",
-    module: nn.Module | None = None,
+    module: Callable[[], nn.Module] | None = None,
 ) -> Network:
     """The network ``name`` of ``model`` run by ONNX Runtime, or ``net`` (PyTorch) itself; on
-    another device than the CPU, ``module`` run there (:class:`DeviceNetwork`).
+    another device than the CPU, the module ``module`` makes run there (:class:`DeviceNetwork`).
 
     The graph is the one ``model.graphs`` holds, else the one ``export`` makes (then kept in
     ``model.graphs``, so that other locators of the same model share it and a save stores it).
@@ -94,10 +94,11 @@ def onnx_or_torch(
         export: makes the graph from ``net``'s weights.
         graph: the stored graph to use for a network of no model (the universal detector's).
         device: a resolved torch device name (:func:`~deepmorph_core.device.resolve_device`).
-        module: the network as a module called as ``net`` is, for ``device`` (default ``net``).
+        module: makes the network as a module called as ``net`` is, for ``device`` (default:
+            ``net`` itself); called only off the CPU.
     """
     if device != "cpu":
-        target = module if module is not None else net
+        target = module() if module is not None else net
         if not isinstance(target, nn.Module):
             raise TypeError(f"onnx_or_torch: {name} on {device} needs the network as a module")
         return DeviceNetwork(target, device)
