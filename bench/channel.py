@@ -14,6 +14,11 @@ of the information bits a code of that many symbols carries with 99 % of its wor
 (Polyanskiy, Poor and Verdu 2010); less the default CRC, the payload a perfect decoder could
 carry at 99 %, and its ratio to the visible variables.
 
+``--pixels 96,200,300`` reads each drawing once per print width in the photo, at that width,
+with the capture's blur and motion in the camera's pixels (``deepmorph train --pixels``); a
+bare run reads at 96 px as a default model does. ``--standardise`` puts each image at zero
+mean and unit variance before the ridge map (a linear reading that ignores contrast).
+
 ``--undone-warp`` reads each drawing a second time through ``medium``'s residual warp, its
 photometric steps and the warp's exact inverse: alignment still perfect, but the picture
 resampled twice, as a photo's view is. ``--bundles`` reads trained models' drawings with the
@@ -46,6 +51,7 @@ from _common import RESULTS, environment, set_threads, table, write_json  # noqa
 WIDTH = 96
 TEST_SAMPLES = 1000
 RIDGE = 10.0
+GRAM_BLOCK = 8192
 WORD_RATE = 0.99
 GEOMETRIC_STEPS = {"perspective", "scale", "rotation", "translation"}
 SIGMA_GRID = np.linspace(0.02, 0.6, 59)
@@ -124,27 +130,38 @@ def payload_within(information_bits: float) -> int:
 # -- reading the groups ------------------------------------------------------------------------
 
 
-def ridge_rms(pixels: np.ndarray, targets: np.ndarray, test: int) -> np.ndarray:
-    """Rms error per target column of a ridge map fitted on all rows but the last ``test``."""
+def ridge_rms(pixels: np.ndarray, targets: np.ndarray, test: int, width: int = WIDTH) -> np.ndarray:
+    """Rms error per target column of a ridge map fitted on all rows but the last ``test``.
+
+    Solved in its dual form (the Gram matrix of the fitted rows, accumulated in float64 over
+    blocks of pixels), which gives the primal's weights and needs no pixels-by-pixels matrix:
+    a 300-px frame has 90,000. The ridge grows with the frame's area (:data:`RIDGE` at
+    :data:`WIDTH` px, times ``(width / WIDTH)^2``), so that wider frames are regularised alike."""
     fit, held = slice(None, -test), slice(-test, None)
-    mean_x, mean_t = pixels[fit].mean(0), targets[fit].mean(0)
-    x = pixels - mean_x
-    gram = x[fit].T @ x[fit] + RIDGE * np.eye(x.shape[1])
-    weights = np.linalg.solve(gram, x[fit].T @ (targets[fit] - mean_t))
-    return np.sqrt(((x[held] @ weights + mean_t - targets[held]) ** 2).mean(0))
+    mean_x, mean_t = pixels[fit].mean(0, dtype=np.float64), targets[fit].mean(0)
+    rows = len(pixels)
+    gram = np.zeros((rows, rows))
+    for lo in range(0, pixels.shape[1], GRAM_BLOCK):
+        block = pixels[:, lo : lo + GRAM_BLOCK].astype(np.float64) - mean_x[lo : lo + GRAM_BLOCK]
+        gram += block @ block.T
+    fitted = gram[fit, fit].copy()
+    fitted[np.diag_indices_from(fitted)] += RIDGE * (width / WIDTH) ** 2
+    dual = np.linalg.solve(fitted, targets[fit] - mean_t)
+    return np.sqrt(((gram[held, fit] @ dual + mean_t - targets[held]) ** 2).mean(0))
 
 
-def medium_part(width: int, geometric: bool) -> Any:
-    """The ``medium`` corruption with only its geometric steps (``geometric``) or without them."""
-    from deepmorph_core.corruption import build_pipeline
+def medium_part(width: int, geometric: bool, print_px: int | None = None) -> Any:
+    """The ``medium`` corruption with only its geometric steps (``geometric``) or without them;
+    with ``print_px``, its pixel parameters the camera's for a print that many pixels wide."""
+    from deepmorph_core.corruption import AugmentPipeline
     from deepmorph_core.severity import residual_steps
 
     steps = [
         {"name": name, "p": p, "params": params}
-        for name, p, params in residual_steps("medium", width)
+        for name, p, params in residual_steps("medium", width, print_px=print_px)
         if (name in GEOMETRIC_STEPS) == geometric
     ]
-    return build_pipeline("medium", width, {"steps": steps})
+    return AugmentPipeline({"steps": steps})
 
 
 def framed_renders(drawing: Any, unit: Any, width: int) -> Any:
@@ -155,22 +172,29 @@ def framed_renders(drawing: Any, unit: Any, width: int) -> Any:
     return frame_renders(real, drawing.neutral_moments(width), tuple(real.shape[-2:]))
 
 
-def corrupted(images: Any, steps: Callable[[Any, Any], Any], seed: int, batch: int = 500) -> np.ndarray:
-    """``steps(images, generator)`` over ``images`` in batches, as float64 rows of pixels."""
+def corrupted(
+    images: Any, steps: Callable[[Any, Any], Any], seed: int, batch: int = 500, standardise: bool = False
+) -> np.ndarray:
+    """``steps(images, generator)`` over ``images`` in batches, as float32 rows of pixels; with
+    ``standardise``, each row at zero mean and unit variance (a reading that ignores contrast
+    and brightness, as a CNN's normalisation does)."""
     import torch
 
     generator = torch.Generator().manual_seed(seed)
     with torch.no_grad():
         out = [steps(images[i : i + batch], generator) for i in range(0, len(images), batch)]
-    return torch.cat(out).flatten(1).numpy().astype(np.float64)
+    flat = torch.cat(out).flatten(1)
+    if standardise:
+        flat = (flat - flat.mean(1, keepdim=True)) / flat.std(1, keepdim=True).clamp_min(1e-6)
+    return flat.numpy()
 
 
 def group_sigma(
-    drawing: Any, views: dict[str, Callable[[Any, Any], Any]], args: argparse.Namespace
+    drawing: Any, views: dict[str, Callable[[Any, Any], Any]], args: argparse.Namespace, width: int = WIDTH
 ) -> tuple[dict[str, np.ndarray], int]:
     """Rms error of a linear reading of each readable group of ``drawing`` through each view's
-    steps (the same renders of the spread start at one code bit per group), and the visible
-    variables."""
+    steps (the same renders of the spread start at one code bit per group, framed ``width``
+    pixels wide), and the visible variables (groups and visibility judged at :data:`WIDTH`)."""
     import torch
 
     from deepmorph_core.capacity import INVISIBLE
@@ -184,16 +208,16 @@ def group_sigma(
     rng = np.random.default_rng(args.seed + 1)
     bits = torch.from_numpy(rng.integers(0, 2, (args.samples + TEST_SAMPLES, len(groups))).astype(np.float32))
     unit = torch.sigmoid((2 * bits - 1) @ weights.T)
-    renders = framed_renders(drawing, unit, WIDTH)
+    renders = framed_renders(drawing, unit, width)
     targets = unit[:, firsts].numpy().astype(np.float64)
-    sigmas = {
-        view: ridge_rms(corrupted(renders, steps, args.seed + 2), targets, TEST_SAMPLES)
-        for view, steps in views.items()
-    }
+    sigmas = {}
+    for view, steps in views.items():
+        seen = corrupted(renders, steps, args.seed + 2, standardise=args.standardise)
+        sigmas[view] = ridge_rms(seen, targets, TEST_SAMPLES, width)
     return sigmas, int(shown.sum())
 
 
-def undone_warp(width: int) -> Callable[[Any, Any], Any]:
+def undone_warp(width: int, print_px: int | None = None) -> Callable[[Any, Any], Any]:
     """``medium``'s residual warp, then its photometric steps, then the warp's exact inverse:
     perfect alignment that pays for resampling the picture twice, as a photo's view is."""
     import torch
@@ -201,7 +225,7 @@ def undone_warp(width: int) -> Callable[[Any, Any], Any]:
     from deepmorph_core.corruption import fused_matrices, warp_white
 
     geometry = medium_part(width, geometric=True).steps
-    light = medium_part(width, geometric=False)
+    light = medium_part(width, geometric=False, print_px=print_px)
 
     def steps(images: Any, generator: Any) -> Any:
         _, matrix = fused_matrices(geometry, images, generator)
@@ -215,28 +239,35 @@ def measure_drawing(
     name: str, svg: Path, move: float | None, args: argparse.Namespace, table_: ChannelTable
 ) -> list[dict]:
     """A panel drawing read with perfect alignment (the photometric steps of ``medium``) and,
-    with ``--undone-warp``, through :func:`undone_warp` too (the same codes)."""
+    with ``--undone-warp``, through :func:`undone_warp` too (the same codes); with ``--pixels``,
+    once per print width, read at that width with the capture in the camera's pixels."""
     from deepmorph_core.morphable import MorphableDrawing
 
     drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
-    pipeline = medium_part(WIDTH, geometric=False)
-    views = {PERFECT: lambda x, g: pipeline(x, generator=g)}
-    if args.undone_warp:
-        views[UNDONE] = undone_warp(WIDTH)
-    start = time.perf_counter()
-    sigmas, visible = group_sigma(drawing, views, args)
-    seconds = round(time.perf_counter() - start, 1)
-    return [
-        {
-            "name": name,
-            "view": view,
-            "variables": drawing.n_variables,
-            "visible": visible,
-            **channel_summary(sigma, visible, table_),
-            "seconds": seconds,
-        }
-        for view, sigma in sigmas.items()
-    ]
+    results = []
+    for print_px in args.pixels or [None]:
+        width = print_px or WIDTH
+        pipeline = medium_part(width, geometric=False, print_px=print_px)
+        views = {PERFECT: lambda x, g, pipeline=pipeline: pipeline(x, generator=g)}
+        if args.undone_warp:
+            views[UNDONE] = undone_warp(width, print_px)
+        start = time.perf_counter()
+        sigmas, visible = group_sigma(drawing, views, args, width)
+        seconds = round(time.perf_counter() - start, 1)
+        results += [
+            {
+                "name": name,
+                "view": view,
+                "print_px": width,
+                "camera_pixels": print_px is not None,
+                "variables": drawing.n_variables,
+                "visible": visible,
+                **channel_summary(sigma, visible, table_),
+                "seconds": seconds,
+            }
+            for view, sigma in sigmas.items()
+        ]
+    return results
 
 
 def measure_bundle(path: Path, args: argparse.Namespace, table_: ChannelTable) -> dict:
@@ -288,15 +319,20 @@ def channel_summary(sigma: np.ndarray, visible: int, table_: ChannelTable) -> di
 
 
 HEADERS = [
-    "drawing", "view", "visible", "readable groups", "sigma median", "sigma worst", "capacity bits",
+    "drawing", "view", "print px", "visible", "readable groups", "sigma median", "sigma worst", "capacity bits",
     "one bit per group", "information bits at 99 %", "payload at 99 %", "payload / visible",
 ]  # fmt: skip
+
+
+def _px(result: dict) -> str:
+    """A row's print width: ``200 (camera)`` when its capture is in camera pixels."""
+    return f"{result.get('print_px', WIDTH)}{' (camera)' if result.get('camera_pixels') else ''}"
 
 
 def rows(results: list[dict]) -> list[list[Any]]:
     return [
         [
-            r["name"], r["view"], r["visible"], r["readable_groups"],
+            r["name"], r["view"], _px(r), r["visible"], r["readable_groups"],
             round(r["sigma_median"], 3), round(r["sigma_worst"], 3),
             round(r["capacity_bits"], 1), round(r["binary_bits"], 1), round(r["information_at_99"], 1),
             r["payload_at_99"], round(r["ratio"], 2),
@@ -315,6 +351,12 @@ def main() -> None:
     ap.add_argument(
         "--undone-warp", action="store_true", help="also each drawing through medium's warp, undone exactly"
     )
+    ap.add_argument(
+        "--pixels",
+        type=lambda text: [int(v) for v in text.split(",")],
+        help="print widths in the photo (e.g. 96,200,300): each read at its width, the capture in camera pixels",
+    )
+    ap.add_argument("--standardise", action="store_true", help="each image at zero mean and unit variance first")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS / "channel.json")
@@ -341,10 +383,11 @@ def main() -> None:
         record(measure_bundle(bundle, args, table_))
     print(table(HEADERS, rows(done)))
     for view in (PERFECT, UNDONE):
-        ratios = [r["ratio"] for r in done if r["view"] == view]
-        if ratios:
-            print(f"payload / visible at 99 %, {view}: median {statistics.median(ratios):.2f}, "
-                  f"worst {min(ratios):.2f}, best {max(ratios):.2f}")  # fmt: skip
+        for px in sorted({_px(r) for r in done}):
+            ratios = [r["ratio"] for r in done if r["view"] == view and _px(r) == px]
+            if ratios:
+                print(f"payload / visible at 99 %, {view}, {px} px: median {statistics.median(ratios):.2f}, "
+                      f"worst {min(ratios):.2f}, best {max(ratios):.2f}")  # fmt: skip
     print(f"wrote {args.out}")
 
 

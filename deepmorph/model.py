@@ -192,6 +192,7 @@ def train(
     steps: int = DEFAULTS.steps,
     batch: int = DEFAULTS.batch,
     image_width: int = DEFAULTS.width,
+    pixels: int | None = DEFAULTS.print_px,
     severity: Severity = DEFAULTS.severity,
     real_render_share: float = DEFAULTS.hard_fraction,
     small_prints: float = DEFAULTS.small_prints,
@@ -226,6 +227,9 @@ def train(
             ``payload_bits="auto"``: the largest size ``deepmorph capacity`` predicts to read.
         steps, batch, image_width: training steps (both stages), morphs per step, the width in
             pixels of the image the decoder reads.
+        pixels: the smallest width in pixels the print will have in photos (``--pixels``):
+            the capture's blur, motion and misalignment are in those pixels, and narrower prints
+            are reported too small.
         severity: the capture corruption reached at the end of the curriculum.
         real_render_share: share of each batch drawn by resvg.
         small_prints: share of each batch captured as a small print.

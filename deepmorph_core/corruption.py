@@ -55,11 +55,14 @@ class AugmentConfig(BaseModel):
     steps: list[AugmentationSpec] = Field(default_factory=list, max_length=64)
 
     @classmethod
-    def preset(cls, severity: str, *, size: int | None = None, colour: bool = False) -> AugmentConfig:
-        """The decoder-frame corruption of a severity (:data:`deepmorph_core.severity.SEVERITIES`),
-        with its pixel-valued parameters scaled to images ``size`` pixels wide, and its colour
-        steps appended when ``colour``."""
-        steps = residual_steps(severity, size, colour=colour)
+    def preset(
+        cls, severity: str, *, size: int | None = None, colour: bool = False, print_px: float | None = None
+    ) -> AugmentConfig:
+        """The decoder-frame corruption of a severity (:data:`deepmorph_core.severity.SEVERITIES`)
+        at images ``size`` pixels wide showing a print ``print_px`` camera pixels wide
+        (:func:`~deepmorph_core.severity.residual_steps`), with its colour steps appended when
+        ``colour``."""
+        steps = residual_steps(severity, size, colour=colour, print_px=print_px)
         return cls(steps=[AugmentationSpec(name=n, p=p, params=params) for n, p, params in steps])
 
     @classmethod
@@ -326,9 +329,19 @@ def capture_pipeline(
 
 
 def build_pipeline(
-    severity: str, width: int, config: dict[str, Any] | None = None, *, colour: bool = False
+    severity: str,
+    width: int,
+    config: dict[str, Any] | None = None,
+    *,
+    colour: bool = False,
+    print_px: float | None = None,
 ) -> AugmentPipeline:
-    """The corruption pipeline of a severity preset at an image width, with its colour steps
-    when ``colour`` (or of a stored config)."""
-    cfg = AugmentConfig.parse(config) if config else AugmentConfig.preset(severity, size=width, colour=colour)
+    """The corruption pipeline of a severity preset at an image width (showing a print
+    ``print_px`` camera pixels wide, :meth:`AugmentConfig.preset`), with its colour steps when
+    ``colour`` (or of a stored config)."""
+    cfg = (
+        AugmentConfig.parse(config)
+        if config
+        else AugmentConfig.preset(severity, size=width, colour=colour, print_px=print_px)
+    )
     return AugmentPipeline(cfg)

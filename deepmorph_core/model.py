@@ -267,6 +267,20 @@ class DeepMorphModel:
         """``(H, W)`` of decoder inputs."""
         return self.decoder.image_size
 
+    @property
+    def print_px(self) -> int | None:
+        """The smallest width in camera pixels its prints were trained to be read at (``train
+        --pixels``; the capture's blur in those pixels), or ``None`` for a model trained the
+        96-pixel way (its frame stands for any print)."""
+        value = self.meta.train.get("print_px")
+        return None if value is None else int(value)
+
+    @property
+    def smallest_print_px(self) -> int:
+        """The narrowest print in a photo the model reads: its :attr:`print_px`, or its decoder's
+        frame (a print narrower than either loses the detail its bits are in)."""
+        return self.print_px or self.width
+
     def rasterizer(self) -> SoftRasterizer:
         """The soft rasterizer at the model's size and settings."""
         settings = RasterSettings(**{**self.meta.raster, "width": self.width})
@@ -332,8 +346,8 @@ class DeepMorphModel:
             "codec": {**m.codec.model_dump(), "ecc_bits": m.codec.ecc_bits},
             "n_variables": m.n_variables,
             "image_size": list(self.image_size),
-            # prints narrower than the decoder's frame in a photo lose detail; decode calls them too small
-            "smallest_print_px": self.width,
+            # narrower prints in a photo lose detail; decode calls them too small
+            "smallest_print_px": self.smallest_print_px,
             "decoder": m.decoder.model_dump(),
             "bounds_defaults": m.bounds_defaults,
             "augment": m.augment,

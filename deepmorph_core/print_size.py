@@ -30,6 +30,12 @@ PHONE_FOV_DEG = 65.0
 PLAN_PIXELS = (96, 150, 200, 300)
 #: A move shorter than this many photo pixels is under the capture's blur at every severity.
 SUB_PIXEL = 1.0
+#: What a plan's predicted payload means for prints of other sizes (``capacity`` and the studio).
+READING_NOTE = (
+    "a model trained the default way reads every print in its decoder's 96-px frame, so the payload above is "
+    "the same for every print at least that wide; `train --pixels N` reads prints N px wide or more at their "
+    "own resolution"
+)
 
 
 def pixels_across(

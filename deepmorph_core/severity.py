@@ -7,7 +7,9 @@ A severity names how rough a capture is. Two things read it:
   centre and spread (:mod:`deepmorph_core.framing`) removes the photo's translation and scale;
   what remains is a little residual scale, shift, rotation and perspective, then blur, light,
   noise and compression at the decoder's size. Pixel-valued parameters are given for
-  :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width. Colour prints add the
+  :data:`PRESET_SIZE`-pixel images and scaled to the decoder's width; for a model trained for
+  prints of a known width in the photo (``train --pixels``) they are the camera's, scaled from
+  that width to the decoder's. Colour prints add the
   severity's colour steps (:attr:`Severity.colour`: faded ink, tinted paper, white balance,
   chroma subsampling), asked for with ``residual_steps(name, size, colour=True)``.
 * **the photo simulator** (:mod:`deepmorph_detect.scenes`): :attr:`Severity.photo` places the
@@ -214,23 +216,63 @@ def photo_ranges(name: str) -> PhotoRanges:
     return photo
 
 
-def residual_steps(name: str, size: int | None = None, *, colour: bool = False) -> list[Step]:
-    """The residual corruption steps of a severity, pixel parameters scaled to ``size``-pixel
-    images (:data:`PRESET_SIZE` when ``None``); when ``colour`` (a colour drawing's training),
-    with the camera's shadow after the light (:func:`camera_shadow`) and followed by the colour
-    steps (for RGB renders; the pipeline skips them on gray ones)."""
+def residual_steps(
+    name: str, size: int | None = None, *, colour: bool = False, print_px: float | None = None
+) -> list[Step]:
+    """The residual corruption steps of a severity at ``size``-pixel images (:data:`PRESET_SIZE`
+    when ``None``); when ``colour`` (a colour drawing's training), with the camera's shadow after
+    the light (:func:`camera_shadow`) and followed by the colour steps (for RGB renders; the
+    pipeline skips them on gray ones).
+
+    The preset's pixel parameters are pixels of a print :data:`PRESET_SIZE` pixels wide in the
+    photo. Without ``print_px`` the frame stands for such a print whatever its width: they are
+    scaled by ``size / PRESET_SIZE``, and a wider frame is only a finer picture of the same
+    blur. With ``print_px`` the frame shows a print ``print_px`` camera pixels wide: blur,
+    motion and shadow are the camera's, in its pixels (scaled by ``size / print_px``), so a
+    larger print in the photo keeps more of its morph (``deepmorph train --pixels``)."""
     level = severity(name)
     steps = level.residual
     if colour:
         after_light = next((i + 1 for i, (step, _, _) in enumerate(steps) if step == "lighting"), len(steps))
-        steps = steps[:after_light] + camera_shadow(level) + steps[after_light:] + level.colour
-    return scaled_steps(steps, (size or PRESET_SIZE) / PRESET_SIZE)
+        # with print_px every step is in camera pixels: the shadow's as the camera has it
+        shadow = camera_shadow(level, None if print_px is None else PRESET_SIZE)
+        steps = steps[:after_light] + shadow + steps[after_light:] + level.colour
+    scaled = scaled_steps(steps, (size or PRESET_SIZE) / (print_px or PRESET_SIZE))
+    return scaled if print_px is None else aligned_steps(scaled, PRESET_SIZE / print_px)
 
 
-def camera_shadow(level: Severity) -> tuple[Step, ...]:
-    """The camera's shadow step of a severity (:attr:`Severity.capture`) as the decoder's frame
-    sees it: a close-up's print, :data:`SHADOW_FRAME_SHARE` of the photo's width, fills the
-    frame, so its softness is scaled from the photo's pixels to the frame's.
+#: The residual's geometric parameters: how far the framed print is off, as shares of the frame
+#: (a scale factor's distance from 1).
+ALIGNMENT_PARAMS = {
+    ("perspective", "jitter"),
+    ("scale", "factor"),
+    ("rotation", "degrees"),
+    ("translation", "fraction"),
+}
+
+
+def aligned_steps(steps: list[Step], factor: float) -> list[Step]:
+    """``steps`` with their geometric residual (:data:`ALIGNMENT_PARAMS`) ``factor`` times as
+    large: an alignment in a print ``1 / factor`` times as many pixels wide is off by as many
+    of the photo's pixels, so by a smaller share of the print."""
+    out = []
+    for step_name, p, params in steps:
+        shrunk = {}
+        for key, value in params.items():
+            if (step_name, key) not in ALIGNMENT_PARAMS:
+                shrunk[key] = value
+            elif step_name == "scale":
+                shrunk[key] = [1.0 + (v - 1.0) * factor for v in value]
+            else:
+                shrunk[key] = [v * factor for v in value] if isinstance(value, list) else value * factor
+        out.append((step_name, p, shrunk))
+    return out
+
+
+def camera_shadow(level: Severity, print_px: float | None = None) -> tuple[Step, ...]:
+    """The camera's shadow step of a severity (:attr:`Severity.capture`), its softness in pixels
+    of a :data:`PRESET_SIZE`-pixel frame that shows a print ``print_px`` camera pixels wide (by
+    default a close-up's print, :data:`SHADOW_FRAME_SHARE` of a :data:`CLOSE_UP_PHOTO_PX` photo).
 
     Why a colour drawing trains with it: a shadow as dark as a light ink is an edge the
     decoder never met in training renders. Framed by the alignment and read, shadowed medium
@@ -238,7 +280,8 @@ def camera_shadow(level: Severity) -> tuple[Step, ...]:
     trained with shadows (``docs/design-notes.md``). Black ink stays far darker than any
     shadow; black-and-white training is unchanged."""
     shadows = [step for step in level.capture if step[0] == "shadow"]
-    return tuple(scaled_steps(tuple(shadows), PRESET_SIZE / (SHADOW_FRAME_SHARE * CLOSE_UP_PHOTO_PX)))
+    seen_px = print_px or SHADOW_FRAME_SHARE * CLOSE_UP_PHOTO_PX
+    return tuple(scaled_steps(tuple(shadows), PRESET_SIZE / seen_px))
 
 
 def capture_steps(name: str, shrink: float = 1.0) -> list[Step]:

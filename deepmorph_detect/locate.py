@@ -204,8 +204,12 @@ class Locator:
             located = self.decode_drawing(
                 gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft, blind=cand.blind
             )
-            located.needs_px = float(self.model.width)  # prints narrower than the decoder's frame lose detail
-            if located.result.ok or self.reports_unread(located, cand, gray.shape[1]):
+            located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
+            refused = self.model.print_px is not None and located.result.ok and located.too_narrow
+            if refused:  # trained for prints at least print_px wide: a narrower one is too small, never a payload
+                found = located.result
+                located.result = replace(found, payload=np.zeros_like(found.payload), ok=False, corrected_bits=-1)
+            if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[1]):
                 results.append(located)
         return results
 

@@ -10,6 +10,7 @@ trained detector is read from whole frames, as such photos need no detector.
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -56,7 +57,8 @@ def validate_close_ups(  # noqa: PLR0913
     detector: str | None = None,
 ) -> ValidationRecord:
     """Read ``samples`` fresh payloads from close-up photos through the photo chain: photos
-    :data:`PHOTO_PX` wide, or with the drawing about ``print_px`` camera pixels wide; with the
+    :data:`PHOTO_PX` wide (a model trained for prints ``model.print_px`` wide: photos whose
+    prints span that width or more), or with the drawing about ``print_px`` camera pixels wide; with the
     model's detector, or the one named by ``detector`` (``"none"``: whole images only)."""
     start = time.perf_counter()
     model.eval()
@@ -67,7 +69,12 @@ def validate_close_ups(  # noqa: PLR0913
     locator = Locator(model, detector=detector)
     colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
     added = model_added_steps(model)
-    photo_px = PHOTO_PX if print_px is None else photo_for_print(print_px)
+    if print_px is not None:
+        photo_px = photo_for_print(print_px)
+    elif model.print_px is not None:  # its prints span at least the width it was trained for
+        photo_px = math.ceil(model.print_px / CLOSE_UP_SIZE[0])
+    else:
+        photo_px = PHOTO_PX
     low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
     tally = PayloadTally()
     right_bits = missed = 0

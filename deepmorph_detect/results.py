@@ -104,11 +104,16 @@ class Located(Detection):
         return None if self.corners is None else measure_width(self.corners)
 
     @property
+    def too_narrow(self) -> bool:
+        """Whether the print is narrower in the photo than :attr:`needs_px`."""
+        width = self.width_px
+        return self.needs_px is not None and width is not None and width < self.needs_px
+
+    @property
     def too_small(self) -> bool:
         """Whether the payload is not read and the print is narrower than :attr:`needs_px`: the
         reason to give is its size (move closer, or print larger), not the light."""
-        width = self.width_px
-        return not self.result.ok and self.needs_px is not None and width is not None and width < self.needs_px
+        return not self.result.ok and self.too_narrow
 
     @property
     def pose(self) -> Pose | None:

@@ -63,6 +63,7 @@ if TYPE_CHECKING:
 
 BatchOpt = Annotated[int, setting_option("batch")]
 ImageWidthOpt = Annotated[int, setting_option("width")]
+PixelsOpt = Annotated[Optional[int], setting_option("print_px")]
 TrainSeverityOpt = Annotated[SeverityName, setting_option("severity")]
 
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
@@ -176,7 +177,7 @@ def capacity(
     ] = None,
     drop: DropOpt = False,
     pixels: Annotated[
-        Optional[float],
+        Optional[int],
         typer.Option("--pixels", min=8, max=10000, help="The print's smallest width in the photo, in pixels."),
     ] = None,
     print_mm: Annotated[
@@ -254,6 +255,8 @@ def _print_sizes(
     sizes: list[Any], pixels: float | None, print_mm: float | None, distance_cm: float | None, frame_px: int, fov: float
 ) -> None:
     """The travel table of ``capacity``: how far the visible variables move at each print width."""
+    from deepmorph_core.print_size import READING_NOTE
+
     if print_mm is not None:
         out.print(
             f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {frame_px}-px, {fov:g}° frame"
@@ -266,10 +269,7 @@ def _print_sizes(
         table.add_row(f"{row.pixels:.0f} px{mark}", f"{row.median_move:.1f} px", f"{row.smallest_move:.1f} px",
                       str(row.sub_pixel))  # fmt: skip
     out.print(table)
-    out.print(
-        "note: models read every print in their decoder's frame (96 px unless trained with --image-width), so "
-        "the payload above is the same for every print at least that wide"
-    )
+    out.print(f"note: {READING_NOTE}")
 
 
 def morph(
@@ -361,6 +361,7 @@ def train(
     steps: Annotated[int, setting_option("steps")] = DEFAULTS.steps,
     batch: BatchOpt = DEFAULTS.batch,
     width: ImageWidthOpt = DEFAULTS.width,
+    print_px: PixelsOpt = DEFAULTS.print_px,
     severity: TrainSeverityOpt = DEFAULTS.severity,
     hard_fraction: Annotated[float, setting_option("hard_fraction")] = DEFAULTS.hard_fraction,
     small_prints: Annotated[float, setting_option("small_prints")] = DEFAULTS.small_prints,
@@ -453,6 +454,7 @@ def train_many(
     steps: Annotated[int, setting_option("steps", "Training steps of each drawing.")] = DEFAULTS.steps,
     batch: BatchOpt = DEFAULTS.batch,
     width: ImageWidthOpt = DEFAULTS.width,
+    print_px: PixelsOpt = DEFAULTS.print_px,
     severity: TrainSeverityOpt = DEFAULTS.severity,
     seed: SeedOpt = DEFAULTS.seed,
     move: MoveOpt = None,
@@ -599,7 +601,10 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         ("image size", "x".join(map(str, data["image_size"][::-1]))),
         (
             "smallest print",
-            f"{data['smallest_print_px']} px across in a photo (the decoder's frame); narrower ones that do not "
+            f"{data['smallest_print_px']} px across in a photo (trained for prints that wide, --pixels); narrower "
+            "ones are reported too small and never read"
+            if (data.get("train") or {}).get("print_px")
+            else f"{data['smallest_print_px']} px across in a photo (the decoder's frame); narrower ones that do not "
             "read are reported too small",
         ),
         (

@@ -559,6 +559,7 @@ def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, dista
     from deepmorph_core.print_size import (
         PHONE_FOV_DEG,
         PHONE_FRAME_PX,
+        READING_NOTE,
         legibility,
         pixels_across,
         plan,
@@ -580,8 +581,7 @@ def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, dista
         f"{PHONE_FOV_DEG:g}° frame",
         "legibility": legible.to_json(),
         "verdict": legible.sentence(),
-        "note": "models read every print in their decoder's frame (96 px unless trained with --image-width), so "
-        "the payload above is the same for every print at least that wide",
+        "note": READING_NOTE,
     }
 
 

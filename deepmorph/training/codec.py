@@ -190,8 +190,9 @@ class CodecRun:
         self.target = model.canonical_moments()
         self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
         self.ink_level = model.drawing.ink_level  # and contrast stretched as photos are
+        self.print_px = model.print_px
         self._augments = {
-            sev: build_pipeline(sev, model.width, colour=self.colour).to(self.device)
+            sev: build_pipeline(sev, model.width, colour=self.colour, print_px=self.print_px).to(self.device)
             for sev in LADDER[: LADDER.index(config.severity)]
         }
         stored = model.meta.augment or None
@@ -317,7 +318,11 @@ class CodecRun:
         small_h = max(8, round(small_w * h / w))
         key = (self._rung(), small_w)
         if key not in self._small_augments:
-            self._small_augments[key] = build_pipeline(key[0], small_w, colour=self.colour).to(self.device)
+            # the same print, shrunk: a print_px-wide print seen at small_w of the frame's w pixels
+            seen = None if self.print_px is None else self.print_px * small_w / w
+            self._small_augments[key] = build_pipeline(key[0], small_w, colour=self.colour, print_px=seen).to(
+                self.device
+            )
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
         return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
@@ -651,7 +656,7 @@ def open_model(
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
             config = _resolved(TrainConfig(**overrides), (world or World()).size)
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
-            augment = build_pipeline(config.severity, config.width, colour=md.colour)
+            augment = build_pipeline(config.severity, config.width, colour=md.colour, print_px=config.print_px)
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
             spec = _payload_code(payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn)
@@ -822,7 +827,7 @@ def tune_decoder(
         raise DeepMorphError(f"{model_path}: its training has not finished; resume it before tuning")
     if out.exists() and not overwrite and out.resolve() != model_path.resolve():
         raise DeepMorphError(f"{out}: already exists; choose another --out")
-    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity") if k in model.meta.train}
+    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity", "print_px") if k in model.meta.train}
     try:
         config = TrainConfig(
             **kept,

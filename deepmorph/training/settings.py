@@ -48,6 +48,12 @@ class TrainSettings:
         steps: total optimisation steps (both stages).
         batch: perturbations per step.
         width: image width in pixels (decoder input; the height follows the drawing).
+        print_px: the smallest width in camera pixels the print will have in photos
+            (``--pixels``). The capture's blur, motion, shadow and the misalignment left after
+            framing are then in those pixels (:func:`~deepmorph_core.severity.residual_steps`),
+            so a print seen larger carries more; ``decode`` calls narrower prints too small and
+            reads no payload from them. ``None``: the default, a frame that stands for a print
+            96 px wide.
         lr, encoder_lr: Adam learning rates of the decoder and the encoder (decayed by a cosine
             to 10 % over stage 2).
         stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
@@ -99,6 +105,12 @@ class TrainSettings:
     batch: Annotated[int, Ge(2), Le(4096)] = setting(32, "batch", "Morphs per step.")
     width: Annotated[int, Ge(32), Le(512)] = setting(
         96, "image-width", "Width in pixels of the image the decoder reads."
+    )
+    print_px: Annotated[int | None, Ge(32), Le(2000)] = setting(
+        None,
+        "pixels",
+        "The smallest width in pixels the print will have in photos: blur, motion and misalignment in those "
+        "pixels; narrower prints are too small.",
     )
     lr: Annotated[float, Gt(0), Le(1)] = 2e-3
     encoder_lr: Annotated[float, Gt(0), Le(10)] = 1e-2

@@ -97,7 +97,7 @@ def read_renders(
     model.eval()
     colour = model.drawing.colour
     on = torch.device(device)
-    augment = build_pipeline(severity, model.width, colour=colour).to(on)
+    augment = build_pipeline(severity, model.width, colour=colour, print_px=model.print_px).to(on)
     generator = torch.Generator().manual_seed(seed + 1)  # on the CPU, so that every device draws the same
     target, size = model.canonical_moments(), model.image_size
     probs = []

@@ -105,7 +105,7 @@ def test_the_cli_and_the_facade_take_each_setting_as_declared() -> None:
     assert keywords["payload_bits"].default == PAYLOAD_BITS
     many = declared(cli.train_many)
     shared = {field: many[field] for field in settings if field in many}
-    assert set(shared) == {"steps", "batch", "width", "severity", "seed", "device", "threads"}
+    assert set(shared) == {"steps", "batch", "width", "print_px", "severity", "seed", "device", "threads"}
     for field, option in shared.items():
         assert option.default == getattr(DEFAULTS, field) and (option.min, option.max) == (
             settings[field].ge,
@@ -156,7 +156,7 @@ def _another(field: str, default: Any) -> Any:
 
 
 #: The settings ``deepmorph train-many`` takes as options (besides ``--device``).
-MANY = ("steps", "batch", "width", "severity", "seed", "threads")
+MANY = ("steps", "batch", "width", "print_px", "severity", "seed", "threads")
 
 
 def test_each_setting_given_reaches_training_under_its_field(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

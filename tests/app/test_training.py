@@ -674,3 +674,32 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
     assert data["written"] == [str(tuned)] and data["bundle"] == str(tuned)
     assert [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
     assert data["run"]["steps"] == 2 and data["run"]["finished"] is True and "bit_acc" in data["run"]
+
+
+def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path: Path) -> None:
+    """``--pixels``: the decoder keeps its frame, and the capture's blur and the misalignment it
+    is trained for are the camera's, in pixels of a print that wide (the preset's blur and turn
+    scaled by 96/200 for a 200-px print); ``info`` gives the width as the smallest print."""
+    out = tmp_path / "p200.dmm"
+    base = ["train", str(tiny_svg), "--steps", "2", "--batch", "2", "--threads", "1", "--payload-bits", "4"]
+    res = runner.invoke(app, [*base, "--pixels", "200", "--out", str(out), "--validation", "0"])
+    assert res.exit_code == 0, res.output
+    model = DeepMorphModel.load(out)
+    assert model.width == 96 and model.print_px == model.smallest_print_px == 200
+    steps = {s["name"]: s["params"] for s in model.meta.augment["steps"]}
+    assert steps["blur"]["sigma"] == pytest.approx([0.0, 0.48])  # medium's 0-1 px at 96 px
+    assert steps["rotation"]["degrees"] == pytest.approx(2.4)  # medium's 5 degrees
+    info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
+    assert info["smallest_print_px"] == 200 and info["train"]["print_px"] == 200
+    shown = " ".join(runner.invoke(app, ["info", str(out)], env={"COLUMNS": "200"}).stdout.split())
+    assert "200 px across in a photo (trained for prints that wide, --pixels)" in shown
+    # a frame of its own: a 64-px frame of prints 128 px wide blurs by half the preset
+    own = tmp_path / "own.dmm"
+    res = runner.invoke(app, [*base, "--pixels", "128", "--image-width", "64", "--out", str(own), "--validation", "0"])
+    assert res.exit_code == 0, res.output
+    model = DeepMorphModel.load(own)
+    assert model.width == 64 and model.smallest_print_px == 128
+    blur = next(s for s in model.meta.augment["steps"] if s["name"] == "blur")
+    assert blur["params"]["sigma"] == pytest.approx([0.0, 0.5])
+    plain = DeepMorphModel.load(BUNDLED_MODEL)
+    assert plain.print_px is None and plain.smallest_print_px == plain.width == 96

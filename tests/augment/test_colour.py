@@ -344,6 +344,30 @@ def test_presets_only_gain_colour_steps_and_the_cameras_shadow_when_asked() -> N
     assert medium["white_balance"][1]["temperature"] == 0.1
 
 
+def test_a_print_of_known_pixels_meets_the_cameras_own_pixels() -> None:
+    """With ``print_px`` (``train --pixels``) every pixel parameter, the shadow's too, is the
+    camera's, scaled from a print that many pixels wide to the frame: a 192-px frame of a
+    200-px print blurs by 0.96 of the preset, where a 96-px model's 192-px frame blurs by 2.
+    Its residual misalignment is the preset's in pixels of a 96-px print, a smaller share."""
+    for severity in ("easy", "medium", "hard"):
+        wide = {n: params for n, _, params in residual_steps(severity, 192, colour=True, print_px=200)}
+        old = {n: params for n, _, params in residual_steps(severity, 192, colour=True)}
+        preset = {n: params for n, _, params in SEVERITIES[severity].residual}
+        assert wide["blur"]["sigma"] == pytest.approx([v * 0.96 for v in preset["blur"]["sigma"]])
+        assert old["blur"]["sigma"] == pytest.approx([v * 2 for v in preset["blur"]["sigma"]])
+        assert wide["motion_blur"]["length"] == pytest.approx([v * 0.96 for v in preset["motion_blur"]["length"]])
+        camera = next(params for n, _, params in SEVERITIES[severity].capture if n == "shadow")
+        assert wide["shadow"]["softness"] == pytest.approx([v * 0.96 for v in camera["softness"]])
+        assert wide["gaussian_noise"] == preset["gaussian_noise"] and wide["jpeg"] == preset["jpeg"]
+        # the alignment is off by as many of the photo's pixels: by 96/200 of the preset's share
+        assert wide["rotation"]["degrees"] == pytest.approx(preset["rotation"]["degrees"] * 0.48)
+        assert wide["translation"]["fraction"] == pytest.approx(preset["translation"]["fraction"] * 0.48)
+        assert wide["perspective"]["jitter"] == pytest.approx(preset["perspective"]["jitter"] * 0.48)
+        lo, hi = preset["scale"]["factor"]
+        assert wide["scale"]["factor"] == pytest.approx([1 - (1 - lo) * 0.48, 1 + (hi - 1) * 0.48])
+        assert old["rotation"] == preset["rotation"] and old["scale"] == preset["scale"]
+
+
 def test_bad_colour_parameter_names_the_step(registry: Registry) -> None:
     with pytest.raises(AugmentConfigError, match="steps\\[0\\] 'chroma_subsampling': upsample: expected one of"):
         AugmentPipeline({"steps": [{"name": "chroma_subsampling", "params": {"upsample": "bicubic"}}]}, registry)

@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from deepmorph.cli import application
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.codec import DecodeResult
+from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
@@ -111,3 +112,29 @@ def test_which_unread_drawings_are_reported(locator) -> None:
     assert reports(located(41, 0.72), proposal(whole=True), 64)  # a tiny scan, too small to read
     assert not reports(located(41, 0.64), proposal(whole=True), 640)
     assert reports(located(150, 0.62), proposal(), 640) and not reports(located(150, 0.58), proposal(), 640)
+
+
+def test_a_model_trained_for_wider_prints_reads_no_payload_from_narrower_ones(locator) -> None:
+    """A model trained with ``--pixels`` (here the ghost, told it was trained for prints 150 px
+    wide) reads prints at least that wide, and calls a narrower one too small even where its
+    payload reads (as the ghost's own locator shows): it was never validated there, so no
+    payload comes back."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    model.meta.train["print_px"] = 150
+    assert model.print_px == model.smallest_print_px == 150
+    trained_wider = Locator(model)
+    rng = np.random.default_rng(3)
+    payload = rng.integers(0, 2, model.codec.spec.payload_bits).astype(np.uint8)
+    art = render_svg(model.encode(payload), 400)
+    narrow = [close_up_photo(art, "easy", rng, size=160) for _ in range(3)]
+    wide = [close_up_photo(art, "easy", rng, size=260) for _ in range(3)]
+    assert all(f.result.ok for photo in narrow for f in locator.locate(photo))
+    blind = Locator(model, detector="universal")  # whose unread proposals are never reported
+    for reader in (trained_wider, blind):
+        refused = [f for photo in narrow for f in reader.locate(photo)]
+        assert len(refused) == 3 and all(96 < f.width_px < 150 for f in refused)
+        assert all(not f.result.ok and f.too_small and not f.result.payload.any() for f in refused)
+        assert all(f.to_json()["too_small"]["needs_px"] == 150.0 for f in refused)
+    read = [f for photo in wide for f in trained_wider.locate(photo)]
+    assert len(read) == 3 and all(f.width_px >= 150 and f.result.ok for f in read)
+    assert all(np.array_equal(f.result.payload, payload) for f in read)

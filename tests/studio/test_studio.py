@@ -700,7 +700,7 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
         == "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away"
     )
     assert "bits read from 99 % of captures" in page.text_content("#capacity-bits")
-    assert "models read every print in their decoder's frame" in page.text_content("#capacity-note")
+    assert "reads every print in its decoder's 96-px frame" in page.text_content("#capacity-note")
     assert "the payload above is the same for every print at least that wide" in page.text_content("#capacity-note")
 
     # another size and distance: the table follows
