@@ -18,6 +18,7 @@ the per-bit check at the first look is often read right by a later one.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -73,17 +74,22 @@ class Reader:
         self.synthesis = synthesis
         self.ink_thickness = ink_thickness
         self.view_width = model.width * RECTIFY_WIDTH_FACTOR
-        # where the unmorphed drawing's ink lies in a rectified view (read_framed_by_template)
-        unmorphed = model.drawing.to_svg(model.drawing.neutral_values()[0])
-        self.template_moments = mask_moments_one(
-            synthesis.renderer(unmorphed, self.view_width, template.viewbox) < TEMPLATE_INK
-        )
         # the decoder's graph run by ONNX Runtime (PyTorch, batch norms folded, where there is
         # none): about half the time per reading
         generator = torch.Generator().manual_seed(0)
         examples = [torch.rand(1, 1, *model.image_size, generator=generator) for _ in range(2)]
         self.decoder = onnx_or_torch(
             model, "decoder", fused_for_inference(model.decoder), examples, model.decoder_graph, device=device
+        )
+
+    @functools.cached_property
+    def template_moments(self) -> np.ndarray:
+        """Where the unmorphed drawing's ink lies in a rectified view (its moments, for
+        :meth:`read_framed_by_template`): rendered once, when a reading first needs it, not for
+        every locator (4 ms for the largest panel drawing)."""
+        unmorphed = self.model.drawing.to_svg(self.model.drawing.neutral_values()[0])
+        return mask_moments_one(
+            self.synthesis.renderer(unmorphed, self.view_width, self.template.viewbox) < TEMPLATE_INK
         )
 
     def rectify(self, pyramid: ImagePyramid, H: np.ndarray) -> np.ndarray:
