@@ -255,18 +255,7 @@ def aligned_steps(steps: list[Step], factor: float) -> list[Step]:
     """``steps`` with their geometric residual (:data:`ALIGNMENT_PARAMS`) ``factor`` times as
     large: an alignment in a print ``1 / factor`` times as many pixels wide is off by as many
     of the photo's pixels, so by a smaller share of the print."""
-    out = []
-    for step_name, p, params in steps:
-        shrunk = {}
-        for key, value in params.items():
-            if (step_name, key) not in ALIGNMENT_PARAMS:
-                shrunk[key] = value
-            elif step_name == "scale":
-                shrunk[key] = [1.0 + (v - 1.0) * factor for v in value]
-            else:
-                shrunk[key] = [v * factor for v in value] if isinstance(value, list) else value * factor
-        out.append((step_name, p, shrunk))
-    return out
+    return _rescaled(steps, factor, ALIGNMENT_PARAMS)
 
 
 def camera_shadow(level: Severity, print_px: float | None = None) -> tuple[Step, ...]:
@@ -295,15 +284,26 @@ def capture_steps(name: str, shrink: float = 1.0) -> list[Step]:
     return scaled_steps(severity(name).capture, shrink)
 
 
-def scaled_steps(steps: tuple[Step, ...], factor: float) -> list[Step]:
+def scaled_steps(steps: tuple[Step, ...] | list[Step], factor: float) -> list[Step]:
     """``steps`` with their pixel-valued parameters (:data:`PIXEL_PARAMS`) times ``factor``."""
+    return _rescaled(steps, factor, PIXEL_PARAMS)
+
+
+def _rescaled(steps: tuple[Step, ...] | list[Step], factor: float, which: set[tuple[str, str]]) -> list[Step]:
+    """``steps`` with the parameters named in ``which`` ``factor`` times as far from their
+    neutral value: 0, or 1 for a scale factor (a number or each end of a range)."""
+
+    def rescale(value: float, neutral: float) -> float:
+        return neutral + (value - neutral) * factor
+
     out = []
     for step_name, p, params in steps:
-        scaled = {
-            key: ([v * factor for v in value] if isinstance(value, list) else value * factor)
-            if (step_name, key) in PIXEL_PARAMS
+        neutral = 1.0 if step_name == "scale" else 0.0
+        changed = {
+            key: ([rescale(v, neutral) for v in value] if isinstance(value, list) else rescale(value, neutral))
+            if (step_name, key) in which
             else value
             for key, value in params.items()
         }
-        out.append((step_name, p, scaled))
+        out.append((step_name, p, changed))
     return out
