@@ -12,13 +12,18 @@ validation (1000 renders, 200 close-ups) counted in the time, as a user waits fo
 ArUco marker in every other scene) at ``medium`` and at ``hard`` are located with the universal
 detector, the drawing's own bundle otherwise untouched: **read** is the share of prints whose
 payload was read whole and vouched for, **wrong** counts payloads vouched for that are not the
-print's. The same scenes (seeded) for every run, so settings compare side by side.
+print's. The same share is also given among the prints at least as wide as the model reads
+(its ``smallest_print_px``, the decoder's 96-px frame by default: ``decode`` calls a narrower
+print it does not read too small). The same scenes (seeded) for every run, so settings compare side by side.
 
 With ``--curve K``, a copy of the checkpoint is kept every ``K`` steps and each copy is read on
 the same scenes after training (not counted in the time): how many steps a drawing needs.
+``--reread`` reads the bundles a run of the same ``--tag`` left on the same scenes again, without
+training, and keeps that run's times: a change to the photo chain, measured on the same models.
 
     .venv/bin/python bench/time_to_print.py /work/shared/data/drawings/feather --n 100
     .venv/bin/python bench/time_to_print.py ../shared/data/drawings/feather --curve 500 --tag curve
+    .venv/bin/python bench/time_to_print.py ../shared/data/drawings/feather --n 80 --tag after --reread
 """
 
 from __future__ import annotations
@@ -112,11 +117,12 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
 
 def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
     """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector, each
-    scored as ``bench/universal_detector.py`` scores its scenes."""
-    from universal_detector import score
-
+    scored as ``bench/universal_detector.py`` scores its scenes; also among the prints at least
+    as wide as the model reads (``smallest_print_px``: narrower ones are too small for it)."""
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.metrics import SceneTally
+    from deepmorph_detect.results import measure_width
     from deepmorph_detect.scenes import SceneMaker
 
     model = DeepMorphModel.load(bundle)
@@ -124,16 +130,23 @@ def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for sev in ("medium", "hard"):
         maker = SceneMaker(model, (640, 480), sev, seed=seed)
-        counts = {"prints": 0, "read": 0, "wrong": 0}
+        tally, wide = SceneTally(), {"prints": 0, "read": 0}
         times = []
         for i in range(n):
             scene = maker.make(drawings=1 + i % 2, distractors=1, aruco=i % 2 == 0)
-            scored, _, seconds = score("universal", locator, scene)
-            times.append(seconds)
-            for key in counts:
-                counts[key] += scored[key]
-        out[sev] = {**counts, "read_share": counts["read"] / max(1, counts["prints"]),
-                    "frame_s_median": statistics.median(times)}  # fmt: skip
+            drawings = [p for p in scene.placements if p.kind == "drawing"]
+            t0 = time.perf_counter()
+            dets = locator.locate(scene.image)
+            times.append(time.perf_counter() - t0)
+            read = {id(p) for det, p, right in tally.add(dets, drawings) if p is not None and det.result.ok and right}
+            for p in drawings:
+                if measure_width(p.corners) >= model.smallest_print_px:
+                    wide["prints"] += 1
+                    wide["read"] += id(p) in read
+        out[sev] = {"prints": tally.prints, "read": tally.read, "wrong": tally.wrong,
+                    "read_share": tally.read / max(1, tally.prints), "frame_s_median": statistics.median(times),
+                    "wide_px": model.smallest_print_px, "wide_prints": wide["prints"], "wide_read": wide["read"],
+                    "wide_read_share": wide["read"] / max(1, wide["prints"])}  # fmt: skip
     return out
 
 
@@ -149,6 +162,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0, help="scene seed")
     ap.add_argument("--work", type=Path, default=RESULTS / "time_to_print")
     ap.add_argument("--tag", default="default", help="names the bundles folder and the JSON")
+    ap.add_argument("--reread", action="store_true", help="read the tag's bundles again, no training")
     args = ap.parse_args()
     threads = set_threads(args.threads)
     settings: dict[str, Any] = {"threads": threads}
@@ -159,12 +173,20 @@ def main() -> None:
         settings[key] = json.loads(value) if value[:1] in "0123456789-[{tf" else value
     work = args.work / args.tag
     work.mkdir(parents=True, exist_ok=True)
+    out = args.work.parent / f"time_to_print_{args.tag}.json"
+    earlier: dict[str, Any] = {}
+    if args.reread:  # the training's own record stays: its threads, times and steps
+        previous = json.loads(out.read_text())
+        earlier, settings = previous["drawings"], {**previous["settings"], "reread_threads": threads}
     results: dict[str, Any] = {}
     rows = []
     for svg, move, variables in pick_drawings(args.feather, args.drawings):
         name = svg.stem
         print(f"{name}: {variables} variables, move {move}", flush=True)
-        run = train(svg, move, work / f"{name}.dmm", settings, args.curve)
+        if args.reread:
+            run = {**earlier[name], "curve_files": []}
+        else:
+            run = train(svg, move, work / f"{name}.dmm", settings, args.curve)
         run["variables"] = variables
         run["reading"] = read_scenes(work / f"{name}.dmm", args.n, args.seed)
         run["curve"] = {Path(p).stem.rsplit(".step", 1)[1]: read_scenes(Path(p), args.n, args.seed)
@@ -174,17 +196,19 @@ def main() -> None:
         rows.append([
             name, variables, run["steps"], f"{run['step_ms']:.0f}", f"{run['steps_s'] / 60:.1f}",
             f"{run['validation_s'] / 60:.1f}", f"{run['total_s'] / 60:.1f}",
-            f"{med['read_share']:.1%}", f"{hard['read_share']:.1%}", med["wrong"] + hard["wrong"],
+            f"{med['read_share']:.1%}", f"{hard['read_share']:.1%}",
+            f"{med['wide_read_share']:.1%}", f"{hard['wide_read_share']:.1%}", med["wrong"] + hard["wrong"],
         ])  # fmt: skip
         for step, reading in run["curve"].items():
             print(f"  step {int(step)}: medium {reading['medium']['read_share']:.1%}, "
                   f"hard {reading['hard']['read_share']:.1%}, wrong "
                   f"{reading['medium']['wrong'] + reading['hard']['wrong']}", flush=True)  # fmt: skip
-        write_json(args.work.parent / f"time_to_print_{args.tag}.json", {"environment": environment(),
+        write_json(out, {"environment": environment(),
                    "settings": settings, "n": args.n, "drawings": results})  # fmt: skip
-    print(f"\nTime to print-ready ({threads} threads; {args.n} scenes per severity, universal detector):")
+    print(f"\nTime to print-ready ({settings['threads']} threads; {args.n} scenes per severity, universal detector):")
     print(table(["drawing", "variables", "steps", "ms/step", "steps min", "validation min", "total min",
-                 "medium read", "hard read", "wrong"], rows))  # fmt: skip
+                 "medium read", "hard read", "medium, prints it reads", "hard, prints it reads", "wrong"],
+                rows))  # fmt: skip
     totals = [r["total_s"] / 60 for r in results.values()]
     print(f"total minutes: median {statistics.median(totals):.1f}, worst {max(totals):.1f}")
 

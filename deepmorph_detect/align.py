@@ -130,6 +130,20 @@ class Aligner:
             kept.append(Aligned(cand, alignment, seen_in))
         return kept
 
+    def other_turn(self, pyramid: ImagePyramid, alignment: Alignment) -> Alignment | None:
+        """The print aligned again from each of the drawing's other turns
+        (:attr:`~deepmorph_detect.refine.Template.other_turns`): the best of them, where this
+        aligner accepts it and it correlates better than ``alignment``; else ``None``. For a
+        print aligned but not read, which may have been aligned at the wrong turn of a drawing
+        that nearly looks the same turned: the right turn then aligns better, while a print
+        aligned at the right turn and not read for other reasons gains nothing here."""
+        best = None
+        for turn in self.template.other_turns:
+            again = refine(pyramid, alignment.homography @ turn, self.template)
+            if self.accepts(again) and again.correlation > (alignment if best is None else best).correlation:
+                best = again
+        return best
+
     def in_flat_light(self, gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:
         """The photo with shadows and light gradients divided out around a detector outline.
 

@@ -34,6 +34,12 @@ MORPH_CACHE = 64  # rendered morph templates kept (a video shows the same payloa
 CHECK_BELOW_CONFIDENCE = 0.97
 
 
+def is_weak(result: DecodeResult) -> bool:
+    """Whether a payload that passed the CRC was read with corrections or with less confidence
+    than :data:`CHECK_BELOW_CONFIDENCE`: where CRC collisions are, so it is checked bit by bit."""
+    return result.corrected_bits > 0 or result.confidence < CHECK_BELOW_CONFIDENCE
+
+
 @dataclass
 class MorphFit:
     """The photo aligned to the drawing morphed with a decoded payload.
@@ -193,7 +199,7 @@ class PayloadChecker:
         if fit is None or not fit.confirms:
             return PayloadCheck(replace(result, ok=False), fit, "failed")
         if bitwise is None:
-            bitwise = result.corrected_bits > 0 or result.confidence < CHECK_BELOW_CONFIDENCE
+            bitwise = is_weak(result)
         if not bitwise:
             return PayloadCheck(result, fit, "passed")
         code = self.model.codec.encode(np.asarray(result.payload, dtype=np.uint8))
@@ -204,4 +210,4 @@ class PayloadChecker:
 
 
 __all__ = ["CHECK_BELOW_CONFIDENCE", "MIN_MORPH_GAIN", "MORPH_WIDTH", "MorphFit", "MorphTemplates", "PayloadCheck",
-           "PayloadChecker"]  # fmt: skip
+           "PayloadChecker", "is_weak"]  # fmt: skip

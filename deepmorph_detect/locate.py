@@ -36,7 +36,7 @@ from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Candidate, Detector
 from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
 from deepmorph_detect.camera import Camera
-from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker
+from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker, is_weak
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.pose import Placer
 from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light, whole_frame_on_paper
@@ -49,7 +49,9 @@ from deepmorph_detect.synthesis import MorphSynthesis
 # vouches for it, so another drawing aligning just above the bar is not reported
 UNREAD_MARGIN = 0.05
 #: ... and one from the whole image framed by its ink (which does not know the drawing) at least
-#: this well: other drawings align to simple ones (a bar chart) up to 0.75
+#: this well: other drawings align to simple ones (a bar chart) up to 0.75. An unread print aligned
+#: this well is also aligned again at its frame's other turns (:meth:`Locator.decode_drawing`):
+#: every print that read there had aligned at 0.85 or better, most below it were other drawings
 UNREAD_BLIND_CORRELATION = 0.8
 #: ... and only where the print's frame is between this share of the image's width and its
 #: inverse (half to twice the image), what framing the whole image is for: a scan, a print
@@ -258,15 +260,31 @@ class Locator:
         A drawing that looks the same turned (``Template.symmetric_turns``: a print aligns as
         well at each of those turns, and which one the alignment ended at is chance) is read
         again at each such turn until a reading passes; the turn that reads also gives the pose.
+        A weak reading there (:func:`~deepmorph_detect.check.is_weak`) is compared with those
+        at the other turns: read at the wrong turn, such a drawing shows its true morph turned,
+        which can land on another code word with corrections; the reading with the fewest
+        corrections, then the most confident, wins.
+        A print still not read but aligned at :data:`UNREAD_BLIND_CORRELATION` or better is
+        aligned again from each other turn of its frame and read at the best
+        (:meth:`Aligner.other_turn <deepmorph_detect.align.Aligner.other_turn>`): a drawing that
+        nearly looks the same turned can align at the wrong turn well enough to be found.
         """
         H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind)
+        weak = checked.result.ok and is_weak(checked.result)
         for turn in self.template.symmetric_turns:
-            if checked.result.ok:
+            if checked.result.ok and not weak:
                 break
             turned = replace(alignment, homography=alignment.homography @ turn)
             other = self._read_and_check(gray, pyramid, turned, source, soft, blind)
-            if other[1].result.ok:
+            if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
+        realigned = None
+        if not checked.result.ok and alignment.correlation >= UNREAD_BLIND_CORRELATION:
+            realigned = self.aligner.other_turn(pyramid, alignment)
+        if realigned is not None:
+            other = self._read_and_check(gray, pyramid, realigned, source, soft, blind)
+            if other[1].result.ok:
+                (H, checked, probs), alignment = other, realigned
         return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
 
     def _read_and_check(
@@ -320,6 +338,11 @@ class Locator:
     def __repr__(self) -> str:
         detector: Any = getattr(self.detector, "name", None)
         return f"Locator({self.model.meta.drawing_name!r}, detector={detector!r}, renderer={self.renderer_name!r})"
+
+
+def _stronger(a: DecodeResult, b: DecodeResult) -> bool:
+    """Whether reading ``a`` is stronger than ``b``: fewer corrected bits, then more confident."""
+    return (a.corrected_bits, -a.confidence) < (b.corrected_bits, -b.confidence)
 
 
 __all__ = [

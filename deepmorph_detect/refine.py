@@ -82,18 +82,35 @@ class Template:
         :data:`SYMMETRY_CORRELATION`. A print of such a drawing (a hexagon, a star) aligns
         as well at each of these turns; only its morph, so only its reading, tells them apart.
         The set is closed under inverses, so the direction each is taken in does not matter."""
-        image = self.images[max(self.images)]
         x, y, w, h = self.viewbox
-        cx, cy = x + w / 2, y + h / 2
-        turns = []
-        for k in (1, 2, 3):
-            if k % 2 and image.shape[0] != image.shape[1]:
-                continue
-            if correlation(image, np.rot90(image, k)) < SYMMETRY_CORRELATION:
-                continue
-            c, s = round(math.cos(k * math.pi / 2)), round(math.sin(k * math.pi / 2))
-            turns.append(np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0, 0, 1]], float))
-        return tuple(turns)
+        return tuple(quarter_turn(k, x + w / 2, y + h / 2) for k in self._symmetric_quarters)
+
+    @functools.cached_property
+    def other_turns(self) -> tuple[np.ndarray, ...]:
+        """The turns within the frame (half first, then the quarters in a square frame) that are
+        not :attr:`symmetric_turns`, about the ink's centre, as ``(3, 3)`` SVG -> SVG matrices.
+
+        A drawing that nearly maps onto itself turned (a battery: its body and bolt do, its
+        small terminal does not) can align to a print at the wrong turn, shifted by however far
+        its ink sits from the frame's centre, well enough to pass as found; its reading then
+        fails. Aligned again from each of these turns, the print is found at the right one."""
+        cx, cy = self.ink_moments[0]
+        return tuple(quarter_turn(k, cx, cy) for k in self._turnable_quarters if k not in self._symmetric_quarters)
+
+    @property
+    def _turnable_quarters(self) -> tuple[int, ...]:
+        """The quarter turns (1-3) that keep the frame's outline: all three in a square frame,
+        the half turn alone otherwise."""
+        image = self.images[max(self.images)]
+        return (2, 1, 3) if image.shape[0] == image.shape[1] else (2,)
+
+    @functools.cached_property
+    def _symmetric_quarters(self) -> tuple[int, ...]:
+        """The quarter turns (1-3) of :attr:`symmetric_turns`."""
+        image = self.images[max(self.images)]
+        return tuple(
+            k for k in sorted(self._turnable_quarters) if correlation(image, np.rot90(image, k)) >= SYMMETRY_CORRELATION
+        )
 
     @functools.cached_property
     def coarse_blurred(self) -> np.ndarray:
@@ -264,6 +281,12 @@ def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray
     return [cv2.getPerspectiveTransform(frame, np.roll(quad, k, axis=0)).astype(np.float64) for k in range(4)]
 
 
+def quarter_turn(k: int, cx: float, cy: float) -> np.ndarray:
+    """``(3, 3)`` the turn by ``k`` quarters about ``(cx, cy)`` (SVG -> SVG)."""
+    c, s = round(math.cos(k * math.pi / 2)), round(math.sin(k * math.pi / 2))
+    return np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0, 0, 1]], float)
+
+
 def correlation(a: np.ndarray, b: np.ndarray) -> float:
     """Zero-mean normalised cross-correlation of two same-size images (ECC's own measure)."""
     a = a - a.mean()
@@ -321,7 +344,9 @@ def refine(
             ``accept`` plus :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is
             returned. ``None``: the quick path only.
         sized: the outline's size comes from the print's own ink (the universal detector's ink
-            square): the wider searches then only turn it (no other scales, no ink starts).
+            square): the wider searches then turn it at that size only (no other scales); the
+            starts from the print's ink still follow, for a print whose outline the square
+            misses in shape (seen steeply from the side).
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -388,8 +413,6 @@ def refine(
     best = best_few(outline_sweep(homography, template, scales=(1.0,) if sized else SWEEP_SCALES), best)
     if good(best):
         return searched(best)
-    if sized:
-        return quick
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
     # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
     quad = project(homography, viewbox_corners(template.viewbox))
@@ -442,6 +465,7 @@ __all__ = [
     "corner_orders",
     "correlation",
     "outline_sweep",
+    "quarter_turn",
     "refine",
     "refine_at",
     "warp_to_template",

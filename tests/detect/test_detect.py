@@ -35,6 +35,7 @@ from deepmorph_detect.camera import (
     translation_error,
     viewbox_corners,
 )
+from deepmorph_detect.check import PayloadCheck
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.metrics import SceneTally
 from deepmorph_detect.propose import whole_frame
@@ -857,6 +858,76 @@ def test_turns_that_map_a_drawing_onto_itself_are_found() -> None:
     np.testing.assert_allclose(turns["codepen"][0], _half_turn(_template_of("codepen").viewbox), atol=1e-9)
 
 
+def test_the_other_turns_of_a_frame_are_those_that_do_not_map_the_drawing_onto_itself() -> None:
+    """A battery in its square frame can be aligned again at three turns, the codepen diamond at
+    the two quarter turns (its half turn maps it onto itself), the plus sign at none; each turn
+    is about the ink's centre, which it keeps in place."""
+    templates = {name: _template_of(name) for name in ("battery-charging", "codepen", "plus")}
+    assert {name: len(t.other_turns) for name, t in templates.items()} == {
+        "battery-charging": 3,
+        "codepen": 2,
+        "plus": 0,
+    }
+    battery = templates["battery-charging"]
+    centre = np.append(battery.ink_moments[0], 1.0)
+    for turn in battery.other_turns:
+        np.testing.assert_allclose(turn @ centre, centre, atol=1e-9)
+    np.testing.assert_allclose(battery.other_turns[0][:2, :2], -np.eye(2), atol=1e-12)  # the half turn first
+
+
+def test_a_print_aligned_at_the_wrong_turn_is_aligned_again_and_read(model: DeepMorphModel, locator: Locator) -> None:
+    """The ghost aligned half turned about its ink (as a drawing that nearly looks the same turned
+    can be) reads nothing there; decoding aligns it again from its other turns, where it
+    correlates better, and reads its payload, with its true outline."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, cam, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None
+    # aligned at the wrong turn, it correlates less than at the right one
+    wrong = replace(
+        right, homography=right.homography @ locator.template.other_turns[0], correlation=right.correlation - 0.05
+    )
+    _, at_the_wrong_turn, _ = locator._read_and_check(gray, pyramid, wrong, "detector", True, False)
+    assert not at_the_wrong_turn.result.ok
+    read = locator.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
+    assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
+    assert np.abs(read.corners - placed.corners).max() < 3.0
+
+
+def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_another_turn(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Read at the wrong turn, a symmetric drawing can land on another code word with
+    corrections. Such a weak reading is compared with the readings at the other turns, and the
+    one with fewer corrections wins; a strong first reading is not read again."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, cam, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None
+    symmetric = Locator(model)
+    symmetric.template.__dict__["symmetric_turns"] = (_half_turn(locator.viewbox),)
+    H, strong, probs = symmetric._read_and_check(gray, pyramid, right, "detector", True, False)
+    assert strong.result.ok and strong.result.corrected_bits == 0
+    other_payload = 1 - strong.result.payload
+    weak = replace(strong, result=replace(strong.result, payload=other_payload, corrected_bits=2, confidence=0.95))
+    for first, expected_calls, expected_payload in (
+        (weak, 2, strong.result.payload),
+        (strong, 1, strong.result.payload),
+    ):
+        calls = []
+
+        def scripted(*args: object, first: PayloadCheck = first, calls: list[int] = calls) -> tuple:
+            calls.append(1)
+            return (H, first if len(calls) == 1 else strong, probs)
+
+        monkeypatch.setattr(symmetric, "_read_and_check", scripted)
+        read = symmetric.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
+        assert len(calls) == expected_calls
+        assert read.result.ok and np.array_equal(read.result.payload, expected_payload)
+
+
 def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     model: DeepMorphModel, locator: Locator
 ) -> None:
@@ -870,7 +941,7 @@ def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     assert right is not None and right.correlation > 0.7
     half = _half_turn(locator.viewbox)
     wrong = replace(right, homography=right.homography @ half)
-    as_it_was = locator.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
+    _, as_it_was, _ = locator._read_and_check(gray, pyramid, wrong, "detector", True, False)
     assert not as_it_was.result.ok
 
     symmetric = Locator(model)
