@@ -137,11 +137,11 @@ class Aligner:
         print aligned but not read, which may have been aligned at the wrong turn of a drawing
         that nearly looks the same turned: the right turn then aligns better, while a print
         aligned at the right turn and not read for other reasons gains nothing here."""
-        best = None
+        best, bar = None, alignment.correlation
         for turn in self.template.other_turns:
             again = refine(pyramid, alignment.homography @ turn, self.template)
-            if self.accepts(again) and again.correlation > (alignment if best is None else best).correlation:
-                best = again
+            if self.accepts(again) and again.correlation > bar:
+                best, bar = again, again.correlation
         return best
 
     def in_flat_light(self, gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:

@@ -209,8 +209,8 @@ class Locator:
             located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
             refused = self.model.print_px is not None and located.result.ok and located.too_narrow
             if refused:  # trained for prints at least print_px wide: a narrower one is too small, never a payload
-                found = located.result
-                located.result = replace(found, payload=np.zeros_like(found.payload), ok=False, corrected_bits=-1)
+                read = located.result
+                located.result = replace(read, payload=np.zeros_like(read.payload), ok=False, corrected_bits=-1)
             if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[1]):
                 results.append(located)
         return results
@@ -278,12 +278,10 @@ class Locator:
             other = self._read_and_check(gray, pyramid, turned, source, soft, blind)
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
-        realigned = None
         if not checked.result.ok and alignment.correlation >= UNREAD_BLIND_CORRELATION:
             realigned = self.aligner.other_turn(pyramid, alignment)
-        if realigned is not None:
-            other = self._read_and_check(gray, pyramid, realigned, source, soft, blind)
-            if other[1].result.ok:
+            other = None if realigned is None else self._read_and_check(gray, pyramid, realigned, source, soft, blind)
+            if other is not None and other[1].result.ok:
                 (H, checked, probs), alignment = other, realigned
         return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
 
