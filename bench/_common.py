@@ -15,10 +15,15 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def set_threads(n: int) -> int:
-    """Pin torch (and the BLAS/OpenMP pools of any child process) to ``n`` threads."""
+    """Pin torch, NumPy's BLAS (and the BLAS/OpenMP pools of any child process) to ``n``
+    threads. The BLAS pool is limited at run time (``threadpoolctl``): NumPy may already be
+    loaded, and its OpenBLAS pool then keeps one thread per core whatever the environment says."""
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = str(n)
     import torch
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=n, user_api="blas")
 
     torch.set_num_threads(n)
     try:

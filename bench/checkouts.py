@@ -34,7 +34,7 @@ from _common import set_threads  # noqa: E402
 from _pairs import add_scene_arguments, compare, print_report  # noqa: E402
 
 
-def _worker(root: str, bundle: str | None, threads: int, conn: Any) -> None:
+def _worker(root: str, bundle: str | None, detector: str | None, threads: int, conn: Any) -> None:
     """Serve ``locate`` requests with the packages of the checkout at ``root``."""
     # the editable install's finder would hand out the installed checkout: take it away (the
     # plugins' finders stay), so that every ``deepmorph_*`` import comes from ``root``
@@ -42,9 +42,11 @@ def _worker(root: str, bundle: str | None, threads: int, conn: Any) -> None:
     sys.path.insert(0, root)
     import cv2
     import torch
+    from threadpoolctl import threadpool_limits
 
     torch.set_num_threads(threads)
     cv2.setNumThreads(threads)
+    threadpool_limits(limits=threads, user_api="blas")  # NumPy's BLAS too, in either checkout
     import deepmorph_detect
     from deepmorph_detect.locate import Locator
 
@@ -55,7 +57,8 @@ def _worker(root: str, bundle: str | None, threads: int, conn: Any) -> None:
         from deepmorph_core.api import BUNDLED_MODEL
         from deepmorph_core.codemodel import DeepMorphModel
 
-    locator = Locator(DeepMorphModel.load(Path(bundle) if bundle else BUNDLED_MODEL))
+    model = DeepMorphModel.load(Path(bundle) if bundle else BUNDLED_MODEL)
+    locator = Locator(model, detector=detector) if detector else Locator(model)
     conn.send(str(Path(deepmorph_detect.__file__).resolve().parent.parent))
     while True:
         job = conn.recv()
@@ -86,6 +89,7 @@ def main() -> None:
     ap.add_argument("--a", type=Path, required=True, help="first checkout (repository root): the code before")
     ap.add_argument("--b", type=Path, default=Path("."), help="second checkout: the code after (default: this one)")
     ap.add_argument("--bundle", type=Path, default=None, help="bundle both decode with (default: the bundled ghost)")
+    ap.add_argument("--detector", default=None, help="detector both use (default: the bundle's)")
     add_scene_arguments(ap, "checkouts.json")
     args = ap.parse_args()
     set_threads(args.threads)
@@ -101,7 +105,8 @@ def main() -> None:
     conns, procs = {}, []
     for k, root in roots.items():
         parent, child = ctx.Pipe()
-        proc = ctx.Process(target=_worker, args=(root, str(args.bundle) if args.bundle else None, args.threads, child))
+        bundle = str(args.bundle) if args.bundle else None
+        proc = ctx.Process(target=_worker, args=(root, bundle, args.detector, args.threads, child))
         proc.start()
         procs.append(proc)
         conns[k] = parent
@@ -121,6 +126,7 @@ def main() -> None:
     for proc in procs:
         proc.join()
     report["checkouts"] = roots
+    report["detector"] = args.detector or "the bundle's"
     print_report(report, rows, roots, "checkout", args.out)
 
 

@@ -254,8 +254,10 @@ class Locator:
         """Read and check one aligned drawing, and place it: the first reading whose payload
         passes every check wins; without one, the first that passed the CRC (its ``ok``
         withdrawn by its check), else the most confident reading. ``blind``: proposed by a
-        detector that does not know the drawing (``Candidate.blind``): every reading takes the
-        per-bit check.
+        detector that does not know the drawing (``Candidate.blind``): a confident reading is
+        also asked whether the print is the drawing at all, unless its morph fits the photo as
+        no other drawing does (:meth:`PayloadChecker.check
+        <deepmorph_detect.check.PayloadChecker.check>`).
 
         A drawing that looks the same turned (``Template.symmetric_turns``: a print aligns as
         well at each of those turns, and which one the alignment ended at is chance) is read
@@ -305,7 +307,7 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
-            attempt = self.checker.check(pyramid, H, reading.result, alignment, blind or bitwise)
+            attempt = self.checker.check(pyramid, H, reading.result, alignment, bitwise, blind)
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
             if attempt.status == "passed":

@@ -99,6 +99,13 @@ class BitEvidence:
         return float(np.median(np.abs(self.evidence - 1.0)))
 
     @property
+    def explained(self) -> bool:
+        """Whether the word's morph explains the photo where its bits act (:attr:`deviation` at
+        most :data:`MAX_DEVIATION`): the part of :attr:`agrees` that tells a print of the drawing
+        from a photo of something else, whichever word it shows."""
+        return self.deviation <= MAX_DEVIATION
+
+    @property
     def agrees(self) -> bool:
         """Whether the photo shows this code word: at most :data:`MAX_CONTRADICTED` bits
         contradicted, its weakest bits still supported (:attr:`weakest_sum` at least

@@ -38,7 +38,6 @@ from deepmorph.cli.frame import (
     setting_option,
     step_progress,
     training_result,
-    use_threads,
     warn_dropped,
     write_text_atomic,
 )
@@ -53,6 +52,7 @@ from deepmorph.training.settings import (
 )
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import refuse_to_overwrite
+from deepmorph_core.threads import use_threads
 
 if TYPE_CHECKING:
     import numpy as np

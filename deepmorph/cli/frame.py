@@ -225,19 +225,6 @@ def step_progress(label: str, describe: Callable[[Any], str]) -> Iterator[StepPr
             bar.progress.stop()
 
 
-def use_threads(threads: int | None) -> int:
-    """Run torch and OpenCV on ``threads`` CPU threads (``None``: torch's default, one per
-    physical core), the same count for both; returns the count in use."""
-    import cv2
-    import torch
-
-    if threads is not None:
-        torch.set_num_threads(threads)
-    n = torch.get_num_threads()
-    cv2.setNumThreads(n)
-    return n
-
-
 def warn_dropped(drawing: Any) -> None:
     """One warning line per thing ``--drop-unsupported`` left out of a drawing."""
     for line, what in getattr(drawing, "dropped", []):

@@ -30,12 +30,12 @@ from deepmorph.cli.frame import (
     setting_option,
     step_progress,
     training_result,
-    use_threads,
     write_text_atomic,
 )
 from deepmorph.training.detector_settings import DETECTOR_DEFAULTS, DetectorSettings
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write, check_target, refuse_non_folder, refuse_to_overwrite
+from deepmorph_core.threads import use_threads
 
 
 def _progress(name: str):  # noqa: ANN202 - a rich Progress

@@ -70,6 +70,7 @@ from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
+from deepmorph_core.threads import use_threads
 
 
 class TrainConfig(BaseModel, TrainSettings):
@@ -179,7 +180,7 @@ class CodecRun:
         self.shards = config.shards or 1
         self.mine = rank_shards(self.shards, self.world)
         if config.threads:
-            torch.set_num_threads(config.threads)
+            use_threads(config.threads)
         model.encoder.to(self.device)
         model.decoder.to(self.device)
         # on the CPU, convolutions run channels-last: the decoder's full-resolution layers (one

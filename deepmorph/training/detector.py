@@ -32,6 +32,7 @@ from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
+from deepmorph_core.threads import use_threads
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
 from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
 from deepmorph_detect.scenes import Placement, Scene, SceneMaker
@@ -208,7 +209,7 @@ class DetectorRun:
         """Threads, seed, a fresh network and its optimiser."""
         self.cfg, self.out = config, Path(out)
         if config.threads:
-            torch.set_num_threads(config.threads)
+            use_threads(config.threads)
         torch.manual_seed(config.seed)
         self.net = DetectorNet(config.width)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)

@@ -181,3 +181,70 @@ def test_a_model_without_its_own_detector_exports_the_universal_one(tmp_path: Pa
     )
     # the universal graph is not stored in the bundle, which holds no detector weights
     assert set(DeepMorphModel.load(tmp_path / "stored.dmm").graphs) == {"decoder"}
+
+
+def test_a_blind_reading_is_checked_for_the_drawing_where_its_morph_fits_as_no_other_drawing_does_not(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The universal detector proposes every drawing. A confident reading of one it found skips
+    the per-bit check where its decoded morph fits the photo at ``TRUSTED_MORPH_FIT`` or better;
+    below that, where the drawing aligned at ``DRAWING_LIKE_ALIGNMENT`` or better, it is asked
+    only whether its morph explains the photo; else it takes the whole per-bit check."""
+    import deepmorph_detect.check as check_module
+    from deepmorph_detect.synthesis import BitEvidence
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    locator = Locator(model, detector="universal")
+    scene = SceneMaker(model, severity="easy", seed=5).make(drawings=1)
+    truth = scene.placements[0]
+    asked: list[int] = []
+    evidence = locator.checker.synthesis.evidence
+
+    def faint_bits(*args: object) -> BitEvidence:
+        """The photo's evidence, with three bits shown flipped yet the morph explaining it: what
+        the bars of a bar chart give, whose moves a homography nearly absorbs."""
+        asked.append(1)
+        real = evidence(*args)
+        flipped = real.evidence.copy()
+        flipped[:3] = -0.2
+        return BitEvidence(real.code, flipped, real.fit, real.blur_px)
+
+    monkeypatch.setattr(locator.checker.synthesis, "evidence", faint_bits)
+
+    def read() -> object:
+        return next(d for d in locator.locate(scene.image) if np.array_equal(d.result.payload, truth.payload))
+
+    det = read()
+    assert det.result.ok and det.result.corrected_bits == 0
+    assert det.result.confidence >= check_module.CHECK_BELOW_CONFIDENCE
+    assert det.morph.correlation >= check_module.TRUSTED_MORPH_FIT and asked == [] and det.bits is None
+    monkeypatch.setattr(check_module, "TRUSTED_MORPH_FIT", det.morph.correlation + 0.001)
+    det = read()
+    assert asked and det.morph.unmorphed_correlation >= check_module.DRAWING_LIKE_ALIGNMENT
+    assert det.result.ok and det.bits.explained and not det.bits.agrees  # asked only whether it is the drawing
+    monkeypatch.setattr(check_module, "DRAWING_LIKE_ALIGNMENT", det.morph.unmorphed_correlation + 0.001)
+    # the whole check, which three flipped bits fail: nothing is vouched for (and a blind
+    # proposer's drawing whose payload is not read is not reported)
+    assert [d for d in locator.locate(scene.image) if d.result.ok] == []
+
+
+def test_a_proposal_that_is_not_the_drawing_takes_the_wider_searches_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each wider search costs a proposal of another drawing about 17 ms: they run in flat light
+    only, after the quick path in the photo fell short."""
+    import deepmorph_detect.align as align_module
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    locator = Locator(model, detector="universal")
+    scene = SceneMaker(model, severity="medium", seed=8).make(drawings=0, distractors=1)
+    gray = scene.image.astype(np.float32).mean(-1) / 255
+    candidates = locator.detector.detect(gray)
+    assert candidates, "the universal detector proposes the other drawing"
+    searches: list[bool] = []
+    real = align_module.refine
+    monkeypatch.setattr(
+        align_module, "refine", lambda *a, **k: searches.append(k.get("accept") is not None) or real(*a, **k)
+    )
+    from deepmorph_detect.refine import ImagePyramid
+
+    assert locator.aligner.verify(ImagePyramid(gray), candidates[:1], gray) == []
+    assert searches == [False, True]  # the photo's quick path, then flat light with the wider searches
