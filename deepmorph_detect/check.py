@@ -39,7 +39,8 @@ CHECK_BELOW_CONFIDENCE = 0.97
 TRUSTED_MORPH_FIT = 0.95
 # ... and below it is asked only whether its morph explains the photo where its bits act where the
 # drawing aligned at least this well (unmorphed): other drawings align to a bar chart at up to 0.75,
-# and below this a confident CRC pass on another drawing's print took the whole per-bit check to stop
+# and where they do, the whole per-bit check stays (the deviation alone was measured on too few
+# CRC passes of other drawings to stand alone there)
 DRAWING_LIKE_ALIGNMENT = 0.8
 
 
