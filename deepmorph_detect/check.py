@@ -220,16 +220,13 @@ class PayloadChecker:
             return PayloadCheck(replace(result, ok=False), fit, "failed")
         if bitwise is None:
             bitwise = is_weak(result)
-        # a confident reading of a well-aligned drawing a blind proposer found, whose morph fits
-        # no better than other drawings can align: is it this drawing at all? (``explained``)
-        is_it_the_drawing = (
-            not bitwise
-            and blind
-            and fit.correlation < TRUSTED_MORPH_FIT
-            and fit.unmorphed_correlation >= DRAWING_LIKE_ALIGNMENT
-        )
-        if blind and fit.unmorphed_correlation < DRAWING_LIKE_ALIGNMENT and fit.correlation < TRUSTED_MORPH_FIT:
-            bitwise = True
+        # a confident reading of a drawing a blind proposer found, whose morph fits no better
+        # than other drawings can align: where it aligned as other drawings do not, is it this
+        # drawing at all? (``explained``); elsewhere the whole per-bit check
+        is_it_the_drawing = False
+        if not bitwise and blind and fit.correlation < TRUSTED_MORPH_FIT:
+            is_it_the_drawing = fit.unmorphed_correlation >= DRAWING_LIKE_ALIGNMENT
+            bitwise = not is_it_the_drawing
         if not bitwise and not is_it_the_drawing:
             return PayloadCheck(result, fit, "passed")
         code = self.model.codec.encode(np.asarray(result.payload, dtype=np.uint8))
