@@ -39,7 +39,13 @@ from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker, is_weak
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.pose import Placer
-from deepmorph_detect.propose import InkFrame, whole_frame, whole_frame_in_flat_light, whole_frame_on_paper
+from deepmorph_detect.propose import (
+    WHOLE_FRAME,
+    InkFrame,
+    whole_frame,
+    whole_frame_in_flat_light,
+    whole_frame_on_paper,
+)
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
@@ -295,7 +301,7 @@ class Locator:
         verdict, and the code bits' probabilities."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
-        if source == "whole-frame":
+        if source == WHOLE_FRAME:
             # A drawing that fills the frame is also read as it is, framed by its ink: a full
             # homography fitted to the unmorphed drawing can absorb part of a morph whose every
             # point moves (no fixed elements); the better-verified reading wins.
@@ -307,7 +313,9 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
-            attempt = self.checker.check(pyramid, H, reading.result, alignment, bitwise, blind)
+            attempt = self.checker.check(
+                pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=source == WHOLE_FRAME
+            )
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
             if attempt.status == "passed":

@@ -25,6 +25,9 @@ from deepmorph_detect.refine import Template
 # shrunk to 240, 2.6 ms); the ink's moments need no finer image
 FLAT_LIGHT_SIDE = 240
 
+#: the source of the candidate that frames the whole image by its ink
+WHOLE_FRAME = "whole-frame"
+
 
 def quad_bbox(quad: np.ndarray, width: int, height: int) -> tuple[int, int, int, int]:
     """``(x0, y0, x1, y1)``: the pixel box around ``(4, 2)`` corners, clipped to the image."""
@@ -71,7 +74,7 @@ def whole_frame(gray: np.ndarray, ink: InkFrame, template: Template, frame_corne
     # template px -> image px: scale s about the centroids
     T = np.array([[s, 0, xs.mean() - s * cx], [0, s, ys.mean() - s * cy], [0, 0, 1]])
     H = T @ np.linalg.inv(template.to_svg_units(ink.level))
-    return [Candidate(project(H, frame_corners), 0.0, box, homography=H, source="whole-frame")]
+    return [Candidate(project(H, frame_corners), 0.0, box, homography=H, source=WHOLE_FRAME)]
 
 
 #: The paper sheet of a close-up fills at least this share of the photo.
@@ -152,6 +155,7 @@ def whole_frame_in_flat_light(
 __all__ = [
     "FLAT_LIGHT_SIDE",
     "MIN_SHEET_SHARE",
+    "WHOLE_FRAME",
     "InkFrame",
     "quad_bbox",
     "whole_frame",

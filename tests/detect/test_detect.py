@@ -949,3 +949,46 @@ def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     read = symmetric.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
     assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
     assert np.abs(read.corners - placed.corners).max() < 3.0
+
+
+def test_a_whole_frame_reading_whose_morph_fits_poorly_must_explain_the_photo(
+    model: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The whole image framed by its ink does not know the drawing: clutter there can align to a
+    simple drawing at 0.6 and pass the CRC without corrections. A confident whole-frame reading
+    skips the per-bit check where its morph fits at ``WHOLE_FRAME_TRUSTED_FIT`` or better; below
+    it, the morph must explain the photo where its bits act (``BitEvidence.explained``)."""
+    import deepmorph_detect.check as check_module
+    from deepmorph_core.payload import random_payloads
+    from deepmorph_core.render import render_svg
+    from deepmorph_detect.synthesis import BitEvidence
+
+    locator = Locator(model, detector="none")
+    (payload,) = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(11))
+    photo = close_up_photo(render_svg(model.encode(payload), 400), "easy", np.random.default_rng(11))
+    evidence = locator.checker.synthesis.evidence
+    asked: list[float] = []
+
+    def shifted(by: float) -> None:
+        """The photo's evidence moved ``by`` away from every bit: 1.5 leaves the morph unexplained."""
+
+        def evidence_of(*args: object) -> BitEvidence:
+            real = evidence(*args)
+            asked.append(real.deviation)
+            return BitEvidence(real.code, real.evidence - by, real.fit, real.blur_px)
+
+        monkeypatch.setattr(locator.checker.synthesis, "evidence", evidence_of)
+
+    shifted(1.5)
+    (found,) = locator.locate(photo)
+    assert found.source == "whole-frame" and found.result.ok and np.array_equal(found.result.payload, payload)
+    assert found.result.corrected_bits == 0 and found.result.confidence >= check_module.CHECK_BELOW_CONFIDENCE
+    assert found.morph.correlation >= check_module.WHOLE_FRAME_TRUSTED_FIT and asked == [] and found.bits is None
+
+    monkeypatch.setattr(check_module, "WHOLE_FRAME_TRUSTED_FIT", found.morph.correlation + 0.001)
+    shifted(0.0)  # asked, and explained: read
+    (found,) = locator.locate(photo)
+    assert asked and found.result.ok and found.bits is not None and found.bits.explained
+    asked.clear()
+    shifted(1.5)  # asked, and not explained: no payload
+    assert [d for d in locator.locate(photo) if d.result.ok] == [] and asked
