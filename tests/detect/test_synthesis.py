@@ -103,6 +103,28 @@ def test_reading_by_synthesis_corrects_confident_misreadings(model: DeepMorphMod
     assert read_whole >= 3 and np.mean(errors) <= 1.5, errors
 
 
+@pytest.mark.parametrize("icon", ["anchor", "camera", "umbrella"])
+def test_reading_by_synthesis_stops_after_one_round_on_another_drawing(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch, icon: str
+) -> None:
+    """A print of another drawing where the ghost would be leaves the photo unexplained by any
+    word of the ghost's: one round asks it (``HOPELESS_DEVIATION``), not ``READ_ROUNDS``."""
+    from deepmorph_detect.synthesis import HOPELESS_DEVIATION
+
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(4))[0]
+    photo, H = _small_print(model, payload, 70, seed=4)
+    other = render_svg((Path(__file__).parent.parent / "data" / "feather" / f"{icon}.svg").read_text(), 70)
+    photo[35:105, 35:105] = np.clip(cv2.GaussianBlur(other, (0, 0), 0.8) * 0.7 + 0.15, 0, 1)
+    asked: list[float] = []
+    evidence = locator.synthesis.evidence
+    monkeypatch.setattr(
+        locator.synthesis, "evidence", lambda *a: (lambda found: asked.append(found.deviation) or found)(evidence(*a))
+    )
+    probs = np.where(model.codec.encode(payload) == 1, 0.9, 0.1).astype(np.float32)
+    locator.synthesis.read(ImagePyramid(photo), H, probs)
+    assert len(asked) == 1 and asked[0] > HOPELESS_DEVIATION, asked
+
+
 def test_the_locator_reads_by_synthesis_when_no_view_passes_the_crc(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
