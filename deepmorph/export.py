@@ -22,6 +22,7 @@ from deepmorph_core.fileio import atomic_write_all, check_target, output_folder,
 from deepmorph_core.graphs import StoredGraph
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import Registry, default_registry
+from deepmorph_core.reading_channel import channel_name
 from deepmorph_detect.network import INPUT_SIZE, STRIDE
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR
 from deepmorph_detect.universal import UniversalDetector, ink_square
@@ -102,6 +103,8 @@ def manifest(model: DeepMorphModel, graphs: dict[str, StoredGraph]) -> dict[str,
                 "shape": [1, 1, h, w],
                 "type": "float32",
                 "values": "gray in [0, 1]: 1 is white paper, 0 is ink",
+                # the gray a colour photo becomes: sum of red, green and blue times these weights
+                "channel": {"name": channel_name(md.channel), "rgb_weights": list(md.channel)},
             },
             "output": {
                 "name": "logits",

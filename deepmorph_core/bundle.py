@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 import torch
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 from safetensors import SafetensorError
 from safetensors.torch import load as load_bytes
 from safetensors.torch import save as save_bytes
@@ -29,6 +29,7 @@ from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import atomic_write
+from deepmorph_core.luminance import LUMA_WEIGHTS
 from deepmorph_core.networks import DecoderConfig
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
@@ -157,6 +158,16 @@ class PayloadTally:
             self.wrong += not same
 
 
+def _reading_weights(channel: tuple[float, float, float]) -> tuple[float, float, float]:
+    if any(w < 0 for w in channel) or abs(sum(channel) - 1.0) > 1e-6:
+        raise ValueError("the reading channel's red, green and blue weights must be non-negative and add up to 1")
+    return channel
+
+
+#: red, green and blue weights of a model's reading channel (checked when a bundle loads)
+ReadingChannel = Annotated[tuple[float, float, float], AfterValidator(_reading_weights)]
+
+
 class DetectorMeta(BaseModel):
     """The detector stored beside the codec networks (``deepmorph train-detector``).
 
@@ -216,6 +227,9 @@ class BundleMeta(BaseModel):
     # bundles written before it was recorded used version 1
     geometry: int = Field(default=1, ge=1, le=GEOMETRY_VERSION)
     n_variables: int = Field(ge=1)
+    # the gray the model reads colour prints in: red, green and blue weights (deepmorph_core.
+    # reading_channel); bundles written before it was recorded read luminance
+    reading_channel: ReadingChannel = LUMA_WEIGHTS
     codec: CodecSpec
     image_width: int = Field(ge=16, le=1024)
     raster: dict[str, Any]

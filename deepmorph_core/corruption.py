@@ -3,10 +3,10 @@ builds the steps from the plugin registry and applies them in a fixed physical o
 
 Order (by each augmentation's ``stage``, :data:`~deepmorph_core.protocols.STAGES`; config
 order within a stage): colour (ink, paper, white balance, chroma subsampling: RGB images
-only), then the conversion to luminance, geometry (fused into one warp), optics (blur,
-defocus, motion blur), lighting, intensity, noise, impulse (salt and pepper), custom (plugins
-that name no known stage), compression (JPEG). Gray images skip the colour stage; the output
-is always gray, clamped to ``[0, 1]``. The severity presets are
+only), then the conversion to luminance (or the channel the model reads), geometry (fused
+into one warp), optics (blur, defocus, motion blur), lighting, intensity, noise, impulse (salt
+and pepper), custom (plugins that name no known stage), compression (JPEG). Gray images skip
+the colour stage; the output is always gray, clamped to ``[0, 1]``. The severity presets are
 :mod:`deepmorph_core.severity`'s; the corruptions themselves are plugins
 (:mod:`deepmorph_augment` holds the built-in ones).
 """
@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from torch import Tensor, nn
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.luminance import to_luminance
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, to_channel
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import STAGES
 from deepmorph_core.severity import capture_steps, residual_steps
@@ -134,24 +134,32 @@ _COLOUR = STAGES.index("colour")
 class AugmentPipeline(nn.Module):
     """Applies a config's augmentations in stage order, differentiably.
 
-    RGB images go through the ``"colour"`` steps, then are converted to luminance
-    (:func:`~deepmorph_core.luminance.to_luminance`) for the other steps; gray images skip the
-    colour steps (no draws either). Consecutive geometric steps (those with ``draw_matrices``)
-    are composed into one warp, so the image is resampled once; their random draws are the
-    same as applying them one by one.
+    RGB images go through the ``"colour"`` steps, then are converted to luminance (or the
+    gray of :attr:`channel`: :func:`~deepmorph_core.luminance.to_channel`) for the other
+    steps; gray images skip the colour steps (no draws either). Consecutive geometric steps
+    (those with ``draw_matrices``) are composed into one warp, so the image is resampled once;
+    their random draws are the same as applying them one by one.
 
     Args:
         config: the steps (an :class:`AugmentConfig` or its ``model_dump()``).
         registry: where step names are looked up; the process-wide default when ``None``.
+        channel: the gray RGB images become after the colour stage: luminance, or the channel
+            the model reads (:mod:`deepmorph_core.reading_channel`).
 
     Raises:
         AugmentConfigError: an invalid config, an unknown augmentation or parameter, or a
             parameter the augmentation refuses; the message names the step.
     """
 
-    def __init__(self, config: AugmentConfig | Mapping[str, Any], registry: Registry | None = None):
+    def __init__(
+        self,
+        config: AugmentConfig | Mapping[str, Any],
+        registry: Registry | None = None,
+        channel: Channel = LUMA_WEIGHTS,
+    ):
         super().__init__()
         self.config = AugmentConfig.parse(config)
+        self.channel = channel
         registry = registry if registry is not None else default_registry()
         built = [_build_step(i, spec, registry) for i, spec in enumerate(self.config.steps)]
         order = sorted(range(len(built)), key=lambda i: (_stage(built[i]), i))
@@ -168,7 +176,7 @@ class AugmentPipeline(nn.Module):
                 self._runs.append(step)
 
     def colour_only(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
-        """Only the colour stage, then luminance: how a colour print and the camera's colour
+        """Only the colour stage, then luminance (or :attr:`channel`): how a colour print and the camera's colour
         handling reach the gray photo chain, for photo simulators that do their own geometry,
         optics and noise.
 
@@ -176,11 +184,20 @@ class AugmentPipeline(nn.Module):
             images: ``(B, 3, H, W)`` RGB (or ``(B, 1, H, W)``, returned as it is); returns
             ``(B, 1, H, W)`` in ``[0, 1]``.
         """
+        return to_channel(self.colour_stage(images, generator), self.channel).clamp(0.0, 1.0)
+
+    def colour_stage(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
+        """Only the colour stage, images kept as they are (RGB stays RGB): a colour print as a
+        colour photo shows it, for photo simulators that keep the photo in colour.
+
+        Shape:
+            images: ``(B, 3, H, W)`` RGB (or ``(B, 1, H, W)``, returned as it is); returns the same.
+        """
         out = images
         if images.shape[1] == 3:
             for step in self._colour:
                 out = step(out, generator)
-        return to_luminance(out).clamp(0.0, 1.0)
+        return out
 
     def capture(self, images: Tensor, generator: torch.Generator | None = None) -> Tensor:
         """The steps after the colour and geometric stages on every channel as it is (no
@@ -217,7 +234,7 @@ class AugmentPipeline(nn.Module):
         if images.shape[1] == 3:
             for step in self._colour:
                 out = step(out, generator)
-            out = to_luminance(out)
+            out = to_channel(out, self.channel)
         for run in self._runs:
             if isinstance(run, list):
                 out = self._warp(run, out, generator)
@@ -335,13 +352,14 @@ def build_pipeline(
     *,
     colour: bool = False,
     print_px: float | None = None,
+    channel: Channel = LUMA_WEIGHTS,
 ) -> AugmentPipeline:
     """The corruption pipeline of a severity preset at an image width (showing a print
     ``print_px`` camera pixels wide, :meth:`AugmentConfig.preset`), with its colour steps when
-    ``colour`` (or of a stored config)."""
+    ``colour`` (or of a stored config), whose RGB images become the gray of ``channel``."""
     cfg = (
         AugmentConfig.parse(config)
         if config
         else AugmentConfig.preset(severity, size=width, colour=colour, print_px=print_px)
     )
-    return AugmentPipeline(cfg)
+    return AugmentPipeline(cfg, channel=channel)

@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from deepmorph_core.kernels import area_resize
-from deepmorph_core.luminance import to_luminance
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, to_channel
 from deepmorph_core.photo import ink_mask, normalise_contrast
 
 
@@ -79,14 +79,14 @@ def canonicalize(images: Tensor, moments: Tensor, target: Tensor, size: tuple[in
     return out.clamp(0.0, 1.0)
 
 
-def frame_renders(images: Tensor, target: Tensor, size: tuple[int, int]) -> Tensor:
+def frame_renders(images: Tensor, target: Tensor, size: tuple[int, int], channel: Channel = LUMA_WEIGHTS) -> Tensor:
     """Clean renders framed by their own ink, as training and validation frame theirs.
 
     Shape:
-        images ``(B, C, h, w)`` (gray, or colour framed by its luminance), target ``(4,)`` ->
-        ``(B, C, H, W)`` with ``(H, W) = size``.
+        images ``(B, C, h, w)`` (gray, or colour framed by its gray in the reading
+        ``channel``), target ``(4,)`` -> ``(B, C, H, W)`` with ``(H, W) = size``.
     """
-    return canonicalize(images, render_moments(to_luminance(images)), target, size)
+    return canonicalize(images, render_moments(to_channel(images, channel)), target, size)
 
 
 def render_moments(images: Tensor) -> Tensor:

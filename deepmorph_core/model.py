@@ -24,10 +24,12 @@ from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning, SvgError
 from deepmorph_core.graphs import GraphError, StoredGraph, make_graph, read_graphs, weights_fingerprint
+from deepmorph_core.luminance import Channel
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
 from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.reading_channel import channel_name
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 #: What a drawing to train on may have: the analysis before training renders every variable's
@@ -127,14 +129,21 @@ class DeepMorphModel:
         train: dict[str, Any],
         decoder_config: DecoderConfig | None = None,
         label: str | None = None,
+        reading_channel: Channel | None = None,
     ) -> DeepMorphModel:
-        """A fresh (untrained) model for a drawing (``label`` names it in SVG errors)."""
+        """A fresh (untrained) model for a drawing (``label`` names it in SVG errors), read in
+        ``reading_channel`` (``None``: the one :func:`~deepmorph_core.reading_channel.choose_channel`
+        picks for a colour drawing, luminance for black and white)."""
         md = MorphableDrawing.load(
             drawing_svg.encode(),
             label=label or drawing_name,
             geometry=GEOMETRY_VERSION,
             **_bound_kwargs(bounds_defaults),
         )
+        if reading_channel is None:
+            md.read_in_chosen_channel()
+        else:
+            md.channel = tuple(reading_channel)
         check_trainable(md, drawing_name)
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()
@@ -145,6 +154,7 @@ class DeepMorphModel:
             bounds_defaults=bounds_defaults,
             geometry=GEOMETRY_VERSION,
             n_variables=md.n_variables,
+            reading_channel=md.channel,
             codec=codec,
             image_width=width,
             raster=raster,
@@ -172,6 +182,7 @@ class DeepMorphModel:
             )
         except SvgError as exc:
             raise DeepMorphError(f"{path}: the drawing inside the model cannot be read: {exc.message}") from None
+        md.channel = tuple(meta.reading_channel)
         if md.n_variables != meta.n_variables:
             raise DeepMorphError(
                 f"{path}: the drawing now has {md.n_variables} variables but the model was trained with "
@@ -284,7 +295,7 @@ class DeepMorphModel:
     def rasterizer(self) -> SoftRasterizer:
         """The soft rasterizer at the model's size and settings."""
         settings = RasterSettings(**{**self.meta.raster, "width": self.width})
-        return SoftRasterizer(self.drawing.space, settings)
+        return SoftRasterizer(self.drawing.space, settings, channel=self.drawing.channel)
 
     # -- encoding -------------------------------------------------------------------------
 
@@ -348,6 +359,8 @@ class DeepMorphModel:
             "image_size": list(self.image_size),
             # narrower prints in a photo lose detail; decode calls them too small
             "smallest_print_px": self.smallest_print_px,
+            # the gray its colour prints are read in: luminance, red, green or blue
+            "reading_channel": channel_name(m.reading_channel),
             "decoder": m.decoder.model_dump(),
             "bounds_defaults": m.bounds_defaults,
             "augment": m.augment,

@@ -27,10 +27,11 @@ from deepmorph_core.bounds import BoundSpec, format_validation_error
 from deepmorph_core.drawing import Drawing, load_drawing
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.framing import render_moments
-from deepmorph_core.luminance import stretch_ink
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, stretch_ink
 from deepmorph_core.morph import MorphSpace, Variable
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.reading_channel import choose_channel
 from deepmorph_core.render import render_svg, render_svg_ink, render_svg_rgb
 from deepmorph_core.svg.policy import GEOMETRY
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
@@ -60,10 +61,13 @@ class MorphableDrawing:
     Attributes:
         drawing: the parsed drawing.
         space: its variables and bounds.
+        channel: the gray its renders are read in (luminance unless a model chose another:
+            :mod:`deepmorph_core.reading_channel`); the SVG keeps the artist's colours.
     """
 
     drawing: Drawing
     space: MorphSpace
+    channel: Channel = LUMA_WEIGHTS
 
     @classmethod
     def load(
@@ -127,7 +131,7 @@ class MorphableDrawing:
 
     def rasterizer(self, width: int, **settings: Any) -> SoftRasterizer:
         """A soft rasterizer module for this drawing (see :class:`RasterSettings`)."""
-        return SoftRasterizer(self.space, RasterSettings(width=width, **settings))
+        return SoftRasterizer(self.space, RasterSettings(width=width, **settings), channel=self.channel)
 
     def render_soft(self, values: Tensor, width: int = 96, **settings: Any) -> Tensor:
         """Soft-rasterize ``(B, N_v)`` values to ``(B, 1, H, W)`` ink (differentiable)."""
@@ -139,12 +143,19 @@ class MorphableDrawing:
 
     @property
     def ink_level(self) -> float:
-        """The luminance of the darkest paint as printed on white (0 for black ink): what a
+        """The luminance (or :attr:`channel`) of the darkest paint as printed on white (0 for black ink): what a
         photo's contrast stretch maps to black (:func:`~deepmorph_core.luminance.stretch_ink`)."""
         paints = self.drawing.palette
         if all(p.black_or_white for p in paints):
             return 0.0
-        return max(0.0, min(1.0 - p.alpha * (1.0 - p.luminance) for p in paints))
+        return max(0.0, min(1.0 - p.alpha * (1.0 - p.in_channel(self.channel)) for p in paints))
+
+    def read_in_chosen_channel(self) -> MorphableDrawing:
+        """Set :attr:`channel` to the one a new model of this drawing reads
+        (:func:`~deepmorph_core.reading_channel.choose_channel`; luminance for black and white);
+        returns the drawing."""
+        self.channel = choose_channel(self.to_svg(self.neutral_values()[0]))[1] if self.colour else LUMA_WEIGHTS
+        return self
 
     @property
     def colour(self) -> bool:
@@ -161,13 +172,13 @@ class MorphableDrawing:
             if rgb:
                 out[i] = render_svg_rgb(svg, w).transpose(2, 0, 1)
             else:
-                out[i, 0] = render_svg(svg, w)
+                out[i, 0] = render_svg(svg, w, self.channel)
         return torch.from_numpy(out)
 
     def render_hard(self, values: Tensor | None, width: int = 96) -> np.ndarray:
         """Render one morph (or the base drawing, for ``None``) with the real renderer, as ink."""
         svg = self.to_svg(values) if values is not None else self.to_svg(self.neutral_values()[0])
-        return render_svg_ink(svg, width)
+        return render_svg_ink(svg, width, self.channel)
 
     def effects(self, raster: SoftRasterizer | None = None, chunk: int = 64) -> Tensor:
         """What each variable does to the picture, as a Gram matrix ``(N_v, N_v)``.
@@ -213,17 +224,17 @@ class MorphableDrawing:
 
     def contrast(self, width: int = 96) -> np.ndarray:
         """``(n_primitives,)`` how strongly each shape shows: the largest change of luminance
-        (``[0, 1]``) that leaving the shape out makes to the unmorphed drawing's render at
-        ``width``. Black on white is 1; a shape in a colour close to what lies under it is near
-        0, and its moves are as faint as its edges."""
+        (or of the channel the drawing is read in; ``[0, 1]``) that leaving the shape out makes
+        to the unmorphed drawing's render at ``width``. Black on white is 1; a shape in a colour
+        close to what lies under it is near 0, and its moves are as faint as its edges."""
         base = self.to_svg(self.neutral_values()[0])
-        full = render_svg(base, width)
+        full = render_svg(base, width, self.channel)
         root = etree.fromstring(base.encode("utf-8"))
         shapes = [el for el in root.iter() if isinstance(el.tag, str) and etree.QName(el).localname in GEOMETRY]
         out = np.zeros(len(self.drawing.primitives))
         for k, element in enumerate(shapes[: len(out)]):
             element.set("display", "none")
-            without = render_svg(etree.tostring(root, encoding="unicode"), width)
+            without = render_svg(etree.tostring(root, encoding="unicode"), width, self.channel)
             element.attrib.pop("display")
             out[k] = float(np.abs(full - without).max())
         return out

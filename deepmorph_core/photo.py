@@ -13,13 +13,15 @@ import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.kernels import SQUARE_3X3, component_label_type, label_set, percentiles
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, is_luma
 
 # float images a little outside [0, 1] (noise, rounding) are clipped; beyond this they are on another scale
 FLOAT_RANGE_SLACK = 2.0
 
 
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """Any ``(H, W)`` or ``(H, W, 1|3|4)`` (BGR or BGRA) image to float32 gray in ``[0, 1]``.
+def to_gray(image: np.ndarray, channel: Channel = LUMA_WEIGHTS) -> np.ndarray:
+    """Any ``(H, W)`` or ``(H, W, 1|3|4)`` (BGR or BGRA) image to float32 gray in ``[0, 1]``:
+    luminance, or the gray of a model's reading ``channel`` (red, green and blue weights).
 
     Pixels may be uint8 (0-255), uint16 (0-65535), bool, or float in ``[0, 1]``; a float image
     on another scale (0-255, say) is an error rather than a silently white or black image. A
@@ -35,6 +37,9 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         raise DeepMorphError(f"expected 1, 3 (BGR) or 4 (BGRA) channels, got an image of shape {img.shape}")
     if img.ndim not in (2, 3):
         raise DeepMorphError(f"expected a 2-D image or an image with channels, got shape {img.shape}")
+    if img.ndim == 3 and img.shape[2] > 1 and not is_luma(channel):
+        weighted = img[..., :3].astype(np.float32) @ np.asarray(channel[::-1], np.float32)  # BGR order
+        return to_gray(weighted / np.float32(_scale(img)))
     if img.dtype == np.uint8:
         if img.ndim == 3 and img.shape[2] > 1:  # photos: gray levels as OpenCV rounds them
             img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_BGR2GRAY)
@@ -62,6 +67,11 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     if out.ndim == 3:
         out = out[..., 0] if out.shape[2] == 1 else cv2.cvtColor(np.ascontiguousarray(out[..., :3]), cv2.COLOR_BGR2GRAY)
     return np.clip(out, 0.0, 1.0)
+
+
+def _scale(img: np.ndarray) -> float:
+    """What the pixels of ``img`` are divided by to lie in ``[0, 1]``."""
+    return {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype, 1.0)
 
 
 def normalise_contrast(gray: np.ndarray) -> np.ndarray | None:

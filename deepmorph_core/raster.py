@@ -42,6 +42,7 @@ import torch
 from torch import Tensor, nn
 
 from deepmorph_core.flat import flat_fill_sdf, flat_stroke_sdf
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel
 from deepmorph_core.morph import MorphSpace
 from deepmorph_core.outline import Frame, Outline, pixel_bbox, pixel_grid
 from deepmorph_core.primitive import outline_paint_sdf
@@ -94,11 +95,13 @@ class SoftRasterizer(nn.Module):
     Args:
         space: the drawing's morph space.
         settings: raster settings.
+        channel: the gray a colour drawing is rendered in (:mod:`deepmorph_core.reading_channel`).
     """
 
-    def __init__(self, space: MorphSpace, settings: RasterSettings | None = None):
+    def __init__(self, space: MorphSpace, settings: RasterSettings | None = None, channel: Channel = LUMA_WEIGHTS):
         super().__init__()
         self.space = space
+        self.channel = channel
         self.settings = settings or RasterSettings()
         self.height, self.width = space.drawing.pixel_size(self.settings.width)
         self._runs = _paint_runs(space)
@@ -114,11 +117,12 @@ class SoftRasterizer(nn.Module):
 
         Returns:
             ``(B, 1, H, W)`` ink in ``[0, 1]``: for a colour drawing, one minus the luminance
-            (BT.601) of its composited colours, what the photo chain reads from a photo.
+            (BT.601; or the gray of :attr:`channel`) of its composited colours, what the photo
+            chain reads from a photo.
         """
         if self.black_and_white:
             return self._squashed(values)
-        return 1.0 - self._composited(values, [[paint.luminance] for paint, _ in self._runs])
+        return 1.0 - self._composited(values, [[paint.in_channel(self.channel)] for paint, _ in self._runs])
 
     def render_rgb(self, values: Tensor) -> Tensor:
         """Render morph values in colour: ``(B, 3, H, W)`` sRGB on white paper, in ``[0, 1]``."""

@@ -20,6 +20,7 @@ from lxml import etree
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, is_luma
 from deepmorph_core.svg.plain_colours import plain_colours
 from deepmorph_core.svg.secure import parse_svg_bytes
 from deepmorph_core.svg.values import parse_numbers
@@ -89,9 +90,10 @@ def _render_png(svg_text: str, width: int) -> Image.Image:
     return Image.open(io.BytesIO(bytes(png)))
 
 
-def render_svg(svg_text: str, width: int) -> np.ndarray:
+def render_svg(svg_text: str, width: int, channel: Channel = LUMA_WEIGHTS) -> np.ndarray:
     """Render SVG text with resvg on white paper, its viewBox ``width`` pixels across, as
-    luminance (BT.601, PIL's ``L``: how the photo chain turns a colour photo to gray).
+    luminance (BT.601, PIL's ``L``: how the photo chain turns a colour photo to gray), or as
+    the gray of another reading ``channel`` (red, green and blue weights).
 
     Returns:
         ``(H, W)`` float32 image intensity in ``[0, 1]`` (1 = white).
@@ -99,6 +101,8 @@ def render_svg(svg_text: str, width: int) -> np.ndarray:
     Raises:
         DeepMorphError: a document resvg (or the secure parser before it) refuses.
     """
+    if not is_luma(channel):
+        return render_svg_rgb(svg_text, width) @ np.asarray(channel, dtype=np.float32)
     img = _render_png(svg_text, width).convert("RGB").convert("L")
     return np.asarray(img, dtype=np.float32) / 255.0
 
@@ -109,9 +113,9 @@ def render_svg_rgb(svg_text: str, width: int) -> np.ndarray:
     return np.asarray(img, dtype=np.float32) / 255.0
 
 
-def render_svg_ink(svg_text: str, width: int) -> np.ndarray:
+def render_svg_ink(svg_text: str, width: int, channel: Channel = LUMA_WEIGHTS) -> np.ndarray:
     """Like :func:`render_svg` but as ink (1 = black), the rasterizer's convention."""
-    return 1.0 - render_svg(svg_text, width)
+    return 1.0 - render_svg(svg_text, width, channel)
 
 
 def overlay(base_ink: np.ndarray, morph_ink: np.ndarray) -> np.ndarray:

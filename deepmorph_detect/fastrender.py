@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.errors import DeepMorphError
-from deepmorph_core.luminance import stretch_ink
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, is_luma, stretch_ink
 from deepmorph_core.render import render_svg
 from deepmorph_core.svg.plain_colours import plain_colours
 
@@ -103,6 +103,16 @@ def render_svg_resvg(svg_text: str, width: int, viewbox: tuple[float, float, flo
     return render_svg(svg_text, width)
 
 
+def channel_renderer(channel: Channel) -> Renderer:
+    """resvg rendering in a model's reading ``channel`` (its colour render, weighted), with the
+    :data:`Renderer` signature."""
+
+    def render(svg_text: str, width: int, viewbox: tuple[float, float, float, float]) -> np.ndarray:
+        return render_svg(svg_text, width, channel)
+
+    return render
+
+
 def renders_alike(svg_text: str, viewbox: tuple[float, float, float, float], widths: tuple[int, ...]) -> float:
     """The largest mean absolute difference between Skia's and resvg's renders of ``svg_text``
     over ``widths`` (``inf`` when Skia cannot read it or the sizes differ)."""
@@ -132,11 +142,18 @@ def stretched_renderer(renderer: Renderer, level: float) -> Renderer:
 
 
 def template_renderer(
-    svg_text: str, viewbox: tuple[float, float, float, float], widths: tuple[int, ...]
+    svg_text: str,
+    viewbox: tuple[float, float, float, float],
+    widths: tuple[int, ...],
+    channel: Channel = LUMA_WEIGHTS,
 ) -> tuple[str, Renderer]:
     """The renderer for a drawing's templates and its name: Skia when it renders ``svg_text``
     like resvg at each of ``widths`` (:data:`MAX_MEAN_DIFFERENCE`), else resvg (also where
-    Skia cannot be loaded: the same results, a few milliseconds slower per decoded drawing)."""
+    Skia cannot be loaded: the same results, a few milliseconds slower per decoded drawing).
+    A drawing read in another channel than luminance is rendered by resvg in that channel
+    (Skia draws gray as luminance)."""
+    if not is_luma(channel):
+        return "resvg", channel_renderer(channel)
     if skia is not None and renders_alike(svg_text, viewbox, widths) <= MAX_MEAN_DIFFERENCE:
         return "skia", render_svg_skia
     return "resvg", render_svg_resvg
@@ -147,6 +164,7 @@ __all__ = [
     "SKIA_UNAVAILABLE",
     "SUPERSAMPLE",
     "Renderer",
+    "channel_renderer",
     "render_svg_resvg",
     "render_svg_skia",
     "renders_alike",

@@ -30,6 +30,7 @@ from deepmorph_core.codec import DecodeResult
 from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.image_io import MIN_IMAGE_SIDE
+from deepmorph_core.luminance import is_luma
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_core.plugins import Registry, default_registry
@@ -137,7 +138,7 @@ class Locator:
         unmorphed = md.to_svg(md.neutral_values()[0])
         # Skia when it draws this drawing as resvg does: the morph check renders a morph per
         # payload read, and resvg's PNG round trip makes that render slow
-        self.renderer_name, renderer = template_renderer(unmorphed, self.viewbox, LEVELS)
+        self.renderer_name, renderer = template_renderer(unmorphed, self.viewbox, LEVELS, md.channel)
         # renders contrast-stretched as photos are (a drawing whose darkest paint is light)
         self.renderer = stretched_renderer(renderer, md.ink_level)
         self.template = Template.from_svg(unmorphed, self.viewbox, LEVELS, self.renderer)
@@ -154,8 +155,9 @@ class Locator:
         self.frame_corners = self.aligner.frame_corners
 
     def frame(self, image: np.ndarray, camera: Camera | None) -> tuple[np.ndarray, Camera, ImagePyramid]:
-        """The photo as gray, its camera (the default one when none is given) and its pyramid."""
-        gray = to_gray(image)
+        """The photo as gray (in the channel the model reads), its camera (the default one when
+        none is given) and its pyramid."""
+        gray = to_gray(image, self.model.drawing.channel)
         h, w = gray.shape
         if min(h, w) < MIN_IMAGE_SIDE:
             raise DeepMorphError(
@@ -174,7 +176,9 @@ class Locator:
             camera: intrinsics for the pose; ``None`` assumes the default field of view.
         """
         gray, cam, pyramid = self.frame(image, camera)
-        candidates = self.detector.detect(gray) if self.detector is not None else []
+        # detectors read luminance: a model read in another channel hands them the photo itself
+        seen = gray if is_luma(self.model.drawing.channel) else image
+        candidates = self.detector.detect(seen) if self.detector is not None else []
         found = self.aligner.verify(pyramid, candidates, gray)
         results = self.decode_each(gray, found, cam, soft)
         if any(located.result.ok for located in results):

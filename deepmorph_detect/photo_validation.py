@@ -42,7 +42,9 @@ def printed(
     """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white: a colour
     drawing rendered in colour and put through the colour corruptions of the capture (ink,
     paper, white balance, chroma: the registered ``colour`` plugins) before it becomes the
-    luminance the camera simulation works on; a black-and-white one rendered as it is."""
+    luminance the camera simulation works on (``(H, W, 3)`` RGB for a model read in another
+    channel, photographed in colour: :func:`~deepmorph_detect.scenes.colour_print`); a
+    black-and-white one rendered as it is."""
     if colours is None:
         return render_svg(svg, width)
     return colour_print(render_svg_rgb(svg, width), colours, rng)
@@ -67,7 +69,8 @@ def validate_close_ups(  # noqa: PLR0913
     payloads = random_payloads(samples, codec.spec.payload_bits, rng)
     codes = codec.encode(payloads)
     locator = Locator(model, detector=detector)
-    colours = build_pipeline(severity, PRINT_PX, colour=True) if model.drawing.colour else None
+    md = model.drawing
+    colours = build_pipeline(severity, PRINT_PX, colour=True, channel=md.channel) if md.colour else None
     added = model_added_steps(model)
     if print_px is not None:
         photo_px = photo_for_print(print_px)

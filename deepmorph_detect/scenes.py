@@ -34,6 +34,7 @@ import torch
 from deepmorph_core.corruption import AugmentationSpec, AugmentPipeline, added_steps, build_pipeline, capture_pipeline
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.kernels import area_resize
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, is_luma
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.severity import photo_ranges
 from deepmorph_detect.backgrounds import random_background
@@ -152,7 +153,8 @@ class SceneMaker:
         camera_width: int | None = None,
     ) -> None:
         self.model = model
-        self._set_up(size, severity, seed, camera_width, model_added_steps(model), model.drawing.colour)
+        md = model.drawing
+        self._set_up(size, severity, seed, camera_width, model_added_steps(model), md.colour, md.channel)
         self.viewbox = model.drawing.drawing.viewbox
         self._pool: list[np.ndarray] | None = None
         if payload_pool:
@@ -168,9 +170,11 @@ class SceneMaker:
         camera_width: int | None,
         added: list[AugmentationSpec],
         colour: bool,
+        channel: Channel = LUMA_WEIGHTS,
     ) -> None:
         """The capture, the random stream and the render cache (shared with subclasses that
-        print other drawings)."""
+        print other drawings); colour prints become the gray of ``channel``, the one the model
+        reads (the simulated photo is that gray)."""
         self.severity = photo_ranges(severity)
         shrink = size[0] / camera_width if camera_width else 1.0
         self._capture = capture_pipeline(severity, shrink, added)
@@ -178,7 +182,7 @@ class SceneMaker:
         self.rng = np.random.default_rng(seed)
         self._render_cache: dict[tuple[str, int], np.ndarray] = {}
         # a colour drawing is printed in colour through the colour plugins of the capture
-        self._colours = build_pipeline(severity, 64, colour=True) if colour else None
+        self._colours = build_pipeline(severity, 64, colour=True, channel=channel) if colour else None
 
     # -- sampling ------------------------------------------------------------------------
 
@@ -281,7 +285,7 @@ class SceneMaker:
                 art = self._render(label, svg.replace("currentColor", "#000"), rw, True)
             else:
                 art, label = _marker_art(kind, rw, rng, qr)
-            ah, aw = art.shape
+            ah, aw = art.shape[:2]
             # art pixels -> frame units -> image pixels
             art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
             _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng)
@@ -292,7 +296,7 @@ class SceneMaker:
             else:  # truth on the unit square
                 truth = plane @ np.array([[1.0, 0, -0.5], [0, 1.0, -0.5], [0, 0, 1]])
             if corners_src is None:
-                corners_src = _frame_corners(kind, art.shape)
+                corners_src = _frame_corners(kind, art.shape[:2])
             placements.append(Placement(kind, rvec, tvec, truth, project(truth, corners_src), payload, label))
         warps = [np.eye(3)]
         for _ in range(1, max(1, frames)):
@@ -378,10 +382,15 @@ CLOSE_UP_TILT_SHARE = 1 / 3
 def colour_print(rgb: np.ndarray, colours: AugmentPipeline, rng: np.random.Generator) -> np.ndarray:
     """A colour render ``(H, W, 3)`` as the camera simulation takes it: through the colour
     stage of ``colours`` (the registered ``colour`` plugins: ink, paper, white balance, chroma),
-    then luminance ``(H, W)``, 1 = white. The draws come from ``rng``."""
+    then luminance ``(H, W)``, 1 = white. A model read in another channel
+    (``colours.channel``) keeps its print in colour, ``(H, W, 3)`` RGB: its photo is taken in
+    colour, the detector reads its luminance and the rest that channel, as in a real photo.
+    The draws come from ``rng``."""
     image = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1), dtype=np.float32))[None]
     generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
     with torch.no_grad():
+        if not is_luma(colours.channel):
+            return colours.colour_stage(image, generator)[0].clamp(0.0, 1.0).numpy().transpose(1, 2, 0)
         return colours.colour_only(image, generator)[0, 0].numpy()
 
 
@@ -395,7 +404,7 @@ def close_up_photo(
 ) -> np.ndarray:
     """A photo in which one print fills most of the frame: a scan or a close phone photo.
 
-    ``art`` (``(H, W)`` float, 1 = white; a render of a code, or anything else) is printed on a
+    ``art`` (``(H, W)`` float, 1 = white, or ``(H, W, 3)`` RGB; a render of a code, or anything else) is printed on a
     sheet with a margin and photographed as scenes are (:class:`SceneMaker`), but near-frontal,
     filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk. The photo is
     ``size`` pixels of the camera (blur, motion and noise in those pixels): a small ``size``
@@ -408,7 +417,7 @@ def close_up_photo(
     sv = photo_ranges(severity)
     frame = (size, size)
     cam = _camera(frame, rng)
-    ah, aw = art.shape
+    ah, aw = art.shape[:2]
     margin = rng.uniform(0.08, 0.15)
     spin = math.radians(sv.spin_deg)
     framing = _Framing(CLOSE_UP_SIZE, sv.tilt_deg * CLOSE_UP_TILT_SHARE, (-spin, spin), (0.47, 0.53))
@@ -484,21 +493,23 @@ def _marker_art(kind: str, width: int, rng: np.random.Generator, qr: str | None)
 def _print_and_place(
     img: np.ndarray, art: np.ndarray, art_to_image: np.ndarray, margin: float, art_width: int, rng: np.random.Generator
 ) -> None:
-    """Print ``art`` (1 = white) on a sheet with ``margin`` (share of the art width) and
-    composite the sheet into ``img`` through ``art_to_image``."""
+    """Print ``art`` (1 = white; gray ``(h, w)`` or RGB ``(h, w, 3)``) on a sheet with
+    ``margin`` (share of the art width) and composite the sheet into ``img`` (BGR) through
+    ``art_to_image``."""
     H, W = img.shape[:2]
     m = int(round(margin * art_width))
-    ah, aw = art.shape
+    ah, aw = art.shape[:2]
     paper_tone = rng.uniform(0.85, 1.0) * rng.uniform(0.94, 1.0, 3).astype(np.float32)
     ink_tone = rng.uniform(0.0, 0.15)
-    sheet = np.ones((ah + 2 * m, aw + 2 * m), np.float32)
-    sheet[m : m + ah, m : m + aw] = art
+    sheet = np.ones((ah + 2 * m, aw + 2 * m) + art.shape[2:], np.float32)
+    sheet[m : m + ah, m : m + aw] = art if art.ndim == 2 else art[..., ::-1]  # RGB art into the BGR photo
     shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
     # the tones are affine in the sheet's value, so averaging before tinting is the same
     sheet, M = _captured_scale(sheet, art_to_image @ shift)
-    sheet_rgb = (ink_tone + (1 - ink_tone) * sheet)[..., None] * paper_tone[None, None, :]
+    toned = ink_tone + (1 - ink_tone) * sheet
+    sheet_rgb = (toned if toned.ndim == 3 else toned[..., None]) * paper_tone[None, None, :]
     warped = cv2.warpPerspective(sheet_rgb, M, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-    mask = cv2.warpPerspective(np.ones(sheet.shape, np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpPerspective(np.ones(sheet.shape[:2], np.float32), M, (W, H), flags=cv2.INTER_LINEAR)
     img *= 1 - mask[..., None]
     img += warped * mask[..., None]
 
@@ -514,14 +525,14 @@ def _captured_scale(sheet: np.ndarray, sheet_to_image: np.ndarray) -> tuple[np.n
     one sheet pixel per photo pixel.
 
     Args:
-        sheet: ``(h, w)`` float32 image.
+        sheet: ``(h, w)`` or ``(h, w, 3)`` float32 image.
         sheet_to_image: ``(3, 3)`` homography from sheet pixels to photo pixels.
 
     Returns:
         The sheet, averaged when it is larger in pixels than its image in the photo, and the
         homography from its pixels to the photo's.
     """
-    h, w = sheet.shape
+    h, w = sheet.shape[:2]
     quad = project(sheet_to_image, np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64))
     scale = math.sqrt(cv2.contourArea(quad.astype(np.float32)) / (w * h))
     if scale >= 1.0:

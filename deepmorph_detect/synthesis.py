@@ -163,7 +163,7 @@ class MorphSynthesis:
         self.width = width
         self.renderer = renderer
         settings = RasterSettings(**{**model.meta.raster, "width": width})
-        self.rasterizer = SoftRasterizer(model.drawing.space, settings)
+        self.rasterizer = SoftRasterizer(model.drawing.space, settings, channel=model.drawing.channel)
         self._variants: OrderedDict[bytes, np.ndarray] = OrderedDict()
 
     def variants(self, code: np.ndarray) -> np.ndarray:

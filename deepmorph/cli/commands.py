@@ -200,6 +200,7 @@ def capacity(
     width a --print-mm print has at --distance-cm)."""
     from deepmorph_core.capacity import predict
     from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
+    from deepmorph_core.reading_channel import channel_name
 
     if crc not in (None, 8, 16):
         raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
@@ -209,8 +210,9 @@ def capacity(
         raise typer.BadParameter("give --pixels or --print-mm/--distance-cm, not both", param_hint="--pixels")
     if print_mm is not None and distance_cm is not None:
         pixels = pixels_across(print_mm, distance_cm, frame_px, fov_deg)
-    drawing = _load(svg, move, shift, scale, rotate, drop)
+    drawing = _load(svg, move, shift, scale, rotate, drop).read_in_chosen_channel()
     report = predict(drawing, crc_bits=crc)
+    read_in = channel_name(drawing.channel)
     sizes = plan(drawing, report.visible_mask, plan_sizes(pixels))
     camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
     # a model reads prints at least as wide as its decoder's frame (the default one before training)
@@ -222,11 +224,15 @@ def capacity(
             "legibility": None if legible is None else legible.to_json(),
             "sizes": rows_to_json(sizes),
         }
-        print_json({"svg": str(svg), **report.to_json(), "print_size": plan_json})
+        print_json({"svg": str(svg), "reading_channel": read_in, **report.to_json(), "print_size": plan_json})
         return
     spec = report.codec
     hidden = report.n_variables - report.visible
     rows = [
+        (
+            "read in",
+            read_in if read_in == "luminance" else f"{read_in} (its colours differ far more there than in luminance)",
+        ),
         ("variables", f"{report.n_variables} ({report.visible} visible, {hidden} change nothing a renderer shows)"),
         ("readable", f"{report.readable_groups} (visible variables, look-alikes counted once)"),
         ("code bits", f"{report.code_bits} read reliably (predicted)"),
@@ -599,6 +605,7 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         ),
         ("variables N_v", str(data["n_variables"])),
         ("image size", "x".join(map(str, data["image_size"][::-1]))),
+        ("read in", data.get("reading_channel", "luminance")),
         (
             "smallest print",
             f"{data['smallest_print_px']} px across in a photo (trained for prints that wide, --pixels); narrower "

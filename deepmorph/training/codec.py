@@ -192,12 +192,17 @@ class CodecRun:
         self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
         self.ink_level = model.drawing.ink_level  # and contrast stretched as photos are
         self.print_px = model.print_px
+        self.channel = model.drawing.channel  # and read in the model's channel
         self._augments = {
-            sev: build_pipeline(sev, model.width, colour=self.colour, print_px=self.print_px).to(self.device)
+            sev: build_pipeline(sev, model.width, colour=self.colour, print_px=self.print_px, channel=self.channel).to(
+                self.device
+            )
             for sev in LADDER[: LADDER.index(config.severity)]
         }
         stored = model.meta.augment or None
-        self._augments[config.severity] = build_pipeline(config.severity, model.width, stored).to(self.device)
+        self._augments[config.severity] = build_pipeline(config.severity, model.width, stored, channel=self.channel).to(
+            self.device
+        )
         self._small_augments: dict[tuple[str, int], nn.Module] = {}
         self.bce = nn.BCEWithLogitsLoss()
         # shard 0's stream is the run's seed (and draws the encoder's spread start on every rank)
@@ -302,7 +307,7 @@ class CodecRun:
                 images = self.raster.render_rgb(soft) if self.colour else 1.0 - self.raster(soft)
         if k:
             images = torch.cat([self.model.real_renders(values[:k], rgb=self.colour), images], 0)
-        images = frame_renders(stretch_ink(images, self.ink_level), self.target, self.model.image_size)
+        images = frame_renders(stretch_ink(images, self.ink_level), self.target, self.model.image_size, self.channel)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
             return self.augment_now()(images, generator=self.gen)
@@ -321,9 +326,9 @@ class CodecRun:
         if key not in self._small_augments:
             # the same print, shrunk: a print_px-wide print seen at small_w of the frame's w pixels
             seen = None if self.print_px is None else self.print_px * small_w / w
-            self._small_augments[key] = build_pipeline(key[0], small_w, colour=self.colour, print_px=seen).to(
-                self.device
-            )
+            self._small_augments[key] = build_pipeline(
+                key[0], small_w, colour=self.colour, print_px=seen, channel=self.channel
+            ).to(self.device)
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
         return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
@@ -698,7 +703,7 @@ def _payload_code(
 ) -> CodecSpec:
     """The code of a new model: the requested payload's (with a warning when the drawing is
     predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry."""
-    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds)
+    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds).read_in_chosen_channel()
     check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
     report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
     if payload_bits == "auto":

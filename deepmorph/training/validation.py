@@ -97,7 +97,8 @@ def read_renders(
     model.eval()
     colour = model.drawing.colour
     on = torch.device(device)
-    augment = build_pipeline(severity, model.width, colour=colour, print_px=model.print_px).to(on)
+    channel = model.drawing.channel
+    augment = build_pipeline(severity, model.width, colour=colour, print_px=model.print_px, channel=channel).to(on)
     generator = torch.Generator().manual_seed(seed + 1)  # on the CPU, so that every device draws the same
     target, size = model.canonical_moments(), model.image_size
     probs = []
@@ -109,7 +110,8 @@ def read_renders(
             real = model.real_renders(values, rgb=colour)
             with torch.no_grad():
                 framed = augment(
-                    frame_renders(stretch_ink(real, model.drawing.ink_level), target, size), generator=generator
+                    frame_renders(stretch_ink(real, model.drawing.ink_level), target, size, channel),
+                    generator=generator,
                 )
             probs.append(model.probabilities(framed).cpu().numpy().astype(np.float64))
     finally:

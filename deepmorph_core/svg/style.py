@@ -46,7 +46,12 @@ class Paint:
     @property
     def luminance(self) -> float:
         """BT.601 luma of the colour (1 = white), before alpha."""
-        return sum(w * c for w, c in zip(LUMA_WEIGHTS, self.rgb))
+        return self.in_channel(LUMA_WEIGHTS)
+
+    def in_channel(self, channel: tuple[float, float, float]) -> float:
+        """The colour's gray in a reading channel (red, green and blue weights; 1 = white),
+        before alpha."""
+        return sum(w * c for w, c in zip(channel, self.rgb))
 
     @property
     def black_or_white(self) -> bool:

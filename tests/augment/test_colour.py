@@ -252,7 +252,7 @@ def test_to_luminance_matches_opencv() -> None:
     assert np.abs(ours - reference).mean() < 0.3 / 255.0
     gray = torch.rand(2, 1, 5, 5)
     assert to_luminance(gray) is gray
-    with pytest.raises(ValueError, match="to_luminance"):
+    with pytest.raises(ValueError, match="to_channel: expected"):
         to_luminance(torch.rand(2, 2, 5, 5))
 
 
