@@ -316,6 +316,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
 
     async def capacity(request: Request) -> Response:
         from deepmorph_core.capacity import predict
+        from deepmorph_core.reading_channel import channel_name
 
         svg, name = current()
         q = request.query_params
@@ -323,10 +324,11 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         distance_cm = number(q.get("distance_cm"), "reading distance (cm)", 30.0)
 
         def work() -> dict[str, Any]:
-            md = drawings.load(svg.encode(), name)
+            md = drawings.load(svg.encode(), name).read_in_chosen_channel()  # what training will read
             report = predict(md)
             return {
                 "name": name,
+                "reading_channel": channel_name(md.channel),
                 **report.to_json(),
                 "limits": report.limits(),
                 "print_size": print_size(md, report.visible_mask, print_mm, distance_cm),
