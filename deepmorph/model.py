@@ -201,6 +201,7 @@ def train(
     spatial_transformer: bool = DEFAULTS.spatial_transformer,
     readout: bool = DEFAULTS.readout,
     early_stop: bool = DEFAULTS.early_stop,
+    read_in: Literal["auto", "luminance", "red", "green", "blue"] = DEFAULTS.read_in,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
     threads: int | None = DEFAULTS.threads,
@@ -237,6 +238,9 @@ def train(
             (``device="auto"``: CUDA where present).
         early_stop: end before ``steps`` once the batches at full corruption read their
             payloads well enough (:class:`~deepmorph.training.settings.TrainSettings`).
+        read_in: the gray a colour drawing's prints are read in (``auto``: red, green or blue
+            where its colours differ at least twice as much there, else luminance); a model not
+            read in luminance needs its prints in colour.
         shards: random streams the batch is drawn from (default: one per torchrun process).
         resume: continue the checkpoint at ``out``.
         checkpoint_every: steps between checkpoints.

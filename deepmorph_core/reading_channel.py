@@ -18,6 +18,8 @@ from deepmorph_core.render import render_svg_rgb
 
 #: The single channels a model may read instead of luminance.
 SINGLE_CHANNELS: dict[str, Channel] = {"red": (1.0, 0.0, 0.0), "green": (0.0, 1.0, 0.0), "blue": (0.0, 0.0, 1.0)}
+#: Every channel a model may be read in, by name.
+CHANNELS: dict[str, Channel] = {"luminance": LUMA_WEIGHTS, **SINGLE_CHANNELS}
 #: A single channel is read only where the drawing's edges show at least this many times the
 #: contrast they show in luminance: twice the noise ratio of one channel to luminance (1.5)
 #: would be the break-even point of signal to noise; the rest is margin for cameras whose blue
@@ -62,5 +64,5 @@ def channel_name(channel: Channel) -> str:
     return "rgb(" + ", ".join(f"{w:g}" for w in channel) + ")"
 
 
-__all__ = ["CHANNEL_GAIN", "EDGE_STEP", "RENDER_WIDTH", "SINGLE_CHANNELS", "channel_name", "choose_channel",
+__all__ = ["CHANNELS", "CHANNEL_GAIN", "EDGE_STEP", "RENDER_WIDTH", "SINGLE_CHANNELS", "channel_name", "choose_channel",
            "edge_contrast"]  # fmt: skip

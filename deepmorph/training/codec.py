@@ -62,12 +62,13 @@ from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.framing import frame_renders
-from deepmorph_core.luminance import stretch_ink
+from deepmorph_core.luminance import Channel, stretch_ink
 from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
+from deepmorph_core.reading_channel import CHANNELS
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
 from deepmorph_core.threads import use_threads
@@ -665,7 +666,10 @@ def open_model(
             augment = build_pipeline(config.severity, config.width, colour=md.colour, print_px=config.print_px)
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
-            spec = _payload_code(payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn)
+            channel = None if config.read_in == "auto" else CHANNELS[config.read_in]
+            spec = _payload_code(
+                payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn, channel
+            )
             torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
             model = DeepMorphModel.create(
                 svg_text,
@@ -678,6 +682,7 @@ def open_model(
                 config.model_dump(),
                 decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer, readout=config.readout),
                 label=label,
+                reading_channel=channel,
             )
             if payload_bits == "auto":  # training may make the code smaller (deepmorph.training.code_shrink)
                 model.meta.record.payload_auto = AutoPayload(crc_bits=crc_bits, ecc_t=ecc_t)
@@ -700,10 +705,16 @@ def _payload_code(
     width: int,
     label: str,
     warn: Callable[[str], None],
+    channel: Channel | None = None,
 ) -> CodecSpec:
     """The code of a new model: the requested payload's (with a warning when the drawing is
-    predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry."""
-    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds).read_in_chosen_channel()
+    predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry,
+    read in ``channel`` (``None``: the one a new model chooses)."""
+    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds)
+    if channel is None:
+        drawing.read_in_chosen_channel()
+    else:
+        drawing.channel = channel
     check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
     report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
     if payload_bits == "auto":

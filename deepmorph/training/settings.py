@@ -71,6 +71,9 @@ class TrainSettings:
         curriculum: share of ``steps`` over which corruption ramps up through the milder presets
             (a decoder facing full corruption from a random start stays at chance); by default
             the first 1500 of 4000 steps, so the last 2500 train at ``severity``.
+        read_in: the gray a colour drawing's prints are read in (``auto``:
+            :func:`~deepmorph_core.reading_channel.choose_channel`); a model read in red, green
+            or blue needs its prints in colour (``docs/colour.md``).
         encoder_init: the encoder's start. ``spread`` (default): each code bit drives its own
             variables at full range (:func:`deepmorph_core.networks.spread_weights`), for far
             fewer bit errors under corruption. ``random``: the paper's dense random matrix.
@@ -150,6 +153,12 @@ class TrainSettings:
     freeze_encoder: bool = False
     seed: int = setting(0, "seed")
     device: Literal["cpu", "cuda", "auto"] = setting("auto", "device")
+    read_in: Literal["auto", "luminance", "red", "green", "blue"] = setting(
+        "auto",
+        "read-in",
+        "The gray colour prints are read in: auto (red, green or blue where the drawing's colours differ at least "
+        "twice as much there, else luminance), or that one. Print in colour unless it is luminance.",
+    )
     shards: Annotated[int | None, Ge(1), Le(1024)] = setting(
         None,
         "shards",

@@ -128,3 +128,20 @@ def test_a_bundle_with_impossible_channel_weights_is_one_clear_error(tmp_path: P
     save_tagged(tmp_path / "bad.dmm", bad, tensors)
     with pytest.raises(DeepMorphError, match="reading_channel"):
         DeepMorphModel.load(tmp_path / "bad.dmm")
+
+
+def test_read_in_luminance_keeps_a_colour_drawing_for_gray_prints(tmp_path: Path) -> None:
+    """`--read-in luminance` (for prints made in gray) overrides the choice, in training and in
+    `capacity`."""
+    svg = tmp_path / "yellow.svg"
+    svg.write_bytes(YELLOW)
+    out = tmp_path / "gray.dmm"
+    train = {"width": 48, "batch": 4, "steps": 3, "threads": 1, "read_in": "luminance"}
+    train_model(svg, out, payload_bits=4, crc_bits=16, ecc_t=0, train=train, validation_samples=(0, 0),
+                on_warning=lambda _: None)  # fmt: skip
+    model = DeepMorphModel.load(out)
+    assert model.meta.reading_channel == LUMA_WEIGHTS and model.meta.train["read_in"] == "luminance"
+    runner = CliRunner()
+    said = runner.invoke(application(), ["capacity", str(svg), "--json"])
+    forced = runner.invoke(application(), ["capacity", str(svg), "--json", "--read-in", "luminance"])
+    assert '"reading_channel": "blue"' in said.output and '"reading_channel": "luminance"' in forced.output
