@@ -126,8 +126,12 @@ def inspect(
     as_json: JsonOpt = False,
 ) -> None:
     """Show the primitives of a drawing, its variables N_v and their bounds."""
+    from deepmorph_core.reading_channel import channel_name
+
     md = _load(svg, move, shift, scale, rotate, drop)
     info = md.describe()
+    if md.colour:  # what a new model reads of its colours (--read-in)
+        info["reading_channel"] = channel_name(md.read_in_chosen_channel().channel)
     if as_json:
         print_json(info)
         return
@@ -156,6 +160,8 @@ def inspect(
         for row in palette[:TABLE_ROWS]:
             shapes = ", ".join(str(i) for i in row["shapes"][:12]) + (" ..." if len(row["shapes"]) > 12 else "")
             out.print(f"  {row['paint']}  luminance {row['luminance']:.2f}  shapes {shapes}")
+        if "reading_channel" in info:
+            out.print(f"read in {info['reading_channel']} by a new model (train --read-in to choose)")
     for s in info["skipped"]:
         out.print(f"skipped line {s['line']}: {s['reason']}")
     if info["n_variables"] == 0:
