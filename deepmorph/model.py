@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS, chosen
+from deepmorph.training.settings import DEFAULTS, PAYLOAD_BITS, ReadIn, chosen
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -201,7 +201,7 @@ def train(
     spatial_transformer: bool = DEFAULTS.spatial_transformer,
     readout: bool = DEFAULTS.readout,
     early_stop: bool = DEFAULTS.early_stop,
-    read_in: Literal["auto", "luminance", "red", "green", "blue"] = DEFAULTS.read_in,
+    read_in: ReadIn = DEFAULTS.read_in,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
     threads: int | None = DEFAULTS.threads,

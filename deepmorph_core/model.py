@@ -140,10 +140,7 @@ class DeepMorphModel:
             geometry=GEOMETRY_VERSION,
             **_bound_kwargs(bounds_defaults),
         )
-        if reading_channel is None:
-            md.read_in_chosen_channel()
-        else:
-            md.channel = tuple(reading_channel)
+        md.read_in(reading_channel)
         check_trainable(md, drawing_name)
         height, _ = md.drawing.pixel_size(width)
         dcfg = decoder_config or DecoderConfig()

@@ -150,11 +150,14 @@ class MorphableDrawing:
             return 0.0
         return max(0.0, min(1.0 - p.alpha * (1.0 - p.in_channel(self.channel)) for p in paints))
 
-    def read_in_chosen_channel(self) -> MorphableDrawing:
-        """Set :attr:`channel` to the one a new model of this drawing reads
-        (:func:`~deepmorph_core.reading_channel.choose_channel`; luminance for black and white);
-        returns the drawing."""
-        self.channel = choose_channel(self.to_svg(self.neutral_values()[0]))[1] if self.colour else LUMA_WEIGHTS
+    def read_in(self, channel: Channel | None = None) -> MorphableDrawing:
+        """Set :attr:`channel` to ``channel``, or (``None``) to the one a new model of this
+        drawing reads (:func:`~deepmorph_core.reading_channel.choose_channel`; luminance for
+        black and white); returns the drawing."""
+        if channel is not None:
+            self.channel = tuple(channel)
+        else:
+            self.channel = choose_channel(self.to_svg(self.neutral_values()[0]))[1] if self.colour else LUMA_WEIGHTS
         return self
 
     @property

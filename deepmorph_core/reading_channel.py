@@ -56,13 +56,17 @@ def choose_channel(svg_text: str) -> tuple[str, Channel]:
 
 def channel_name(channel: Channel) -> str:
     """``"luminance"``, ``"red"``, ``"green"``, ``"blue"``, or the weights written out."""
-    if tuple(channel) == LUMA_WEIGHTS:
-        return "luminance"
-    for name, weights in SINGLE_CHANNELS.items():
+    for name, weights in CHANNELS.items():
         if tuple(channel) == weights:
             return name
     return "rgb(" + ", ".join(f"{w:g}" for w in channel) + ")"
 
 
-__all__ = ["CHANNELS", "CHANNEL_GAIN", "EDGE_STEP", "RENDER_WIDTH", "SINGLE_CHANNELS", "channel_name", "choose_channel",
-           "edge_contrast"]  # fmt: skip
+def channel_for(read_in: str) -> Channel | None:
+    """The channel a ``--read-in`` choice names: ``None`` for ``"auto"`` (the drawing's
+    :func:`choose_channel`), else :data:`CHANNELS`' entry."""
+    return None if read_in == "auto" else CHANNELS[read_in]
+
+
+__all__ = ["CHANNELS", "CHANNEL_GAIN", "EDGE_STEP", "RENDER_WIDTH", "SINGLE_CHANNELS", "channel_for", "channel_name",
+           "choose_channel", "edge_contrast"]  # fmt: skip

@@ -154,6 +154,10 @@ class PayloadChecker:
         self.morphs = morphs
         self.synthesis = synthesis
 
+    def pyramid(self, image: np.ndarray | ImagePyramid) -> ImagePyramid:
+        """``image`` as the checks compare it: a pyramid of its gray in the model's channel."""
+        return image if isinstance(image, ImagePyramid) else ImagePyramid(to_gray(image, self.model.drawing.channel))
+
     def fit_morph(
         self,
         image: np.ndarray | ImagePyramid,
@@ -171,7 +175,7 @@ class PayloadChecker:
         :data:`RECHECK_ITERATIONS`, and that fit is the verdict: it rejects fewer right
         payloads, and the CRC, checked first, is what stops wrong ones.
         """
-        pyramid = image if isinstance(image, ImagePyramid) else ImagePyramid(to_gray(image, self.model.drawing.channel))
+        pyramid = self.pyramid(image)
         plain = unmorphed if unmorphed is not None and unmorphed.width == MORPH_WIDTH else None
         if plain is None:
             plain = refine_at(pyramid, homography, self.template, MORPH_WIDTH)
@@ -223,7 +227,7 @@ class PayloadChecker:
         """
         if not result.ok:
             return PayloadCheck(result, None, "not run")
-        pyramid = image if isinstance(image, ImagePyramid) else ImagePyramid(to_gray(image, self.model.drawing.channel))
+        pyramid = self.pyramid(image)
         fit = self.fit_morph(pyramid, homography, result.payload, unmorphed)
         if fit is None or not fit.confirms:
             return PayloadCheck(replace(result, ok=False), fit, "failed")

@@ -47,6 +47,7 @@ from deepmorph.training.settings import (
     PHOTO_SAMPLES,
     RENDER_SAMPLES,
     TUNE_DEFAULTS,
+    ReadIn,
     TuneSettings,
     chosen,
 )
@@ -131,7 +132,7 @@ def inspect(
     md = _load(svg, move, shift, scale, rotate, drop)
     info = md.describe()
     if md.colour:  # what a new model reads of its colours (--read-in)
-        info["reading_channel"] = channel_name(md.read_in_chosen_channel().channel)
+        info["reading_channel"] = channel_name(md.read_in().channel)
     if as_json:
         print_json(info)
         return
@@ -198,9 +199,7 @@ def capacity(
     fov_deg: Annotated[
         float, typer.Option("--fov-deg", help="The camera's field of view across that side, in degrees.")
     ] = 65.0,
-    read_in: Annotated[
-        Literal["auto", "luminance", "red", "green", "blue"], setting_option("read_in")
-    ] = DEFAULTS.read_in,
+    read_in: Annotated[ReadIn, setting_option("read_in")] = DEFAULTS.read_in,
     as_json: JsonOpt = False,
 ) -> None:
     """Predict the payload a drawing carries before training: its readable variables, the
@@ -209,7 +208,7 @@ def capacity(
     width a --print-mm print has at --distance-cm)."""
     from deepmorph_core.capacity import predict
     from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
-    from deepmorph_core.reading_channel import CHANNELS, channel_name
+    from deepmorph_core.reading_channel import channel_for, channel_name
 
     if crc not in (None, 8, 16):
         raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
@@ -219,11 +218,7 @@ def capacity(
         raise typer.BadParameter("give --pixels or --print-mm/--distance-cm, not both", param_hint="--pixels")
     if print_mm is not None and distance_cm is not None:
         pixels = pixels_across(print_mm, distance_cm, frame_px, fov_deg)
-    drawing = _load(svg, move, shift, scale, rotate, drop)
-    if read_in == "auto":
-        drawing.read_in_chosen_channel()
-    else:
-        drawing.channel = CHANNELS[read_in]
+    drawing = _load(svg, move, shift, scale, rotate, drop).read_in(channel_for(read_in))
     report = predict(drawing, crc_bits=crc)
     read_in = channel_name(drawing.channel)
     sizes = plan(drawing, report.visible_mask, plan_sizes(pixels))
@@ -389,9 +384,7 @@ def train(
     spatial_transformer: Annotated[bool, setting_option("spatial_transformer")] = DEFAULTS.spatial_transformer,
     readout: Annotated[bool, setting_option("readout")] = DEFAULTS.readout,
     early_stop: Annotated[bool, setting_option("early_stop")] = DEFAULTS.early_stop,
-    read_in: Annotated[
-        Literal["auto", "luminance", "red", "green", "blue"], setting_option("read_in")
-    ] = DEFAULTS.read_in,
+    read_in: Annotated[ReadIn, setting_option("read_in")] = DEFAULTS.read_in,
     device: DeviceOpt = DEFAULTS.device,
     shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
     threads: ThreadsOpt = DEFAULTS.threads,

@@ -324,7 +324,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         distance_cm = number(q.get("distance_cm"), "reading distance (cm)", 30.0)
 
         def work() -> dict[str, Any]:
-            md = drawings.load(svg.encode(), name).read_in_chosen_channel()  # what training will read
+            md = drawings.load(svg.encode(), name).read_in()  # what training will read
             report = predict(md)
             return {
                 "name": name,

@@ -68,7 +68,7 @@ from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
 from deepmorph_core.plugins import default_registry
 from deepmorph_core.raster import RasterSettings
-from deepmorph_core.reading_channel import CHANNELS
+from deepmorph_core.reading_channel import channel_for
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
 from deepmorph_core.threads import use_threads
@@ -666,7 +666,7 @@ def open_model(
             augment = build_pipeline(config.severity, config.width, colour=md.colour, print_px=config.print_px)
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
-            channel = None if config.read_in == "auto" else CHANNELS[config.read_in]
+            channel = md.read_in(channel_for(config.read_in)).channel  # chosen once, for capacity and model
             spec = _payload_code(
                 payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn, channel
             )
@@ -705,16 +705,12 @@ def _payload_code(
     width: int,
     label: str,
     warn: Callable[[str], None],
-    channel: Channel | None = None,
+    channel: Channel,
 ) -> CodecSpec:
     """The code of a new model: the requested payload's (with a warning when the drawing is
     predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry,
-    read in ``channel`` (``None``: the one a new model chooses)."""
-    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds)
-    if channel is None:
-        drawing.read_in_chosen_channel()
-    else:
-        drawing.channel = channel
+    read in ``channel``."""
+    drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds).read_in(channel)
     check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
     report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
     if payload_bits == "auto":

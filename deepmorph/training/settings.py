@@ -40,6 +40,11 @@ def setting(default: Any, option: str | None = None, help: str = "") -> Any:  # 
     return dataclasses.field(default=default, metadata={"option": option, "help": help})
 
 
+#: What a colour drawing's prints are read in (``--read-in``): ``auto`` or a channel's name
+#: (:data:`deepmorph_core.reading_channel.CHANNELS`).
+ReadIn = Literal["auto", "luminance", "red", "green", "blue"]
+
+
 @dataclass(frozen=True)
 class TrainSettings:
     """Training settings (stored in the bundle, as :class:`deepmorph.training.codec.TrainConfig`).
@@ -153,7 +158,7 @@ class TrainSettings:
     freeze_encoder: bool = False
     seed: int = setting(0, "seed")
     device: Literal["cpu", "cuda", "auto"] = setting("auto", "device")
-    read_in: Literal["auto", "luminance", "red", "green", "blue"] = setting(
+    read_in: ReadIn = setting(
         "auto",
         "read-in",
         "The gray colour prints are read in: auto (red, green or blue where the drawing's colours differ at least "

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import tinycss2.color4
 
-from deepmorph_core.luminance import LUMA_WEIGHTS
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel
 from deepmorph_core.svg.values import parse_length, parse_number
 
 #: Colour spaces tinycss2 converts to sRGB; others (lab, oklch, display-p3 ...) are refused.
@@ -48,7 +48,7 @@ class Paint:
         """BT.601 luma of the colour (1 = white), before alpha."""
         return self.in_channel(LUMA_WEIGHTS)
 
-    def in_channel(self, channel: tuple[float, float, float]) -> float:
+    def in_channel(self, channel: Channel) -> float:
         """The colour's gray in a reading channel (red, green and blue weights; 1 = white),
         before alpha."""
         return sum(w * c for w, c in zip(channel, self.rgb))

@@ -62,7 +62,7 @@ def test_photos_renders_and_the_soft_rasterizer_turn_gray_in_the_same_channel(wi
     np.testing.assert_allclose(to_gray(bgr.astype(np.float32) / 255, BLUE), bgr[..., 0] / 255, atol=1e-6)
     # the face is ink in blue, and barely so in luminance
     assert render_svg(svg, 64, BLUE)[32, 8] < 0.25 < 0.6 < render_svg(svg, 64)[32, 8]
-    md = MorphableDrawing.load(svg.encode(), move=0.5).read_in_chosen_channel()
+    md = MorphableDrawing.load(svg.encode(), move=0.5).read_in()
     assert md.channel == BLUE
     with torch.no_grad():
         soft = 1.0 - md.rasterizer(96)(md.neutral_values())[0, 0].numpy()
