@@ -110,15 +110,24 @@ class Reader:
         return Reading(model.codec.decode(probs, soft=soft), probs)
 
     def looks(
-        self, pyramid: ImagePyramid, H: np.ndarray, views: list[np.ndarray], readings: list[Reading], soft: bool
+        self,
+        pyramid: ImagePyramid,
+        H: np.ndarray,
+        views: list[np.ndarray],
+        readings: list[Reading],
+        soft: bool,
+        first_only: bool = False,
     ) -> Iterator[tuple[Reading, bool | None]]:
         """Readings of one drawing, each with the ``bitwise`` argument its check takes, in the
         order they are tried (see the module); the caller appends each reading to ``readings``
-        before asking for the next."""
+        before asking for the next. ``first_only``: the first looks alone (a drawing that
+        aligned too poorly to be worth the later ones)."""
         firsts = [r for r in (self.read(view, soft) for view in views) if r is not None]
         firsts.sort(key=lambda r: (r.result.ok, r.result.confidence), reverse=True)
         for reading in firsts:
             yield reading, None
+        if first_only:
+            return
         framed = self.read_framed_by_template(views[0], soft)
         if framed is not None:
             yield framed, None

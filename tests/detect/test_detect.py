@@ -992,3 +992,35 @@ def test_a_whole_frame_reading_whose_morph_fits_poorly_must_explain_the_photo(
     asked.clear()
     shifted(1.5)  # asked, and not explained: no payload
     assert [d for d in locator.locate(photo) if d.result.ok] == [] and asked
+
+
+def test_a_blind_proposal_aligned_poorly_gets_the_first_looks_only(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A blind proposer's drawing (the universal detector proposes every drawing) aligned below
+    ``BLIND_READ_CORRELATION`` is read by the first looks alone: no second looks, no last look by
+    synthesis. A drawing's own detector's, or a blind one aligned above the bar, gets them all."""
+    from deepmorph_detect.locate import BLIND_READ_CORRELATION
+
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, _, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None
+    # at the wrong turn the first looks read nothing, so every later look would be tried
+    wrong = replace(right, homography=right.homography @ _half_turn(locator.viewbox))
+    later: list[str] = []
+    for name in ("read_framed_by_template", "read_again", "read_by_synthesis"):
+        real = getattr(locator.reader, name)
+        monkeypatch.setattr(locator.reader, name, lambda *a, _real=real, _name=name: later.append(_name) or _real(*a))
+
+    def looks_taken(correlation: float, blind: bool) -> list[str]:
+        later.clear()
+        low = replace(wrong, correlation=correlation)
+        _, checked, _ = locator._read_and_check(gray, pyramid, low, "universal", True, blind)
+        assert not checked.result.ok
+        return list(later)
+
+    assert looks_taken(BLIND_READ_CORRELATION - 0.01, blind=True) == []
+    assert "read_by_synthesis" in looks_taken(BLIND_READ_CORRELATION + 0.01, blind=True)
+    assert "read_by_synthesis" in looks_taken(BLIND_READ_CORRELATION - 0.01, blind=False)
