@@ -198,6 +198,7 @@ class PayloadChecker:
         bitwise: bool | None = None,
         blind: bool = False,
         whole_frame: bool = False,
+        relit_from: float | None = None,
     ) -> PayloadCheck:
         """The morph check of a decoded payload (one frame's, or one fused over frames): a
         payload that passed the CRC keeps its ``ok`` only when its morph fits the photo better
@@ -223,7 +224,12 @@ class PayloadChecker:
         bar chart) are too faint for the rest of the per-bit check, which rejects many right
         readings of such prints. A reading of the whole image framed by its ink (``whole_frame``,
         which does not know the drawing either) is asked the same where its morph fits below
-        :data:`WHOLE_FRAME_TRUSTED_FIT`, whatever the alignment.
+        :data:`WHOLE_FRAME_TRUSTED_FIT`, whatever the alignment. A reading in a photo whose light
+        was estimated from the drawing's own template (:mod:`~deepmorph_detect.template_light`;
+        ``relit_from``: the unmorphed drawing's alignment in the photo itself) never skips the
+        per-bit check: there the drawing and any morph near it fit better than in the photo, so
+        no fit measured there vouches for it. It is asked only whether its morph explains the
+        photo where the photo itself aligned at :data:`DRAWING_LIKE_ALIGNMENT` or better.
         """
         if not result.ok:
             return PayloadCheck(result, None, "not run")
@@ -237,7 +243,10 @@ class PayloadChecker:
         # than other drawings can align: where it aligned as other drawings do not, is it this
         # drawing at all? (``explained``); elsewhere the whole per-bit check
         is_it_the_drawing = False
-        if not bitwise and blind and fit.correlation < TRUSTED_MORPH_FIT:
+        if not bitwise and relit_from is not None:
+            is_it_the_drawing = relit_from >= DRAWING_LIKE_ALIGNMENT
+            bitwise = not is_it_the_drawing
+        elif not bitwise and blind and fit.correlation < TRUSTED_MORPH_FIT:
             is_it_the_drawing = fit.unmorphed_correlation >= DRAWING_LIKE_ALIGNMENT
             bitwise = not is_it_the_drawing
         elif not bitwise and whole_frame:

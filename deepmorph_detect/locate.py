@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 import warnings
 from dataclasses import replace
@@ -51,6 +52,7 @@ from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
 from deepmorph_detect.synthesis import MorphSynthesis
+from deepmorph_detect.template_light import TemplateLight
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
 # vouches for it, so another drawing aligning just above the bar is not reported
@@ -68,7 +70,9 @@ UNREAD_BLIND_CORRELATION = 0.8
 FILLS_FRAME = 0.5
 #: A blind proposer's drawing (the universal detector's) aligned below this is read by the first
 #: looks only: on 360 scenes of three colour models every print read had aligned at 0.81 or better,
-#: while the later looks at other drawings aligned at 0.55-0.7 took a third of the reading's time
+#: while the later looks at other drawings aligned at 0.55-0.7 took a third of the reading's time.
+#: A drawing aligned this well and not read is also aligned and read again in the light its
+#: template shows (:mod:`~deepmorph_detect.template_light`)
 BLIND_READ_CORRELATION = 0.7
 
 
@@ -143,6 +147,7 @@ class Locator:
         # Skia when it draws this drawing as resvg does: the morph check renders a morph per
         # payload read, and resvg's PNG round trip makes that render slow
         self.renderer_name, renderer = template_renderer(unmorphed, self.viewbox, LEVELS, md.channel)
+        self._reflectance_renderer = renderer
         # renders contrast-stretched as photos are (a drawing whose darkest paint is light)
         self.renderer = stretched_renderer(renderer, md.ink_level)
         self.template = Template.from_svg(unmorphed, self.viewbox, LEVELS, self.renderer)
@@ -157,6 +162,15 @@ class Locator:
         self.checker = PayloadChecker(model, self.template, self.morphs, self.synthesis)
         self.placer = Placer(self.viewbox)
         self.frame_corners = self.aligner.frame_corners
+
+    @functools.cached_property
+    def light(self) -> TemplateLight:
+        """The light on a print, estimated from the unmorphed drawing's render (what its print
+        reflects, in the channel the model reads): made when a drawing first needs it."""
+        md = self.model.drawing
+        unmorphed = md.to_svg(md.neutral_values()[0])
+        width = self.model.width * RECTIFY_WIDTH_FACTOR
+        return TemplateLight(self.template, self._reflectance_renderer(unmorphed, width, self.viewbox))
 
     def frame(self, image: np.ndarray, camera: Camera | None) -> tuple[np.ndarray, Camera, ImagePyramid]:
         """The photo as gray (in the channel the model reads), its camera (the default one when
@@ -284,29 +298,71 @@ class Locator:
         aligned again from each other turn of its frame and read at the best
         (:meth:`Aligner.other_turn <deepmorph_detect.align.Aligner.other_turn>`): a drawing that
         nearly looks the same turned can align at the wrong turn well enough to be found.
+        A print still not read but aligned at :data:`BLIND_READ_CORRELATION` or better is aligned
+        again in the light its template shows (:class:`~deepmorph_detect.template_light.TemplateLight`:
+        a cast shadow bends the alignment and reads as ink), and all of the above is done again
+        in the photo so lit; a reading there counts only where it is not weak (no corrections,
+        confident) and never skips the per-bit check (the light came from the drawing itself, so
+        any morph near it fits that photo well).
         """
-        H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind)
+        located = self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind)
+        if located.result.ok or alignment.correlation < BLIND_READ_CORRELATION:
+            return located
+        lit = self.light.align(gray, alignment.homography, self.aligner.accepts)
+        if lit is None:
+            return located
+        again = self._decode_at(gray, lit[0], lit[1], score, cam, source, soft, blind, alignment.correlation)
+        # a second photo is a second chance for a wrong word: only a strong reading counts there
+        return again if again.result.ok and not is_weak(again.result) else located
+
+    def _decode_at(
+        self,
+        gray: np.ndarray,
+        pyramid: ImagePyramid,
+        alignment: Alignment,
+        score: float,
+        cam: Camera,
+        source: str,
+        soft: bool,
+        blind: bool,
+        relit_from: float | None = None,
+    ) -> Located:
+        """:meth:`decode_drawing` in one photo (the photo itself, or the photo lit by the
+        template's light, ``relit_from`` the alignment in the photo itself): the readings at the
+        alignment, at the symmetric turns and at the other turns."""
+        H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind, relit_from)
         weak = checked.result.ok and is_weak(checked.result)
         for turn in self.template.symmetric_turns:
             if checked.result.ok and not weak:
                 break
             turned = replace(alignment, homography=alignment.homography @ turn)
-            other = self._read_and_check(gray, pyramid, turned, source, soft, blind)
+            other = self._read_and_check(gray, pyramid, turned, source, soft, blind, relit_from)
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
         if not checked.result.ok and alignment.correlation >= UNREAD_BLIND_CORRELATION:
             realigned = self.aligner.other_turn(pyramid, alignment)
-            other = None if realigned is None else self._read_and_check(gray, pyramid, realigned, source, soft, blind)
+            other = None
+            if realigned is not None:
+                other = self._read_and_check(gray, pyramid, realigned, source, soft, blind, relit_from)
             if other is not None and other[1].result.ok:
                 (H, checked, probs), alignment = other, realigned
         return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
 
     def _read_and_check(
-        self, gray: np.ndarray, pyramid: ImagePyramid, alignment: Alignment, source: str, soft: bool, blind: bool
+        self,
+        gray: np.ndarray,
+        pyramid: ImagePyramid,
+        alignment: Alignment,
+        source: str,
+        soft: bool,
+        blind: bool,
+        relit_from: float | None = None,
     ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
         """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
         place the drawing by (the passed payload's morph fit, else the alignment's), the
-        verdict, and the code bits' probabilities."""
+        verdict, and the code bits' probabilities. ``relit_from``: in a photo lit by the
+        template's light, the alignment in the photo itself (:meth:`PayloadChecker.check
+        <deepmorph_detect.check.PayloadChecker.check>`)."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
         if source == WHOLE_FRAME:
@@ -322,8 +378,9 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
+            whole = source == WHOLE_FRAME
             attempt = self.checker.check(
-                pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=source == WHOLE_FRAME
+                pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=whole, relit_from=relit_from
             )
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
