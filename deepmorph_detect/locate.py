@@ -365,7 +365,8 @@ class Locator:
         <deepmorph_detect.check.PayloadChecker.check>`)."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
-        if source == WHOLE_FRAME:
+        whole = source == WHOLE_FRAME
+        if whole:
             # A drawing that fills the frame is also read as it is, framed by its ink: a full
             # homography fitted to the unmorphed drawing can absorb part of a morph whose every
             # point moves (no fixed elements); the better-verified reading wins.
@@ -378,7 +379,6 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok:
                 continue
-            whole = source == WHOLE_FRAME
             attempt = self.checker.check(
                 pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=whole, relit_from=relit_from
             )

@@ -52,10 +52,15 @@ class TemplateLight:
         step = cv2.morphologyEx(self.reflectance, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
         self._edges = (step > EDGE_STEP).astype(np.uint8)
         self._width = self.reflectance.shape[1]
+        # every unread print asks for the same masks: made once
+        self._flat = {margin: self._far_from_edges(margin) for margin in EDGE_MARGINS}
 
     def flat_pixels(self, margin: float) -> np.ndarray:
         """``(h, w)`` float32 mask of the render's pixels farther than ``margin`` (a share of
         its width) from any edge of the drawing."""
+        return self._flat[margin] if margin in self._flat else self._far_from_edges(margin)
+
+    def _far_from_edges(self, margin: float) -> np.ndarray:
         r = max(1, round(margin * self._width))
         near = cv2.dilate(self._edges, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
         return (near == 0).astype(np.float32)
