@@ -4,8 +4,9 @@ The decoder CNN reads a rectified print in one pass. On small, blurred prints it
 bits, and a reading that lands near the wrong code word can pass the CRC. This module asks the
 photo directly instead. For a code word ``c`` it renders, with the model's soft rasterizer, the
 drawing morphed by ``c`` and by each of its one-bit variants ``c ^ e_j``, blurs them as much as
-the print is blurred, fits the light on the print (contrast and brightness as linear fields),
-discounts what a small misalignment explains, and compares:
+the print is blurred, fits the light on the print (contrast and brightness as linear fields; a
+colour drawing's renders in colour, one contrast field per colour channel, since printing and
+capture change each ink differently), discounts what a small misalignment explains, and compares:
 
     evidence_j = (|P - T(c ^ e_j)|^2 - |P - T(c)|^2) / |T(c ^ e_j) - T(c)|^2
 
@@ -20,7 +21,10 @@ Two uses (:class:`~deepmorph_detect.locate.Locator`):
   in six bits or more, most of them contradicted. The morph check of the whole drawing (one
   correlation) passes such near misses about half the time.
 * :meth:`MorphSynthesis.read` -- the last look at a drawing no view of which passes the CRC:
-  the CNN's log-odds plus the evidence decide every bit again.
+  the CNN's log-odds plus the evidence decide every bit again. A colour drawing's bits are asked
+  there in its reading channel's one gray, not in colour: the per-bit check of the word this look
+  reads then asks the photo in a way that did not choose it (asked in colour both times, a hard
+  close-up under a cast shadow gave a wrong payload that its own evidence vouched for).
 """
 
 from __future__ import annotations
@@ -164,11 +168,16 @@ class MorphSynthesis:
         self.renderer = renderer
         settings = RasterSettings(**{**model.meta.raster, "width": width})
         self.rasterizer = SoftRasterizer(model.drawing.space, settings, channel=model.drawing.channel)
-        self._variants: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        # a colour drawing's renders stay in colour: printing and capture change each paint's
+        # colour differently (faded ink, white balance), so no one gray of the render is the photo's
+        self.colour = model.drawing.colour
+        self._variants: OrderedDict[bytes, tuple[np.ndarray, np.ndarray]] = OrderedDict()
 
-    def variants(self, code: np.ndarray) -> np.ndarray:
-        """``(N_b + 2, h, w)`` renders (1 = paper): ``code`` and each of its one-bit variants by
-        the soft rasterizer, then ``code`` by the real renderer (see :meth:`evidence`)."""
+    def variants(self, code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The renders :meth:`evidence` compares (1 = paper): ``(N_b + 1, C, h, w)`` of ``code``
+        and each of its one-bit variants by the soft rasterizer (``C`` = 3, sRGB, for a colour
+        drawing; 1, gray, for a black-and-white one), and ``(h, w)`` of ``code`` by the real
+        renderer in the model's reading channel."""
         code = np.asarray(code, dtype=np.uint8)
         key = code.tobytes()
         renders = self._variants.get(key)
@@ -178,11 +187,11 @@ class MorphSynthesis:
             codes[np.arange(1, n + 1), np.arange(n)] ^= 1
             values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
             with torch.no_grad():
-                soft = 1.0 - self.rasterizer(values)[:, 0].numpy()
-            real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[2], self.template.viewbox)
-            if real.shape != soft.shape[1:]:
-                real = cv2.resize(real, soft.shape[:0:-1], interpolation=cv2.INTER_AREA)
-            renders = np.concatenate([soft, real[None]])
+                soft = (self.rasterizer.render_rgb(values) if self.colour else 1.0 - self.rasterizer(values)).numpy()
+            real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[3], self.template.viewbox)
+            if real.shape != soft.shape[2:]:
+                real = cv2.resize(real, soft.shape[:1:-1], interpolation=cv2.INTER_AREA)
+            renders = (soft, real)
             self._variants[key] = renders
             if len(self._variants) > VARIANT_CACHE:
                 self._variants.popitem(last=False)
@@ -216,7 +225,9 @@ class MorphSynthesis:
         """The photo through ``homography`` (SVG units -> image px), at :attr:`width`."""
         return warp_to_template(pyramid, homography, self.template, self.width).astype(np.float32)
 
-    def evidence(self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray) -> BitEvidence:
+    def evidence(
+        self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, in_colour: bool = True
+    ) -> BitEvidence:
         """The photo's evidence on every bit of ``code``; ``homography`` must already be aligned
         to the morph of ``code`` (an alignment to another morph bends towards that one).
 
@@ -227,30 +238,56 @@ class MorphSynthesis:
         difference is within the measurement's noise and is left alone. It matters where a
         bit's change hides under another stroke, where the soft union and a renderer's painting
         differ (pins of a chip pushed along themselves into its outline).
+
+        ``in_colour``: a colour drawing's renders are fitted in colour (:meth:`_light`); false,
+        in its reading channel's gray, as :meth:`read` asks.
         """
         photo = self.rectified(pyramid, homography)
-        renders = self.variants(code)
-        if renders.shape[1:] != photo.shape:
-            renders = np.stack([cv2.resize(r, photo.shape[::-1], interpolation=cv2.INTER_AREA) for r in renders])
-        soft, real = renders[:-1], renders[-1]
-        fit, sigma = max((correlation(cv2.GaussianBlur(soft[0], (0, 0), s), photo), s) for s in BLUR_SIGMAS)
-        blurred = np.stack([cv2.GaussianBlur(r, (0, 0), sigma) for r in soft]).reshape(len(soft), -1)
-        said = self._ask(photo, blurred)
-        own = self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred)
+        soft, real = self.variants(code)
+        colour = self.colour and in_colour
+        if self.colour and not colour:  # the renders in the reading channel's one gray
+            soft = np.einsum("ncyx,c->nyx", soft, np.asarray(self.rasterizer.channel, dtype=soft.dtype))[:, None]
+        if soft.shape[2:] != photo.shape:
+            size = photo.shape[::-1]
+            soft = np.stack([[cv2.resize(c, size, interpolation=cv2.INTER_AREA) for c in r] for r in soft])
+            real = cv2.resize(real, size, interpolation=cv2.INTER_AREA)
+        fields = self._light_fields(photo.shape)
+        # the print's blur: the one whose render (a colour one in its fitted light) looks most like it
+        looks = (lambda r: self._lit(photo, r, fields)) if colour else (lambda r: r[0])
+        fit, sigma = max((correlation(looks(_blurred(soft[0], s)), photo), s) for s in BLUR_SIGMAS)
+        blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
+        said = self._ask(photo, blurred, fields)
+        own = self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields)
         evidence = said - np.where(own < MIN_OWN_EVIDENCE, own - 1.0, 0.0)
         return BitEvidence(np.asarray(code, dtype=np.uint8), evidence.astype(np.float32), fit, float(sigma))
 
-    def _ask(self, photo: np.ndarray, blurred: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _light(photo: np.ndarray, render: np.ndarray, fields: np.ndarray) -> np.ndarray:
+        """The light on the print as coefficients: for each of the render's ``C`` channels
+        (``(C, h * w)``) a contrast field, then one brightness field, each a combination of the
+        smooth ``fields`` (``(h * w, k)``), least squares against ``photo``: ``(C + 1, k)``.
+
+        One contrast field per colour channel: the photo's gray is a linear mix of the printed
+        colours that the capture changed (faded ink, white balance, the camera's tint), so a
+        colour print is fitted as its own mix rather than as one fixed gray."""
+        design = np.concatenate([fields * channel[:, None] for channel in render] + [fields], axis=1)
+        coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
+        return coef.reshape(len(render) + 1, fields.shape[1])
+
+    def _lit(self, photo: np.ndarray, render: np.ndarray, fields: np.ndarray) -> np.ndarray:
+        """``render`` (``(C, h, w)``) in the light :meth:`_light` fits to ``photo``: ``(h, w)``."""
+        flat = render.reshape(len(render), -1)
+        light = fields @ self._light(photo, flat, fields).T
+        return ((light[:, :-1] * flat.T).sum(1) + light[:, -1]).reshape(photo.shape)
+
+    def _ask(self, photo: np.ndarray, blurred: np.ndarray, fields: np.ndarray) -> np.ndarray:
         """``(N_b,)`` evidence of ``photo`` (``(h, w)``) on each bit, from ``blurred``: the
-        word's render and its one-bit variants, blurred like the print, ``(N_b + 1, h * w)``."""
+        word's render and its one-bit variants, blurred like the print, ``(N_b + 1, C, h * w)``;
+        ``fields``: the light's smooth basis (:meth:`_light_fields`)."""
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
-        fields = self._light_fields(photo.shape)
-        design = np.concatenate([fields * blurred[0][:, None], fields], axis=1)
-        coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
-        gain = fields @ coef[: fields.shape[1]]
-        offset = fields @ coef[fields.shape[1] :]
-        models = gain * blurred + offset
+        light = fields @ self._light(photo, blurred[0], fields).T
+        models = np.einsum("pc,ncp->np", light[:, :-1], blurred) + light[:, -1]
         residuals = photo.ravel()[None] - models
         changes = models[1:] - models[0]
         # a small misalignment: what a small motion of the word's render explains is evidence
@@ -285,7 +322,7 @@ class MorphSynthesis:
         aligned = refine_at(pyramid, homography, soft_morph, width, ALIGN_ITERATIONS, wide_basin=True)
         H = homography if aligned is None else aligned.homography
         for _ in range(READ_ROUNDS):
-            asked = self.evidence(pyramid, H, bits)
+            asked = self.evidence(pyramid, H, bits, False)  # in the reading channel's gray
             said = asked.evidence
             logits = cnn + EVIDENCE_WEIGHT * np.where(bits == 1, said, -said)
             # as probabilities, on a scale where evidence of +-1 gives about 0.993 and the CNN
@@ -296,6 +333,12 @@ class MorphSynthesis:
                 break
             bits = new
         return soft.astype(np.float32)
+
+
+def _blurred(renders: np.ndarray, sigma: float) -> np.ndarray:
+    """``renders`` (``(..., h, w)``) each blurred by a Gaussian of ``sigma`` pixels."""
+    flat = renders.reshape(-1, *renders.shape[-2:])
+    return np.stack([cv2.GaussianBlur(r, (0, 0), sigma) for r in flat]).reshape(renders.shape)
 
 
 def morph_template(
