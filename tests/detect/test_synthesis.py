@@ -362,51 +362,100 @@ def test_the_per_bit_evidence_is_corrected_where_the_soft_rasterizer_misdraws_a_
     assert sum(e.agrees for e in raw) < len(raw)  # and uncorrected, some right word is withdrawn
 
 
-def test_a_colour_print_is_asked_in_its_own_colours(tmp_path: Path, with_bezier) -> None:
-    """Printing and capture change each colour differently (faded ink, a white balance). The
-    yellow face is read in blue, where its render shows the face and the eyes' dark brown
-    alike and the photo does not. The light fitted per colour channel shows every bit of the
-    printed word and leaves less of the photo unexplained than one gray fitted to it; a word
-    near it still does not agree."""
+@pytest.fixture(scope="module")
+def face_bundle(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The yellow face emoji at the encoder's spread start (full-range bits), read in blue."""
+    import deepmorph.plugin as commands
+    import deepmorph_augment.plugin as augmentations
+    import deepmorph_detect.plugin as detectors
+    import deepmorph_primitives.plugin as primitives
     from deepmorph.training.codec import train_model
-    from deepmorph_core.luminance import LUMA_WEIGHTS
-    from deepmorph_core.render import render_svg_rgb
-    from deepmorph_detect.fastrender import channel_renderer
-    from deepmorph_detect.refine import Template
-    from deepmorph_detect.synthesis import MorphSynthesis
+    from deepmorph_core.plugins import load_registry, set_default_registry
 
+    bezier = pytest.importorskip("deepmorph_bezier.plugin", reason="the example Bézier plugin is not installed")
+    set_default_registry(load_registry([primitives, augmentations, detectors, commands, bezier], entry_points=False))
+    out = tmp_path_factory.mktemp("face") / "face.dmm"
     train_model(
         Path(__file__).parent.parent / "data" / "fluent-emoji-flat" / "face-without-mouth.svg",
-        tmp_path / "face.dmm",
+        out,
         payload_bits=12,
         ecc_t=1,
         bounds={"move": 0.5},
         train={"steps": 1, "width": 32, "batch": 2, "threads": 1},
     )
-    model = DeepMorphModel.load(tmp_path / "face.dmm").eval()  # the spread start: full-range bits
+    return out
+
+
+@pytest.fixture
+def face(face_bundle: Path, with_bezier) -> DeepMorphModel:
+    return DeepMorphModel.load(face_bundle).eval()
+
+
+def _colour_photo(model: DeepMorphModel, code: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A 256-px print of ``code``'s morph, its ink faded a third of the way to gray and its
+    white balance warmed, blurred and noisy, in the model's reading channel; and its homography."""
+    from deepmorph_core.luminance import LUMA_WEIGHTS
+    from deepmorph_core.render import render_svg_rgb
+
+    values = model.morph_values(torch.from_numpy(code[None].astype(np.float32)))[0]
+    rgb = render_svg_rgb(model.drawing.to_svg(values), 256)
+    faded = rgb + 0.35 * (rgb @ np.asarray(LUMA_WEIGHTS, np.float32)[:, None] - rgb)
     channel = np.asarray(model.drawing.channel, dtype=np.float32)
-    assert channel.argmax() == 2  # read in blue
-    renderer = channel_renderer(model.drawing.channel)
+    photo = cv2.GaussianBlur(np.clip(faded * (1.0, 0.97, 0.85), 0, 1) @ channel, (0, 0), 0.8)
+    photo = np.clip(photo * 0.8 + 0.1 + rng.normal(0, 0.01, photo.shape), 0, 1).astype(np.float32)
     viewbox = model.drawing.drawing.viewbox
-    template = Template.from_svg(model.drawing.to_svg(model.drawing.neutral_values()[0]), viewbox, (48, 128), renderer)
-    synthesis = MorphSynthesis(model, template, renderer=renderer)
     s = 256 / viewbox[2]
-    H = np.array([[s, 0, -viewbox[0] * s], [0, s, -viewbox[1] * s], [0, 0, 1]])
+    return photo, np.array([[s, 0, -viewbox[0] * s], [0, s, -viewbox[1] * s], [0, 0, 1]])
+
+
+def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> None:
+    """Printing and capture change each colour differently (faded ink, a white balance). The
+    yellow face is read in blue, where its render shows the face and the eyes' dark brown
+    alike and the photo does not. The light fitted per colour channel shows every bit of the
+    printed word and leaves less of the photo unexplained than one gray fitted to it; a word
+    near it still does not agree."""
+    from deepmorph_detect.fastrender import channel_renderer
+    from deepmorph_detect.refine import Template
+    from deepmorph_detect.synthesis import MorphSynthesis
+
+    assert np.argmax(face.drawing.channel) == 2  # read in blue
+    renderer = channel_renderer(face.drawing.channel)
+    neutral = face.drawing.to_svg(face.drawing.neutral_values()[0])
+    template = Template.from_svg(neutral, face.drawing.drawing.viewbox, (48, 128), renderer)
+    synthesis = MorphSynthesis(face, template, renderer=renderer)
     rng = np.random.default_rng(5)
     gains = []
     for payload in random_payloads(4, 12, rng):
-        code = model.codec.encode(payload)
-        values = model.morph_values(torch.from_numpy(code[None].astype(np.float32)))[0]
-        rgb = render_svg_rgb(model.drawing.to_svg(values), 256)
-        faded = rgb + 0.35 * (rgb @ np.asarray(LUMA_WEIGHTS, np.float32)[:, None] - rgb)  # a third of the way to gray
-        photo = cv2.GaussianBlur(np.clip(faded * (1.0, 0.97, 0.85), 0, 1) @ channel, (0, 0), 0.8)
-        photo = np.clip(photo * 0.8 + 0.1 + rng.normal(0, 0.01, photo.shape), 0, 1).astype(np.float32)
+        code = face.codec.encode(payload)
+        photo, H = _colour_photo(face, code, rng)
         pyramid = ImagePyramid(photo)
         in_colour = synthesis.evidence(pyramid, H, code)
         in_gray = synthesis.evidence(pyramid, H, code, in_colour=False)
         assert in_colour.agrees and in_colour.contradicted == 0, in_colour.reason
-        gains.append(in_gray.deviation - in_colour.deviation)
         assert 1 - in_colour.fit**2 < 0.8 * (1 - in_gray.fit**2)  # a third less of the photo left unexplained
-        near = model.codec.encode(_near_payloads(payload)[0])
+        gains.append(in_gray.deviation - in_colour.deviation)
+        near = face.codec.encode(_near_payloads(payload)[0])
         assert not synthesis.evidence(pyramid, H, near).agrees
     assert np.mean(gains) > 0.03, gains
+
+
+def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
+    face: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The colours' extra freedom also explains clutter; a weak reading is asked in colour where
+    the unmorphed drawing aligned at 0.8 or better (in a lit photo: where the photo itself did),
+    else in the reading channel's gray."""
+    from deepmorph_detect.check import DRAWING_LIKE_ALIGNMENT
+
+    locator = Locator(face, detector=None)
+    payload = random_payloads(1, 12, np.random.default_rng(6))[0]
+    photo, H = _colour_photo(face, face.codec.encode(payload), np.random.default_rng(6))
+    asked: list[bool] = []
+    evidence = locator.checker.synthesis.evidence
+    monkeypatch.setattr(locator.checker.synthesis, "evidence", lambda *a: asked.append(a[3]) or evidence(*a))
+    weak = DecodeResult(payload, ok=True, corrected_bits=1, confidence=0.9)
+    pyramid = ImagePyramid(photo)
+    assert locator.checker.check(pyramid, H, weak).status == "passed"
+    for relit_from in (DRAWING_LIKE_ALIGNMENT - 0.2, DRAWING_LIKE_ALIGNMENT + 0.1):
+        locator.checker.check(pyramid, H, weak, relit_from=relit_from)
+    assert asked == [True, False, True]
