@@ -183,6 +183,15 @@ class Locator:
             )
         return gray, camera.for_image(w, h) if camera is not None else Camera.default(w, h), ImagePyramid(gray)
 
+    def aligns(self, image: np.ndarray) -> bool:
+        """Whether the detector's proposals in ``image`` align to the drawing at all, read or
+        not: a blind proposer's unread prints are never reported (:meth:`reports_unread`), so an
+        empty :meth:`locate` alone does not say whether the print was found."""
+        gray, _, pyramid = self.frame(image, None)
+        seen = gray if is_luma(self.model.drawing.channel) else image
+        candidates = self.detector.detect(seen) if self.detector is not None else []
+        return bool(self.aligner.verify(pyramid, candidates, gray))
+
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.
 

@@ -123,3 +123,18 @@ def test_a_plugin_validation_must_return_a_record() -> None:
     registry = load_registry([builtin, _BadValidation()], entry_points=False)
     with pytest.raises(PluginError, match="deepmorph_validate_model returned a dict"):
         registry.validate_model(DeepMorphModel.load(BUNDLED_MODEL), 1, 0)
+
+
+def test_a_print_found_but_not_read_is_not_counted_as_not_found(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The universal detector reports only the prints it reads, so an empty result is not a
+    print not found: one that aligns counts as not read, which calls for fewer bits, not a
+    detector; one that does not align counts as not found."""
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.photo_validation import validate_close_ups
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    monkeypatch.setattr(Locator, "locate", lambda self, image, camera=None, soft=True: [])
+    record = validate_close_ups(model, 3, 0, "easy", detector="universal")
+    assert record.read == 0 and record.missed == 0 and record.bit_accuracy is None
+    monkeypatch.setattr(Locator, "aligns", lambda self, image: False)
+    assert validate_close_ups(model, 3, 0, "easy", detector="universal").missed == 3
