@@ -183,14 +183,21 @@ class Locator:
             )
         return gray, camera.for_image(w, h) if camera is not None else Camera.default(w, h), ImagePyramid(gray)
 
+    def _proposed(
+        self, image: np.ndarray, camera: Camera | None
+    ) -> tuple[np.ndarray, Camera, ImagePyramid, list[Aligned]]:
+        """:meth:`frame`, and the detector's proposals in ``image`` that align to the drawing."""
+        gray, cam, pyramid = self.frame(image, camera)
+        # detectors read luminance: a model read in another channel hands them the photo itself
+        seen = gray if is_luma(self.model.drawing.channel) else image
+        candidates = self.detector.detect(seen) if self.detector is not None else []
+        return gray, cam, pyramid, self.aligner.verify(pyramid, candidates, gray)
+
     def aligns(self, image: np.ndarray) -> bool:
         """Whether the detector's proposals in ``image`` align to the drawing at all, read or
         not: a blind proposer's unread prints are never reported (:meth:`reports_unread`), so an
         empty :meth:`locate` alone does not say whether the print was found."""
-        gray, _, pyramid = self.frame(image, None)
-        seen = gray if is_luma(self.model.drawing.channel) else image
-        candidates = self.detector.detect(seen) if self.detector is not None else []
-        return bool(self.aligner.verify(pyramid, candidates, gray))
+        return bool(self._proposed(image, None)[3])
 
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.
@@ -202,11 +209,7 @@ class Locator:
         Args:
             camera: intrinsics for the pose; ``None`` assumes the default field of view.
         """
-        gray, cam, pyramid = self.frame(image, camera)
-        # detectors read luminance: a model read in another channel hands them the photo itself
-        seen = gray if is_luma(self.model.drawing.channel) else image
-        candidates = self.detector.detect(seen) if self.detector is not None else []
-        found = self.aligner.verify(pyramid, candidates, gray)
+        gray, cam, pyramid, found = self._proposed(image, camera)
         results = self.decode_each(gray, found, cam, soft)
         if any(located.result.ok for located in results):
             return results

@@ -239,7 +239,7 @@ class MorphSynthesis:
         bit's change hides under another stroke, where the soft union and a renderer's painting
         differ (pins of a chip pushed along themselves into its outline).
 
-        ``in_colour``: a colour drawing's renders are fitted in colour (:meth:`_light`); false,
+        ``in_colour``: a colour drawing's renders are fitted in colour (:meth:`_in_light`); false,
         in its reading channel's gray, as :meth:`read` asks.
         """
         photo = self.rectified(pyramid, homography)
@@ -252,8 +252,14 @@ class MorphSynthesis:
             soft = np.stack([[cv2.resize(c, size, interpolation=cv2.INTER_AREA) for c in r] for r in soft])
             real = cv2.resize(real, size, interpolation=cv2.INTER_AREA)
         fields = self._light_fields(photo.shape)
-        # the print's blur: the one whose render (a colour one in its fitted light) looks most like it
-        looks = (lambda r: self._lit(photo, r, fields)) if colour else (lambda r: r[0])
+
+        def looks(render: np.ndarray) -> np.ndarray:
+            """``(C, h, w)`` as the photo would show it: a colour one in its fitted light."""
+            if not colour:
+                return render[0]
+            return self._in_light(photo, render.reshape(1, len(render), -1), fields)[0].reshape(photo.shape)
+
+        # the print's blur: the one whose render looks most like it
         fit, sigma = max((correlation(looks(_blurred(soft[0], s)), photo), s) for s in BLUR_SIGMAS)
         blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
         said = self._ask(photo, blurred, fields)
@@ -274,11 +280,11 @@ class MorphSynthesis:
         coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
         return coef.reshape(len(render) + 1, fields.shape[1])
 
-    def _lit(self, photo: np.ndarray, render: np.ndarray, fields: np.ndarray) -> np.ndarray:
-        """``render`` (``(C, h, w)``) in the light :meth:`_light` fits to ``photo``: ``(h, w)``."""
-        flat = render.reshape(len(render), -1)
-        light = fields @ self._light(photo, flat, fields).T
-        return ((light[:, :-1] * flat.T).sum(1) + light[:, -1]).reshape(photo.shape)
+    def _in_light(self, photo: np.ndarray, renders: np.ndarray, fields: np.ndarray) -> np.ndarray:
+        """``renders`` (``(n, C, h * w)``) in the light :meth:`_light` fits between the first of
+        them and ``photo``: ``(n, h * w)``, what each would look like in the photo."""
+        light = fields @ self._light(photo, renders[0], fields).T
+        return np.einsum("pc,ncp->np", light[:, :-1], renders) + light[:, -1]
 
     def _ask(self, photo: np.ndarray, blurred: np.ndarray, fields: np.ndarray) -> np.ndarray:
         """``(N_b,)`` evidence of ``photo`` (``(h, w)``) on each bit, from ``blurred``: the
@@ -286,8 +292,7 @@ class MorphSynthesis:
         ``fields``: the light's smooth basis (:meth:`_light_fields`)."""
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
-        light = fields @ self._light(photo, blurred[0], fields).T
-        models = np.einsum("pc,ncp->np", light[:, :-1], blurred) + light[:, -1]
+        models = self._in_light(photo, blurred, fields)
         residuals = photo.ravel()[None] - models
         changes = models[1:] - models[0]
         # a small misalignment: what a small motion of the word's render explains is evidence
