@@ -37,6 +37,33 @@ EDGE_STEP = 0.03  # a reflectance step this large between neighbouring pixels is
 DARKEST_REFLECTANCE = 0.05  # the photo is divided by no reflectance darker than this
 
 
+def far_from_edges(reflectance: np.ndarray, radius: int) -> np.ndarray:
+    """``(h, w)`` float32 mask of the pixels of ``reflectance`` (``(h, w)``, or ``(C, h, w)``:
+    an edge in any channel counts) farther than ``radius`` pixels from any of its edges (a step
+    of :data:`EDGE_STEP` or more between neighbours): where a print's light can be read off it."""
+    channels = reflectance.reshape(-1, *reflectance.shape[-2:]).astype(np.float32)
+    kernel = np.ones((3, 3), np.uint8)
+    step = np.max([cv2.morphologyEx(c, cv2.MORPH_GRADIENT, kernel) for c in channels], axis=0)
+    edges = (step > EDGE_STEP).astype(np.uint8)
+    disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    return (cv2.dilate(edges, disk) == 0).astype(np.float32)
+
+
+def smoothed_light(ratio: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+    """The light on a print from ``ratio`` (photo over reflectance, already multiplied by
+    ``weight``, the mask of the pixels it is read at): their Gaussian-weighted mean within
+    ``sigma`` pixels (a normalised convolution), or within four times that where the pixels read
+    carry less than :data:`MIN_WEIGHT` of the weight; 1 where none is near at all."""
+    light = cv2.GaussianBlur(ratio, (0, 0), sigma)
+    support = cv2.GaussianBlur(weight, (0, 0), sigma)
+    wide_light = cv2.GaussianBlur(ratio, (0, 0), 4 * sigma)
+    wide_support = cv2.GaussianBlur(weight, (0, 0), 4 * sigma)
+    light = np.where(
+        support > MIN_WEIGHT, light / np.maximum(support, 1e-6), wide_light / np.maximum(wide_support, 1e-6)
+    )
+    return np.where(wide_support > 1e-3, light, 1.0).astype(np.float32)
+
+
 class TemplateLight:
     """Divides the light out of photos of one drawing, estimated from its unmorphed render.
 
@@ -49,8 +76,6 @@ class TemplateLight:
     def __init__(self, template: Template, reflectance: np.ndarray) -> None:
         self.template = template
         self.reflectance = np.ascontiguousarray(reflectance, dtype=np.float32)
-        step = cv2.morphologyEx(self.reflectance, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
-        self._edges = (step > EDGE_STEP).astype(np.uint8)
         self._width = self.reflectance.shape[1]
         # every unread print asks for the same masks: made once
         self._flat = {margin: self._far_from_edges(margin) for margin in EDGE_MARGINS}
@@ -61,9 +86,7 @@ class TemplateLight:
         return self._flat[margin] if margin in self._flat else self._far_from_edges(margin)
 
     def _far_from_edges(self, margin: float) -> np.ndarray:
-        r = max(1, round(margin * self._width))
-        near = cv2.dilate(self._edges, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
-        return (near == 0).astype(np.float32)
+        return far_from_edges(self.reflectance, max(1, round(margin * self._width)))
 
     def lit(self, gray: np.ndarray, homography: np.ndarray, margin: float) -> np.ndarray | None:
         """``gray`` with the light on the print at ``homography`` (SVG units -> pixels) divided
@@ -84,14 +107,7 @@ class TemplateLight:
         weight = cv2.warpPerspective(self.flat_pixels(margin), to_crop, size, flags=cv2.INTER_NEAREST)
         crop = gray[y0:y1, x0:x1].astype(np.float32)
         ratio = crop / np.maximum(seen, DARKEST_REFLECTANCE) * weight
-        sigma = LIGHT_SMOOTHING * span
-        light = cv2.GaussianBlur(ratio, (0, 0), sigma)
-        support = cv2.GaussianBlur(weight, (0, 0), sigma)
-        wide_light = cv2.GaussianBlur(ratio, (0, 0), 4 * sigma)
-        wide_support = cv2.GaussianBlur(weight, (0, 0), 4 * sigma)
-        light = np.where(
-            support > MIN_WEIGHT, light / np.maximum(support, 1e-6), wide_light / np.maximum(wide_support, 1e-6)
-        )
+        light = smoothed_light(ratio, weight, LIGHT_SMOOTHING * span)
         out = np.array(gray, dtype=np.float32, copy=True)
         out[y0:y1, x0:x1] = np.clip(crop / np.maximum(light, 1e-3), 0.0, 1.0)
         return out
@@ -115,4 +131,4 @@ class TemplateLight:
         return found
 
 
-__all__ = ["EDGE_MARGINS", "LIGHT_SMOOTHING", "TemplateLight"]
+__all__ = ["EDGE_MARGINS", "LIGHT_SMOOTHING", "TemplateLight", "far_from_edges", "smoothed_light"]

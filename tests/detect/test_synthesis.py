@@ -31,6 +31,7 @@ from deepmorph_detect.synthesis import (
     MIN_WEAKEST_SUM,
     WEAKEST_BITS,
     BitEvidence,
+    MorphSynthesis,
     disagreement,
 )
 
@@ -430,9 +431,11 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
         photo, H = _colour_photo(face, code, rng)
         pyramid = ImagePyramid(photo)
         in_colour = synthesis.evidence(pyramid, H, code)
-        in_gray = synthesis.evidence(pyramid, H, code, in_colour=False)
         assert in_colour.agrees and in_colour.contradicted == 0, in_colour.reason
-        assert 1 - in_colour.fit**2 < 0.8 * (1 - in_gray.fit**2)  # a third less of the photo left unexplained
+        # with no light divided out (which would take up some of the inks' change too)
+        in_gray = synthesis.evidence(pyramid, H, code, in_colour=False, lit=False)
+        unlit = synthesis.evidence(pyramid, H, code, lit=False)
+        assert 1 - unlit.fit**2 < 0.8 * (1 - in_gray.fit**2)  # a third less of the photo left unexplained
         gains.append(in_gray.deviation - in_colour.deviation)
         near = face.codec.encode(_near_payloads(payload)[0])
         assert not synthesis.evidence(pyramid, H, near).agrees
@@ -459,3 +462,82 @@ def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
     for relit_from in (DRAWING_LIKE_ALIGNMENT - 0.2, DRAWING_LIKE_ALIGNMENT + 0.1):
         locator.checker.check(pyramid, H, weak, relit_from=relit_from)
     assert asked == [True, False, True]
+
+
+def _shadowed_colour_photo(
+    model: DeepMorphModel, code: np.ndarray, seed: int, angle: float, offset: float, shade: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
+    """A 256-px print of ``code``'s morph under a branch's cast shadow (a band a tenth of the
+    print wide that takes ``shade`` of the light, with a soft edge) across it, blurred and noisy
+    (noise by ``seed``), in the model's reading channel; and its homography."""
+    from deepmorph_core.render import render_svg_rgb
+
+    values = model.morph_values(torch.from_numpy(code[None].astype(np.float32)))[0]
+    rgb = render_svg_rgb(model.drawing.to_svg(values), 256)
+    y, x = np.mgrid[0:256, 0:256].astype(np.float32)
+    across = (x - 128) * np.cos(angle) + (y - 128) * np.sin(angle) - offset * 256
+    light = 1 - shade * cv2.GaussianBlur((np.abs(across) < 0.05 * 256).astype(np.float32), (0, 0), 1.5)
+    photo = cv2.GaussianBlur((rgb * light[..., None]) @ np.asarray(model.drawing.channel, np.float32), (0, 0), 0.8)
+    noise = np.random.default_rng(seed).normal(0, 0.01, photo.shape)
+    photo = np.clip(photo * 0.8 + 0.1 + noise, 0, 1).astype(np.float32)
+    viewbox = model.drawing.drawing.viewbox
+    s = 256 / viewbox[2]
+    return photo, np.array([[s, 0, -viewbox[0] * s], [0, s, -viewbox[1] * s], [0, 0, 1]])
+
+
+def _face_synthesis(face: DeepMorphModel) -> MorphSynthesis:
+    """The face's synthesis, reading its blue through the channel's renderer."""
+    from deepmorph_detect.fastrender import channel_renderer
+    from deepmorph_detect.refine import Template
+
+    renderer = channel_renderer(face.drawing.channel)
+    neutral = face.drawing.to_svg(face.drawing.neutral_values()[0])
+    template = Template.from_svg(neutral, face.drawing.drawing.viewbox, (48, 128), renderer)
+    return MorphSynthesis(face, template, renderer=renderer)
+
+
+def test_the_light_of_a_cast_shadow_is_read_off_the_flat_of_the_print(face: DeepMorphModel) -> None:
+    """Where the render is flat and light, the light divided out is the shadow's: on the paper
+    in the band, the photo's brightness there over the paper's away from it (half the light,
+    less the camera's black level), and one away from it."""
+    from deepmorph_detect.template_light import far_from_edges
+
+    synthesis = _face_synthesis(face)
+    code = face.codec.encode(random_payloads(1, 12, np.random.default_rng(2))[0])
+    photo, H = _shadowed_colour_photo(face, code, 2, angle=0.8, offset=0.0)
+    rectified = synthesis.rectified(ImagePyramid(photo), H)
+    render = synthesis.variants(code)[0][0]
+    light = synthesis.shadows(rectified, render)
+    h, w = rectified.shape
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    across = np.abs((x - w / 2) * np.cos(0.8) + (y - h / 2) * np.sin(0.8)) / w  # in print widths
+    paper = (far_from_edges(render, 3) > 0) & (render.min(axis=0) > 0.95)
+    inside, outside = paper & (across < 0.02), paper & (across > 0.15)
+    assert inside.sum() > 10 and outside.sum() > 200
+    assert np.median(light[outside]) == pytest.approx(1.0, abs=0.05)
+    shaded = np.median(rectified[inside]) / np.median(rectified[outside])  # (0.8 * 0.5 + 0.1) / 0.9
+    assert np.median(light[inside]) == pytest.approx(shaded, abs=0.05)
+
+
+def test_a_cast_shadow_moves_the_bits_evidence_less_once_its_light_is_divided_out(face: DeepMorphModel) -> None:
+    """A shadow's sharp edge across the face's fill is a change no smooth light field fits;
+    near a bit it outweighs the bit's change. With its light divided out, the per-bit evidence
+    of a shadowed print stays nearer that of the same print unshadowed, a near word is still
+    refused, and the deviation (whether the morph explains the photo at all) is the unlit one."""
+    synthesis = _face_synthesis(face)
+    rng = np.random.default_rng(5)
+    lit_shift, unlit_shift = [], []
+    for k, payload in enumerate(random_payloads(8, 12, rng)):
+        code = face.codec.encode(payload)
+        where = {"angle": 0.5 + 0.45 * k, "offset": 0.08 * (k % 3 - 1)}
+        photo, H = _shadowed_colour_photo(face, code, k, **where)
+        unshadowed, _ = _shadowed_colour_photo(face, code, k, shade=0.0, **where)
+        clean = synthesis.evidence(ImagePyramid(unshadowed), H, code, lit=False).evidence
+        lit = synthesis.evidence(ImagePyramid(photo), H, code)
+        unlit = synthesis.evidence(ImagePyramid(photo), H, code, lit=False)
+        lit_shift.append(np.abs(lit.evidence - clean).mean())
+        unlit_shift.append(np.abs(unlit.evidence - clean).mean())
+        assert lit.deviation == unlit.deviation
+        assert not synthesis.evidence(ImagePyramid(photo), H, face.codec.encode(_near_payloads(payload)[k])).agrees
+    assert all(np.less(lit_shift, unlit_shift)), (lit_shift, unlit_shift)
+    assert np.mean(lit_shift) < 0.85 * np.mean(unlit_shift), (lit_shift, unlit_shift)
