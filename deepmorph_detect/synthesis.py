@@ -276,18 +276,25 @@ class MorphSynthesis:
             soft = np.stack([[cv2.resize(c, size, interpolation=cv2.INTER_AREA) for c in r] for r in soft])
             real = cv2.resize(real, size, interpolation=cv2.INTER_AREA)
         code = np.asarray(code, dtype=np.uint8)
-        evidence, fit, sigma = self._asked(photo, soft, real, colour)
+        at_blur: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # both passes mostly find the same blur
+        evidence, fit, sigma = self._asked(photo, soft, real, colour, at_blur)
         if not lit:
             return BitEvidence(code, evidence, fit, sigma)
-        shown, fit, sigma = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour)
+        shown, fit, sigma = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, at_blur)
         return BitEvidence(code, shown, fit, sigma, unlit=evidence)
 
     def _asked(
-        self, photo: np.ndarray, soft: np.ndarray, real: np.ndarray, colour: bool
+        self,
+        photo: np.ndarray,
+        soft: np.ndarray,
+        real: np.ndarray,
+        colour: bool,
+        at_blur: dict[float, tuple[np.ndarray, np.ndarray]],
     ) -> tuple[np.ndarray, float, float]:
         """:meth:`evidence` of ``photo`` from the renders :meth:`variants` gives (``soft`` in the
         colours asked, ``colour``), sized as the photo: ``(N_b,)`` evidence, the fit of the word's
-        render and the print's blur."""
+        render and the print's blur. ``at_blur`` keeps, per blur, the blurred renders and the
+        evidence of the word's own real render, which do not depend on the photo."""
         fields = self._light_fields(photo.shape)
 
         def looks(render: np.ndarray) -> np.ndarray:
@@ -298,9 +305,11 @@ class MorphSynthesis:
 
         # the print's blur: the one whose render looks most like it
         fit, sigma = max((correlation(looks(_blurred(soft[0], s)), photo), s) for s in BLUR_SIGMAS)
-        blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
+        if sigma not in at_blur:
+            blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
+            at_blur[sigma] = blurred, self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields)
+        blurred, own = at_blur[sigma]
         said = self._ask(photo, blurred, fields)
-        own = self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields)
         evidence = said - np.where(own < MIN_OWN_EVIDENCE, own - 1.0, 0.0)
         return evidence.astype(np.float32), float(fit), float(sigma)
 
