@@ -81,6 +81,7 @@ SHADOW_MARGIN = 1
 LIGHT_ROUNDS = 3
 LIGHT_READ_SHARE = 0.3  # the light is read on paper and inks at least this share as bright as the brightest
 SHADOW_RENDER_BLUR = 1.0  # blur (px at SYNTH_WIDTH) of the render the light is read against
+SHADOW_LIGHT_RANGE = (0.1, 10.0)  # a light outside it is an estimate gone wrong, not a shadow: held to it
 VARIANT_CACHE = 16  # code words whose one-bit variants stay rendered (videos repeat payloads)
 
 
@@ -334,7 +335,7 @@ class MorphSynthesis:
             model = (mix @ inks).reshape(h, w)
             weight = (flat * (model > LIGHT_READ_SHARE * float(model.max()))).astype(np.float32)
             ratio = (photo / np.maximum(model, DARKEST_REFLECTANCE) * weight).astype(np.float32)
-            light = np.clip(smoothed_light(ratio, weight, SHADOW_SMOOTHING), 0.1, 10.0)
+            light = np.clip(smoothed_light(ratio, weight, SHADOW_SMOOTHING), *SHADOW_LIGHT_RANGE)
         return light
 
     def _gray(self, renders: np.ndarray) -> np.ndarray:
