@@ -392,6 +392,24 @@ def face(face_bundle: Path, with_bezier) -> DeepMorphModel:
     return DeepMorphModel.load(face_bundle).eval()
 
 
+def _filling(model: DeepMorphModel, width: int) -> np.ndarray:
+    """The homography (SVG units -> px) of a print whose viewBox fills a photo ``width`` px wide."""
+    x, y, vw, _ = model.drawing.drawing.viewbox
+    s = width / vw
+    return np.array([[s, 0, -x * s], [0, s, -y * s], [0, 0, 1]])
+
+
+def _face_synthesis(face: DeepMorphModel) -> MorphSynthesis:
+    """The face's synthesis, reading its blue through the channel's renderer."""
+    from deepmorph_detect.fastrender import channel_renderer
+    from deepmorph_detect.refine import Template
+
+    renderer = channel_renderer(face.drawing.channel)
+    neutral = face.drawing.to_svg(face.drawing.neutral_values()[0])
+    template = Template.from_svg(neutral, face.drawing.drawing.viewbox, (48, 128), renderer)
+    return MorphSynthesis(face, template, renderer=renderer)
+
+
 def _colour_photo(model: DeepMorphModel, code: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A 256-px print of ``code``'s morph, its ink faded a third of the way to gray and its
     white balance warmed, blurred and noisy, in the model's reading channel; and its homography."""
@@ -404,9 +422,7 @@ def _colour_photo(model: DeepMorphModel, code: np.ndarray, rng: np.random.Genera
     channel = np.asarray(model.drawing.channel, dtype=np.float32)
     photo = cv2.GaussianBlur(np.clip(faded * (1.0, 0.97, 0.85), 0, 1) @ channel, (0, 0), 0.8)
     photo = np.clip(photo * 0.8 + 0.1 + rng.normal(0, 0.01, photo.shape), 0, 1).astype(np.float32)
-    viewbox = model.drawing.drawing.viewbox
-    s = 256 / viewbox[2]
-    return photo, np.array([[s, 0, -viewbox[0] * s], [0, s, -viewbox[1] * s], [0, 0, 1]])
+    return photo, _filling(model, 256)
 
 
 def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> None:
@@ -415,15 +431,8 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
     alike and the photo does not. The light fitted per colour channel shows every bit of the
     printed word and leaves less of the photo unexplained than one gray fitted to it; a word
     near it still does not agree."""
-    from deepmorph_detect.fastrender import channel_renderer
-    from deepmorph_detect.refine import Template
-    from deepmorph_detect.synthesis import MorphSynthesis
-
     assert np.argmax(face.drawing.channel) == 2  # read in blue
-    renderer = channel_renderer(face.drawing.channel)
-    neutral = face.drawing.to_svg(face.drawing.neutral_values()[0])
-    template = Template.from_svg(neutral, face.drawing.drawing.viewbox, (48, 128), renderer)
-    synthesis = MorphSynthesis(face, template, renderer=renderer)
+    synthesis = _face_synthesis(face)
     rng = np.random.default_rng(5)
     gains = []
     for payload in random_payloads(4, 12, rng):
@@ -480,20 +489,7 @@ def _shadowed_colour_photo(
     photo = cv2.GaussianBlur((rgb * light[..., None]) @ np.asarray(model.drawing.channel, np.float32), (0, 0), 0.8)
     noise = np.random.default_rng(seed).normal(0, 0.01, photo.shape)
     photo = np.clip(photo * 0.8 + 0.1 + noise, 0, 1).astype(np.float32)
-    viewbox = model.drawing.drawing.viewbox
-    s = 256 / viewbox[2]
-    return photo, np.array([[s, 0, -viewbox[0] * s], [0, s, -viewbox[1] * s], [0, 0, 1]])
-
-
-def _face_synthesis(face: DeepMorphModel) -> MorphSynthesis:
-    """The face's synthesis, reading its blue through the channel's renderer."""
-    from deepmorph_detect.fastrender import channel_renderer
-    from deepmorph_detect.refine import Template
-
-    renderer = channel_renderer(face.drawing.channel)
-    neutral = face.drawing.to_svg(face.drawing.neutral_values()[0])
-    template = Template.from_svg(neutral, face.drawing.drawing.viewbox, (48, 128), renderer)
-    return MorphSynthesis(face, template, renderer=renderer)
+    return photo, _filling(model, 256)
 
 
 def test_the_light_of_a_cast_shadow_is_read_off_the_flat_of_the_print(face: DeepMorphModel) -> None:
