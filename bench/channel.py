@@ -19,6 +19,19 @@ with the capture's blur and motion in the camera's pixels (``deepmorph train --p
 bare run reads at 96 px as a default model does. ``--standardise`` puts each image at zero
 mean and unit variance before the ridge map (a linear reading that ignores contrast).
 
+``--reader cnn`` reads the groups with the project's decoder CNN trained as a regressor of their
+positions (``--cnn-steps``, fresh corruption each step) instead of a ridge map, each group set
+anywhere in its range (``--continuous``; a regression of one-bit positions measures how well a
+reader tells two apart, not how finely it places them). A print wider than 96 px is area-averaged
+into the decoder's 96-px frame, as the photo chain frames it.
+
+Beside each ceiling, the project's own figure as a share of it: the payload ``deepmorph capacity``
+plans for the drawing (``planned``; a model reads every print at least 96 px wide in its 96-px
+frame, so it plans the same payload at every width), and with ``--measured`` the largest payload
+bench/capacity.py's trained models read at 99 % (``read``; measured on close-ups whose prints
+span 144-192 px, so shown at 96 px). ``--tabulate RUN.json`` prints a saved run's tables again
+with these columns, measuring nothing.
+
 ``--undone-warp`` reads each drawing a second time through ``medium``'s residual warp, its
 photometric steps and the warp's exact inverse: alignment still perfect, but the picture
 resampled twice, as a photo's view is. ``--bundles`` reads trained models' drawings with the
@@ -27,14 +40,18 @@ instead: what their alignment leaves on top of the photometric noise.
 
     .venv/bin/python bench/channel.py --feather /work/shared/data/drawings/feather
     .venv/bin/python bench/channel.py --feather ... --only airplay,flag --undone-warp --bundles m1.dmm m2.dmm
+    .venv/bin/python bench/channel.py --feather ... --pixels 96,200,300 --standardise --measured capacity.json
+    .venv/bin/python bench/channel.py --feather ... --tabulate channel.json --measured capacity.json
 
 A linear reading is not the best one, so ``sigma`` is what a linear decoder meets, and the
-payload a ceiling for decoders that read no better; the CNN's bit errors sit at that level.
+payload a ceiling for decoders that read no better; a trained model's bit errors sit at that
+level, while ``--reader cnn`` places the groups more finely.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import sys
@@ -52,6 +69,10 @@ WIDTH = 96
 TEST_SAMPLES = 1000
 RIDGE = 10.0
 GRAM_BLOCK = 8192
+#: the CNN reader's batch and peak learning rate (one-cycle schedule)
+CNN_BATCH, CNN_LR = 32, 2e-3
+#: the CNN reader's stride-2 layers in a frame wider than the decoder's (no full-resolution stem)
+WIDE_FRAME = (16, 32, 48, 64, 64)
 WORD_RATE = 0.99
 GEOMETRIC_STEPS = {"perspective", "scale", "rotation", "translation"}
 SIGMA_GRID = np.linspace(0.02, 0.6, 59)
@@ -192,9 +213,11 @@ def corrupted(
 def group_sigma(
     drawing: Any, views: dict[str, Callable[[Any, Any], Any]], args: argparse.Namespace, width: int = WIDTH
 ) -> tuple[dict[str, np.ndarray], int]:
-    """Rms error of a linear reading of each readable group of ``drawing`` through each view's
-    steps (the same renders of the spread start at one code bit per group, framed ``width``
-    pixels wide), and the visible variables (groups and visibility judged at :data:`WIDTH`)."""
+    """Rms error of reading each readable group of ``drawing`` through each view's steps (the
+    same renders of the spread start, framed ``width`` pixels wide), and the visible variables
+    (groups and visibility judged at :data:`WIDTH`). The groups are set by one code bit each, or
+    with ``--continuous`` (always for ``--reader cnn``) anywhere between: a regression of binary
+    positions measures how well a reader classifies, not how finely it reads positions."""
     import torch
 
     from deepmorph_core.capacity import INVISIBLE
@@ -206,15 +229,84 @@ def group_sigma(
     firsts = [members[0] for members, _ in groups if shown[members].any()]
     weights = spread_weights(effects, len(groups), torch.Generator().manual_seed(args.seed))
     rng = np.random.default_rng(args.seed + 1)
-    bits = torch.from_numpy(rng.integers(0, 2, (args.samples + TEST_SAMPLES, len(groups))).astype(np.float32))
-    unit = torch.sigmoid((2 * bits - 1) @ weights.T)
+    shape = (args.samples + TEST_SAMPLES, len(groups))
+    if continuous_inputs(args):
+        levels = rng.uniform(-1.0, 1.0, shape)
+    else:
+        levels = 2 * rng.integers(0, 2, shape) - 1
+    unit = torch.sigmoid(torch.from_numpy(levels.astype(np.float32)) @ weights.T)
     renders = framed_renders(drawing, unit, width)
     targets = unit[:, firsts].numpy().astype(np.float64)
     sigmas = {}
     for view, steps in views.items():
-        seen = corrupted(renders, steps, args.seed + 2, standardise=args.standardise)
-        sigmas[view] = ridge_rms(seen, targets, TEST_SAMPLES, width)
+        if args.reader == "cnn":
+            sigmas[view] = cnn_rms(renders, targets, steps, args.cnn_steps, args.seed + 2, args.cnn_width)
+        else:
+            seen = corrupted(renders, steps, args.seed + 2, standardise=args.standardise)
+            sigmas[view] = ridge_rms(seen, targets, TEST_SAMPLES, width)
     return sigmas, int(shown.sum())
+
+
+def continuous_inputs(args: argparse.Namespace) -> bool:
+    """Whether the groups are read at positions anywhere in their range (not one bit each)."""
+    return args.continuous or args.reader == "cnn"
+
+
+def reader_name(args: argparse.Namespace) -> str:
+    """The table's name of the reading: ``linear`` or ``cnn``, and the inputs it read."""
+    frame = f" at {args.cnn_width} px" if args.reader == "cnn" and args.cnn_width != WIDTH else ""
+    return f"{args.reader}{frame}{', continuous' if continuous_inputs(args) else ''}"
+
+
+def cnn_rms(
+    renders: Any,
+    targets: np.ndarray,
+    steps: Callable[[Any, Any], Any],
+    train_steps: int,
+    seed: int,
+    frame: int = WIDTH,
+) -> np.ndarray:
+    """Rms error per target column of the project's decoder CNN (:class:`~deepmorph_core.networks.Decoder`)
+    trained as a regressor of the targets: ``train_steps`` Adam steps of :data:`CNN_BATCH`
+    renders of all but the last :data:`TEST_SAMPLES`, each through ``steps`` afresh and
+    area-averaged into a ``frame``-pixel frame as the photo chain frames a wider print; measured
+    on the last ones, each seen once. At :data:`WIDTH` px the decoder is the default one; in a
+    wider frame its first layer is strided (:data:`WIDE_FRAME`), so that it costs about as much."""
+    import torch
+    import torch.nn.functional as F
+
+    from deepmorph_core.networks import Decoder, DecoderConfig
+
+    fit = len(renders) - TEST_SAMPLES
+    wanted = torch.from_numpy(targets).float()
+
+    def framed(images: Any, generator: Any) -> Any:
+        seen = steps(images, generator)
+        return seen if seen.shape[-1] == frame else F.interpolate(seen, size=(frame, frame), mode="area")
+
+    torch.manual_seed(seed)
+    net = Decoder(
+        targets.shape[1], (frame, frame), None if frame == WIDTH else DecoderConfig(stem=0, channels=WIDE_FRAME)
+    )
+    optimiser = torch.optim.Adam(net.parameters(), lr=CNN_LR / 2)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, CNN_LR, total_steps=train_steps)
+    generator = torch.Generator().manual_seed(seed)
+    for _ in range(train_steps):
+        rows = torch.randint(0, fit, (CNN_BATCH,), generator=generator)
+        with torch.no_grad():
+            seen = framed(renders[rows], generator)
+        loss = F.mse_loss(torch.sigmoid(net(seen)), wanted[rows])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        schedule.step()
+    net.eval()
+    generator = torch.Generator().manual_seed(seed + 1)
+    with torch.no_grad():
+        read = torch.cat(
+            [torch.sigmoid(net(framed(renders[i : i + 250], generator))) for i in range(fit, len(renders), 250)]
+        )
+    return ((read - wanted[fit:]) ** 2).mean(0).sqrt().numpy().astype(np.float64)
 
 
 def undone_warp(width: int, print_px: int | None = None) -> Callable[[Any, Any], Any]:
@@ -241,9 +333,11 @@ def measure_drawing(
     """A panel drawing read with perfect alignment (the photometric steps of ``medium``) and,
     with ``--undone-warp``, through :func:`undone_warp` too (the same codes); with ``--pixels``,
     once per print width, read at that width with the capture in the camera's pixels."""
+    from deepmorph_core.capacity import predict
     from deepmorph_core.morphable import MorphableDrawing
 
     drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
+    planned = predict(drawing).payload_bits
     results = []
     for print_px in args.pixels or [None]:
         width = print_px or WIDTH
@@ -258,10 +352,12 @@ def measure_drawing(
             {
                 "name": name,
                 "view": view,
+                "reader": reader_name(args),
                 "print_px": width,
                 "camera_pixels": print_px is not None,
                 "variables": drawing.n_variables,
                 "visible": visible,
+                "planned_payload": planned,
                 **channel_summary(sigma, visible, table_),
                 "seconds": seconds,
             }
@@ -292,6 +388,7 @@ def measure_bundle(path: Path, args: argparse.Namespace, table_: ChannelTable) -
     return {
         "name": f"{model.meta.drawing_name} ({path.name})",
         "view": "medium, the model's spatial transformer",
+        "reader": reader_name(args),
         "variables": model.drawing.n_variables,
         "visible": visible,
         **channel_summary(sigma, visible, table_),
@@ -319,8 +416,9 @@ def channel_summary(sigma: np.ndarray, visible: int, table_: ChannelTable) -> di
 
 
 HEADERS = [
-    "drawing", "view", "print px", "visible", "readable groups", "sigma median", "sigma worst", "capacity bits",
-    "one bit per group", "information bits at 99 %", "payload at 99 %", "payload / visible",
+    "drawing", "view", "reader", "print px", "visible", "readable groups", "sigma median", "sigma worst",
+    "capacity bits", "one bit per group", "information bits at 99 %", "payload at 99 %", "payload / visible",
+    "planned", "planned / ceiling", "read", "read / ceiling",
 ]  # fmt: skip
 
 
@@ -329,16 +427,80 @@ def _px(result: dict) -> str:
     return f"{result.get('print_px', WIDTH)}{' (camera)' if result.get('camera_pixels') else ''}"
 
 
+def _share(part: int | None, ceiling: int) -> float | None:
+    """``part`` as a share of the ceiling's payload (``None`` where either is missing or 0)."""
+    return None if part is None or not ceiling else round(part / ceiling, 2)
+
+
 def rows(results: list[dict]) -> list[list[Any]]:
     return [
         [
-            r["name"], r["view"], _px(r), r["visible"], r["readable_groups"],
+            r["name"], r["view"], r.get("reader", "linear"), _px(r), r["visible"], r["readable_groups"],
             round(r["sigma_median"], 3), round(r["sigma_worst"], 3),
             round(r["capacity_bits"], 1), round(r["binary_bits"], 1), round(r["information_at_99"], 1),
             r["payload_at_99"], round(r["ratio"], 2),
+            r.get("planned_payload"), _share(r.get("planned_payload"), r["payload_at_99"]),
+            r.get("read_payload"), _share(r.get("read_payload"), r["payload_at_99"]),
         ]
         for r in results
     ]  # fmt: skip
+
+
+def measured_reads(paths: list[Path]) -> dict[str, int]:
+    """``drawing -> largest payload read at 99 %`` from bench/capacity.py's JSON (later files win).
+
+    Raises:
+        SystemExit: a file that cannot be read or is not that benchmark's JSON, naming it.
+    """
+    out: dict[str, int] = {}
+    for path in paths:
+        try:
+            for drawing in json.loads(path.read_text())["drawings"]:
+                out[drawing["drawing"]] = int(drawing["largest_passing"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            why = f"{type(exc).__name__}: {exc}"
+            raise SystemExit(f"--measured {path}: not a capacity benchmark result ({why})") from None
+    return out
+
+
+def with_figures(results: list[dict], reads: dict[str, int], drawings: dict[str, tuple[Path, float | None]]) -> None:
+    """Each row of a panel drawing given the project's figures: ``planned_payload`` where a saved
+    run lacks it (``deepmorph capacity``'s plan) and, on the 96-px rows, ``read_payload``."""
+    from deepmorph_core.capacity import predict
+    from deepmorph_core.morphable import MorphableDrawing
+
+    plans: dict[str, int] = {}
+    for r in results:
+        if r["name"] not in drawings:
+            continue  # a bundle's row
+        if r.get("planned_payload") is None:
+            if r["name"] not in plans:
+                svg, move = drawings[r["name"]]
+                drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
+                plans[r["name"]] = predict(drawing).payload_bits
+            r["planned_payload"] = plans[r["name"]]
+        if r.get("print_px", WIDTH) == WIDTH and r["name"] in reads:
+            r["read_payload"] = reads[r["name"]]
+
+
+def summary(done: list[dict]) -> list[str]:
+    """Per view and print width: the ceiling's payload per visible variable (median, worst,
+    best), and the project's figures as shares of the ceiling (median, worst)."""
+    lines = []
+    for view in (PERFECT, UNDONE):
+        for px in sorted({_px(r) for r in done}, key=lambda text: int(text.split()[0])):
+            here = [r for r in done if r["view"] == view and _px(r) == px]
+            if not here:
+                continue
+            ratios = [r["ratio"] for r in here]
+            line = (f"payload / visible at 99 %, {view}, {px} px: median {statistics.median(ratios):.2f}, "
+                    f"worst {min(ratios):.2f}, best {max(ratios):.2f}")  # fmt: skip
+            for key, label in (("planned_payload", "planned"), ("read_payload", "read")):
+                shares = [s for r in here if (s := _share(r.get(key), r["payload_at_99"])) is not None]
+                if shares:
+                    line += f"; {label} / ceiling median {statistics.median(shares):.2f}, worst {min(shares):.2f}"
+            lines.append(line)
+    return lines
 
 
 def main() -> None:
@@ -357,6 +519,16 @@ def main() -> None:
         help="print widths in the photo (e.g. 96,200,300): each read at its width, the capture in camera pixels",
     )
     ap.add_argument("--standardise", action="store_true", help="each image at zero mean and unit variance first")
+    ap.add_argument(
+        "--reader", choices=("linear", "cnn"), default="linear", help="a ridge map, or the decoder CNN as a regressor"
+    )
+    ap.add_argument("--cnn-steps", type=int, default=3000, help="training steps of the CNN reader")
+    ap.add_argument("--cnn-width", type=int, default=WIDTH, help="the CNN reader's frame in pixels (96: the decoder's)")
+    ap.add_argument("--continuous", action="store_true", help="groups anywhere in their range, not one bit each")
+    ap.add_argument(
+        "--measured", type=Path, nargs="*", default=[], help="bench/capacity.py results: what trained models read"
+    )
+    ap.add_argument("--tabulate", type=Path, help="print a saved run's tables again (measures nothing)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS / "channel.json")
@@ -368,11 +540,23 @@ def main() -> None:
     if args.only:
         keep = set(args.only.split(","))
         drawings = [d for d in drawings if d[0] in keep]
+    reads = measured_reads(args.measured)
+    by_name = {name: (svg, move) for name, svg, move in drawings}
+    if args.tabulate is not None:
+        try:
+            done = json.loads(args.tabulate.read_text())["drawings"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise SystemExit(f"--tabulate {args.tabulate}: not a channel benchmark result ({exc})") from None
+        with_figures(done, reads, by_name)
+        print(table(HEADERS, rows(done)))
+        print("\n".join(summary(done)))
+        return
     table_ = ChannelTable()
     done: list[dict] = []
 
     def record(result: dict) -> None:
         done.append(result)
+        with_figures([result], reads, by_name)
         print(table(HEADERS, rows([result])).splitlines()[-1], flush=True)
         write_json(args.out, {"environment": {**environment(), "threads": threads}, "drawings": done})
 
@@ -382,12 +566,7 @@ def main() -> None:
     for bundle in args.bundles:
         record(measure_bundle(bundle, args, table_))
     print(table(HEADERS, rows(done)))
-    for view in (PERFECT, UNDONE):
-        for px in sorted({_px(r) for r in done}):
-            ratios = [r["ratio"] for r in done if r["view"] == view and _px(r) == px]
-            if ratios:
-                print(f"payload / visible at 99 %, {view}, {px} px: median {statistics.median(ratios):.2f}, "
-                      f"worst {min(ratios):.2f}, best {max(ratios):.2f}")  # fmt: skip
+    print("\n".join(summary(done)))
     print(f"wrote {args.out}")
 
 
