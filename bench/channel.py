@@ -51,6 +51,7 @@ level, while ``--reader cnn`` places the groups more finely.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import statistics
@@ -333,11 +334,9 @@ def measure_drawing(
     """A panel drawing read with perfect alignment (the photometric steps of ``medium``) and,
     with ``--undone-warp``, through :func:`undone_warp` too (the same codes); with ``--pixels``,
     once per print width, read at that width with the capture in the camera's pixels."""
-    from deepmorph_core.capacity import predict
     from deepmorph_core.morphable import MorphableDrawing
 
     drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
-    planned = predict(drawing).payload_bits
     results = []
     for print_px in args.pixels or [None]:
         width = print_px or WIDTH
@@ -357,7 +356,6 @@ def measure_drawing(
                 "camera_pixels": print_px is not None,
                 "variables": drawing.n_variables,
                 "visible": visible,
-                "planned_payload": planned,
                 **channel_summary(sigma, visible, table_),
                 "seconds": seconds,
             }
@@ -447,38 +445,33 @@ def rows(results: list[dict]) -> list[list[Any]]:
 
 
 def measured_reads(paths: list[Path]) -> dict[str, int]:
-    """``drawing -> largest payload read at 99 %`` from bench/capacity.py's JSON (later files win).
+    """``drawing -> largest payload read at 99 %`` from bench/capacity.py's JSON, read as that
+    benchmark reads it (:func:`capacity.measured_sizes`; later files win, a broken one is named)."""
+    from capacity import measured_sizes
 
-    Raises:
-        SystemExit: a file that cannot be read or is not that benchmark's JSON, naming it.
-    """
     out: dict[str, int] = {}
-    for path in paths:
-        try:
-            for drawing in json.loads(path.read_text())["drawings"]:
-                out[drawing["drawing"]] = int(drawing["largest_passing"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            why = f"{type(exc).__name__}: {exc}"
-            raise SystemExit(f"--measured {path}: not a capacity benchmark result ({why})") from None
+    for (name, bits), size in measured_sizes(paths).items():
+        out[name] = max(out.get(name, 0), bits if size["passed"] else 0)
     return out
 
 
-def with_figures(results: list[dict], reads: dict[str, int], drawings: dict[str, tuple[Path, float | None]]) -> None:
-    """Each row of a panel drawing given the project's figures: ``planned_payload`` where a saved
-    run lacks it (``deepmorph capacity``'s plan) and, on the 96-px rows, ``read_payload``."""
+@functools.cache
+def planned_payload(svg: Path, move: float | None) -> int:
+    """The payload ``deepmorph capacity`` plans for a panel drawing."""
     from deepmorph_core.capacity import predict
     from deepmorph_core.morphable import MorphableDrawing
 
-    plans: dict[str, int] = {}
+    return predict(MorphableDrawing.load(svg, **({} if move is None else {"move": move}))).payload_bits
+
+
+def with_figures(results: list[dict], reads: dict[str, int], drawings: dict[str, tuple[Path, float | None]]) -> None:
+    """Each row of a panel drawing given the project's figures: ``planned_payload``
+    (:func:`planned_payload`, where a row lacks it) and, on the 96-px rows, ``read_payload``."""
     for r in results:
         if r["name"] not in drawings:
             continue  # a bundle's row
         if r.get("planned_payload") is None:
-            if r["name"] not in plans:
-                svg, move = drawings[r["name"]]
-                drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
-                plans[r["name"]] = predict(drawing).payload_bits
-            r["planned_payload"] = plans[r["name"]]
+            r["planned_payload"] = planned_payload(*drawings[r["name"]])
         if r.get("print_px", WIDTH) == WIDTH and r["name"] in reads:
             r["read_payload"] = reads[r["name"]]
 
