@@ -51,7 +51,7 @@ from deepmorph_detect.propose import (
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located
-from deepmorph_detect.synthesis import MorphSynthesis
+from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
@@ -159,7 +159,9 @@ class Locator:
         self.ink_share = thickness / view_width
         self.aligner = Aligner(self.template, min_correlation, thickness, view_width)
         self.reader = Reader(model, self.template, self.morphs, self.synthesis, thickness, self.device)
-        self.checker = PayloadChecker(model, self.template, self.morphs, self.synthesis)
+        # the per-bit check asks at a finer width than the last look reads
+        checks = MorphSynthesis(model, self.template, CHECK_WIDTH, renderer=self.renderer)
+        self.checker = PayloadChecker(model, self.template, self.morphs, checks)
         self.placer = Placer(self.viewbox)
         self.frame_corners = self.aligner.frame_corners
 
@@ -313,9 +315,9 @@ class Locator:
         A print still not read but aligned at :data:`BLIND_READ_CORRELATION` or better is aligned
         again in the light its template shows (:class:`~deepmorph_detect.template_light.TemplateLight`:
         a cast shadow bends the alignment and reads as ink), and all of the above is done again
-        in the photo so lit; a reading there counts only where it is not weak (no corrections,
-        confident) and never skips the per-bit check (the light came from the drawing itself, so
-        any morph near it fits that photo well).
+        in the photo so lit; a reading there never skips the per-bit check (the light came from
+        the drawing itself, so any morph near it fits that photo well), which a weak one (read
+        with corrections, or not confident) is asked in full.
         """
         located = self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind)
         if located.result.ok or alignment.correlation < BLIND_READ_CORRELATION:
@@ -324,8 +326,7 @@ class Locator:
         if lit is None:
             return located
         again = self._decode_at(gray, lit[0], lit[1], score, cam, source, soft, blind, alignment.correlation)
-        # a second photo is a second chance for a wrong word: only a strong reading counts there
-        return again if again.result.ok and not is_weak(again.result) else located
+        return again if again.result.ok else located
 
     def _decode_at(
         self,

@@ -45,7 +45,11 @@ from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_
 from deepmorph_detect.template_light import DARKEST_REFLECTANCE, far_from_edges, smoothed_light
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (wider reads fewer small prints, slower)
-BLUR_SIGMAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)  # print blur tried, in pixels at SYNTH_WIDTH
+# ... of the per-bit check, which asks about a word rather than reading one: at 64 px the evidence of
+# a drawing with many variables per bit contradicts bits of right words (2-8 of 23 on a 98-variable
+# colour icon, medium close-ups: 16 % of its right words agreed, 34 % at 96 px)
+CHECK_WIDTH = 96
+BLUR_SIGMAS = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)  # print blur tried, in pixels at the render's width
 MAX_CONTRADICTED = 2  # a checked code word may have at most this many bits the photo contradicts
 # ... and the evidence of its WEAKEST_BITS weakest bits must add up to MIN_WEAKEST_SUM or more:
 # on a blurred, steeply tilted print the evidence is noise of about +-0.6, and a wrong word can
@@ -71,7 +75,7 @@ ALIGN_ITERATIONS = 5  # ECC iterations of the alignment to the CNN's morph befor
 LIGHT_DEGREE = 1  # degree of the smooth light fields (0: one contrast and brightness for the print)
 # the light on the print, divided out before asking: a cast shadow's sharp edge across a fill is
 # something no smooth field fits, and it swamps the small changes of the bits near it. It is read
-# off the photo where the word's render is flat: farther than SHADOW_MARGIN px (at SYNTH_WIDTH)
+# off the photo where the word's render is flat: farther than SHADOW_MARGIN px (at the render's width)
 # from its edges, where the morph acts, smoothed over SHADOW_SMOOTHING px, in LIGHT_ROUNDS rounds
 # of fitting the render's inks to the photo so lit and the light to the inks so fitted. Right
 # words the per-bit check refused on close-ups that aligned (an icon, medium, and two drawings,
@@ -80,7 +84,7 @@ SHADOW_SMOOTHING = 1.0
 SHADOW_MARGIN = 1
 LIGHT_ROUNDS = 3
 LIGHT_READ_SHARE = 0.3  # the light is read on paper and inks at least this share as bright as the brightest
-SHADOW_RENDER_BLUR = 1.0  # blur (px at SYNTH_WIDTH) of the render the light is read against
+SHADOW_RENDER_BLUR = 1.0  # blur (px at the render's width) of the render the light is read against
 SHADOW_LIGHT_RANGE = (0.1, 10.0)  # a light outside it is an estimate gone wrong, not a shadow: held to it
 VARIANT_CACHE = 16  # code words whose one-bit variants stay rendered (videos repeat payloads)
 
@@ -94,7 +98,7 @@ class BitEvidence:
         evidence: ``(N_b,)`` about +1 where the photo shows the word's bit, -1 where it shows
             the flipped bit.
         fit: correlation of the blurred render of ``code`` with the photo.
-        blur_px: the blur (Gaussian sigma, pixels at :data:`SYNTH_WIDTH`) that fitted best.
+        blur_px: the blur (Gaussian sigma, pixels at the render's width) that fitted best.
         unlit: ``(N_b,)`` the evidence with no shadow divided out, where :attr:`evidence` had
             one divided out (:meth:`MorphSynthesis.shadows`): whether the word's morph explains
             the photo at all (:attr:`deviation`) is judged on it, as dividing out a light read
@@ -441,6 +445,7 @@ def morph_template(
 
 __all__ = [
     "BLUR_SIGMAS",
+    "CHECK_WIDTH",
     "HOPELESS_DEVIATION",
     "MAX_CONTRADICTED",
     "MAX_DEVIATION",

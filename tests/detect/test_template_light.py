@@ -8,13 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import deepmorph_detect.locate as locate_module
+import deepmorph_detect.check as check_module
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.fastrender import template_renderer
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
 from deepmorph_detect.refine import LEVELS, ImagePyramid, Template, refine
 from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.synthesis import BitEvidence
 from deepmorph_detect.template_light import EDGE_MARGINS, TemplateLight
 
 FACE = Path(__file__).parents[1] / "data" / "fluent-emoji-flat" / "face-without-mouth.svg"
@@ -94,7 +95,7 @@ def test_a_drawing_aligned_well_and_not_read_is_read_again_in_its_light(
 ) -> None:
     """The photo chain asks the template's light only for a drawing that aligned at
     ``BLIND_READ_CORRELATION`` or better and was not read, and reads it again there; a weak
-    reading there does not count."""
+    reading there counts only where the whole per-bit check passes."""
     from dataclasses import replace
 
     locator = Locator(model)
@@ -128,8 +129,20 @@ def test_a_drawing_aligned_well_and_not_read_is_read_again_in_its_light(
     read = locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
     assert asked == [1.0] and read.result.ok and np.array_equal(read.result.payload, placed.payload)
     first.clear()
-    with monkeypatch.context() as m:  # a weak reading there (corrections, or not confident) does not count
-        m.setattr(locate_module, "is_weak", lambda result: True)
+    with monkeypatch.context() as m:  # a weak reading there (corrections, or not confident) counts
+        m.setattr(check_module, "is_weak", lambda result: True)  # where the whole per-bit check passes
+        evidence = locator.checker.synthesis.evidence
+        asked_bits: list[int] = []
+        m.setattr(locator.checker.synthesis, "evidence", lambda *a: asked_bits.append(1) or evidence(*a))
+        read = locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
+        assert read.result.ok and np.array_equal(read.result.payload, placed.payload) and asked_bits
+        first.clear()
+
+        def contradicted(*args: object) -> BitEvidence:
+            real = evidence(*args)
+            return BitEvidence(real.code, -real.evidence, real.fit, real.blur_px)
+
+        m.setattr(locator.checker.synthesis, "evidence", contradicted)  # and not where the bits are contradicted
         assert not locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True).result.ok
     first.clear()
     asked.clear()
