@@ -70,7 +70,7 @@ def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_on
     photo, H = _small_print(model, payload, 80, seed=1)
     pyramid = ImagePyramid(photo)
     true_code = model.codec.encode(payload)
-    said = locator.synthesis.evidence(pyramid, H, true_code)
+    said = locator.checker.synthesis.evidence(pyramid, H, true_code)
     assert said.contradicted == 0 and said.agrees and said.fit > 0.9
     assert np.median(said.evidence) == pytest.approx(1.0, abs=0.3)  # +1: the photo shows the word's bit
     for near in _near_payloads(payload)[:4]:
@@ -78,7 +78,7 @@ def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_on
         differs = code != true_code
         assert differs.sum() >= 4
         fit = locator.checker.fit_morph(pyramid, H, near)  # aligned to its own morph, as the check does
-        said = locator.synthesis.evidence(pyramid, fit.homography, code)
+        said = locator.checker.synthesis.evidence(pyramid, fit.homography, code)
         assert not said.agrees and said.contradicted > MAX_CONTRADICTED
         # the bits seen flipped are mostly the ones that differ from the printed word
         flipped = said.evidence < 0
