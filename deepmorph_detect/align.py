@@ -146,14 +146,15 @@ class Aligner:
                 return flat, in_flat
         return pyramid, alignment
 
-    def other_turn(self, pyramid: ImagePyramid, alignment: Alignment) -> Alignment | None:
+    def other_turn(self, pyramid: ImagePyramid, alignment: Alignment, margin: float = 0.0) -> Alignment | None:
         """The print aligned again from each of the drawing's other turns
         (:attr:`~deepmorph_detect.refine.Template.other_turns`): the best of them, where this
-        aligner accepts it and it correlates better than ``alignment``; else ``None``. For a
-        print aligned but not read, which may have been aligned at the wrong turn of a drawing
-        that nearly looks the same turned: the right turn then aligns better, while a print
-        aligned at the right turn and not read for other reasons gains nothing here."""
-        best, bar = None, alignment.correlation
+        aligner accepts it and it correlates better than ``alignment`` less ``margin``; else
+        ``None``. For a print aligned but not read, which may have been aligned at the wrong turn
+        of a drawing that nearly looks the same turned: the right turn then aligns better, while
+        a print aligned at the right turn and not read for other reasons gains nothing here. With
+        a ``margin``, for a print read weakly: both turns can align about as well."""
+        best, bar = None, alignment.correlation - margin
         for turn in self.template.other_turns:
             again = refine(pyramid, alignment.homography @ turn, self.template)
             if self.accepts(again) and again.correlation > bar:

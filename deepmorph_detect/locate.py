@@ -62,6 +62,11 @@ UNREAD_MARGIN = 0.05
 #: this well is also aligned again at its frame's other turns (:meth:`Locator.decode_drawing`):
 #: every print that read there had aligned at 0.85 or better, most below it were other drawings
 UNREAD_BLIND_CORRELATION = 0.8
+#: A weak reading (:func:`~deepmorph_detect.check.is_weak`) aligned that well is compared with the
+#: reading at the best other turn of its frame where that turn aligns at most this much worse: a
+#: drawing that nearly looks the same half turned (a battery) aligned at 0.832 at either turn of a
+#: print, and read another word at the wrong one, with 4 corrections against the true one's 1
+TURN_TIE_MARGIN = 0.02
 #: ... and only where the print's frame is between this share of the image's width and its
 #: inverse (half to twice the image), what framing the whole image is for: a scan, a print
 #: filling the frame. In 10,000 scenes without any print, whole-image framing reported six
@@ -311,7 +316,11 @@ class Locator:
         A print still not read but aligned at :data:`UNREAD_BLIND_CORRELATION` or better is
         aligned again from each other turn of its frame and read at the best
         (:meth:`Aligner.other_turn <deepmorph_detect.align.Aligner.other_turn>`): a drawing that
-        nearly looks the same turned can align at the wrong turn well enough to be found.
+        nearly looks the same turned can align at the wrong turn well enough to be found. A weak
+        reading aligned that well is compared likewise with the reading at the best other turn
+        aligning at most :data:`TURN_TIE_MARGIN` worse (its first looks; only a stronger reading
+        is checked there, and wins): at the wrong turn such a drawing can read another word, with
+        more corrections than the true one at the right turn.
         A print still not read but aligned at :data:`BLIND_READ_CORRELATION` or better is aligned
         again in the light its template shows (:class:`~deepmorph_detect.template_light.TemplateLight`:
         a cast shadow bends the alignment and reads as ink), and all of the above is done again
@@ -344,19 +353,21 @@ class Locator:
         template's light, ``relit_from`` the alignment in the photo itself): the readings at the
         alignment, at the symmetric turns and at the other turns."""
         H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind, relit_from)
-        weak = checked.result.ok and is_weak(checked.result)
         for turn in self.template.symmetric_turns:
-            if checked.result.ok and not weak:
+            if _settled(checked.result):
                 break
             turned = replace(alignment, homography=alignment.homography @ turn)
             other = self._read_and_check(gray, pyramid, turned, source, soft, blind, relit_from)
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
-        if not checked.result.ok and alignment.correlation >= UNREAD_BLIND_CORRELATION:
-            realigned = self.aligner.other_turn(pyramid, alignment)
+        if not _settled(checked.result) and alignment.correlation >= UNREAD_BLIND_CORRELATION:
+            margin = TURN_TIE_MARGIN if checked.result.ok else 0.0
+            realigned = self.aligner.other_turn(pyramid, alignment, margin)
             other = None
             if realigned is not None:
-                other = self._read_and_check(gray, pyramid, realigned, source, soft, blind, relit_from)
+                # a weak reading gives way only to a stronger one: only those are checked there
+                than = checked.result if checked.result.ok else None
+                other = self._read_and_check(gray, pyramid, realigned, source, soft, blind, relit_from, than)
             if other is not None and other[1].result.ok:
                 (H, checked, probs), alignment = other, realigned
         return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
@@ -370,12 +381,14 @@ class Locator:
         soft: bool,
         blind: bool,
         relit_from: float | None = None,
+        stronger_than: DecodeResult | None = None,
     ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
         """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
         place the drawing by (the passed payload's morph fit, else the alignment's), the
         verdict, and the code bits' probabilities. ``relit_from``: in a photo lit by the
         template's light, the alignment in the photo itself (:meth:`PayloadChecker.check
-        <deepmorph_detect.check.PayloadChecker.check>`)."""
+        <deepmorph_detect.check.PayloadChecker.check>`). ``stronger_than``: only readings
+        stronger than this one are checked (and can pass); the others count as not read."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
         whole = source == WHOLE_FRAME
@@ -387,10 +400,11 @@ class Locator:
         readings: list[Reading] = []
         checked: PayloadCheck | None = None  # the verdict on the first payload that passed the CRC
         probs = np.full(self.model.codec.spec.code_bits, 0.5, dtype=np.float32)
-        first_only = blind and alignment.correlation < BLIND_READ_CORRELATION
+        # a reading asked only whether it beats another: the first looks are enough
+        first_only = (blind and alignment.correlation < BLIND_READ_CORRELATION) or stronger_than is not None
         for reading, bitwise in self.reader.looks(pyramid, H, views, readings, soft, first_only):
             readings.append(reading)
-            if not reading.result.ok:
+            if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
                 continue
             attempt = self.checker.check(
                 pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=whole, relit_from=relit_from
@@ -400,13 +414,13 @@ class Locator:
             if attempt.status == "passed":
                 H = attempt.fit.homography
                 break
-        if checked is None:  # no reading passed the CRC: report the most confident one
+        if checked is None:  # no reading passed the CRC (or was stronger): report the most confident one
             if readings:
                 best = max(readings, key=lambda r: r.result.confidence)
                 result, probs = best.result, best.probabilities
             else:
                 result = self.model.codec.decode(probs, soft=soft)
-            checked = PayloadCheck(result, None, "not run")
+            checked = PayloadCheck(replace(result, ok=False) if result.ok else result, None, "not run")
         return H, checked, probs
 
     def check_payload(
@@ -427,6 +441,11 @@ class Locator:
         return f"Locator({self.model.meta.drawing_name!r}, detector={detector!r}, renderer={self.renderer_name!r})"
 
 
+def _settled(result: DecodeResult) -> bool:
+    """Whether a reading needs no reading at another turn: it passed, and is not weak."""
+    return result.ok and not is_weak(result)
+
+
 def _stronger(a: DecodeResult, b: DecodeResult) -> bool:
     """Whether reading ``a`` is stronger than ``b``: fewer corrected bits, then more confident."""
     return (a.corrected_bits, -a.confidence) < (b.corrected_bits, -b.confidence)
@@ -437,6 +456,7 @@ __all__ = [
     "NO_DETECTOR",
     "UNREAD_MARGIN",
     "UNREAD_BLIND_CORRELATION",
+    "TURN_TIE_MARGIN",
     "FILLS_FRAME",
     "BLIND_READ_CORRELATION",
     "Locator",

@@ -929,6 +929,66 @@ def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_an
         assert read.result.ok and np.array_equal(read.result.payload, expected_payload)
 
 
+def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns_as_well(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A drawing that nearly looks the same half turned can align as well at the wrong turn and
+    read another word there, with corrections. A weak reading is therefore compared with the
+    reading at the best other turn aligning at most ``TURN_TIE_MARGIN`` worse: only a stronger
+    one is asked for there, and wins. A strong reading is not read again."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, cam, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None and right.correlation >= locate_module.UNREAD_BLIND_CORRELATION
+    turned = replace(right, homography=right.homography @ locator.template.other_turns[0])
+    H, strong, probs = locator._read_and_check(gray, pyramid, right, "detector", True, False)
+    assert strong.result.ok and strong.result.corrected_bits == 0
+    weak = replace(strong, result=replace(strong.result, payload=1 - strong.result.payload, corrected_bits=4))
+    cases = (  # first reading -> margins asked, what the other turn's reading must beat, payload read
+        (weak, [locate_module.TURN_TIE_MARGIN], [weak.result], strong.result.payload),
+        (strong, [], [], strong.result.payload),
+    )
+    for first, expected_margins, expected_bars, expected_payload in cases:
+        margins: list[float] = []
+        bars: list[object] = []
+
+        def other_turn(
+            pyramid: ImagePyramid, alignment: Alignment, margin: float = 0.0, margins: list[float] = margins
+        ) -> Alignment:
+            margins.append(margin)
+            return turned
+
+        def scripted(gray, pyramid, alignment, *args, first=first, bars=bars) -> tuple:
+            if alignment is right:
+                return (H, first, probs)
+            bars.append(args[4])  # stronger_than
+            return (H, strong, probs)
+
+        monkeypatch.setattr(locator.aligner, "other_turn", other_turn)
+        monkeypatch.setattr(locator, "_read_and_check", scripted)
+        read = locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
+        assert margins == expected_margins and bars == expected_bars
+        assert read.result.ok and np.array_equal(read.result.payload, expected_payload)
+
+
+def test_a_reading_asked_to_beat_another_passes_only_when_stronger(model: DeepMorphModel, locator: Locator) -> None:
+    """Read at a print's alignment and asked to beat a reading with corrections, the print's own
+    reading (none) passes; asked to beat itself, nothing passes, and no payload is vouched for."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, _, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None
+    _, strong, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False)
+    assert strong.result.ok and strong.result.corrected_bits == 0
+    weak = replace(strong.result, corrected_bits=2)
+    _, beats_weak, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False, None, weak)
+    assert beats_weak.result.ok and np.array_equal(beats_weak.result.payload, placed.payload)
+    _, beats_itself, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False, None, strong.result)
+    assert not beats_itself.result.ok and beats_itself.status == "not run"
+
+
 def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     model: DeepMorphModel, locator: Locator
 ) -> None:
