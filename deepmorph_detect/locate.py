@@ -363,13 +363,14 @@ class Locator:
         if not _settled(checked.result) and alignment.correlation >= UNREAD_BLIND_CORRELATION:
             margin = TURN_TIE_MARGIN if checked.result.ok else 0.0
             realigned = self.aligner.other_turn(pyramid, alignment, margin)
-            other = None
             if realigned is not None:
                 # a weak reading gives way only to a stronger one: only those are checked there
                 than = checked.result if checked.result.ok else None
-                other = self._read_and_check(gray, pyramid, realigned, source, soft, blind, relit_from, than)
-            if other is not None and other[1].result.ok:
-                (H, checked, probs), alignment = other, realigned
+                other = self._read_and_check(
+                    gray, pyramid, realigned, source, soft, blind, relit_from, stronger_than=than
+                )
+                if other[1].result.ok:
+                    (H, checked, probs), alignment = other, realigned
         return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
 
     def _read_and_check(
@@ -414,7 +415,7 @@ class Locator:
             if attempt.status == "passed":
                 H = attempt.fit.homography
                 break
-        if checked is None:  # no reading passed the CRC (or was stronger): report the most confident one
+        if checked is None:  # none passed the CRC (and beat ``stronger_than``): report the most confident
             if readings:
                 best = max(readings, key=lambda r: r.result.confidence)
                 result, probs = best.result, best.probabilities

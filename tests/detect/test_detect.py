@@ -876,15 +876,24 @@ def test_the_other_turns_of_a_frame_are_those_that_do_not_map_the_drawing_onto_i
     np.testing.assert_allclose(battery.other_turns[0][:2, :2], -np.eye(2), atol=1e-12)  # the half turn first
 
 
-def test_a_print_aligned_at_the_wrong_turn_is_aligned_again_and_read(model: DeepMorphModel, locator: Locator) -> None:
-    """The ghost aligned half turned about its ink (as a drawing that nearly looks the same turned
-    can be) reads nothing there; decoding aligns it again from its other turns, where it
-    correlates better, and reads its payload, with its true outline."""
+def _easy_print_aligned(
+    model: DeepMorphModel, locator: Locator
+) -> tuple[Placement, np.ndarray, Camera, ImagePyramid, Alignment]:
+    """One print in an easy scene (seed 11): its placement, the photo as ``locator`` frames it
+    (gray, camera, pyramid), and its alignment refined from the true outline."""
     scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
     (placed,) = [p for p in scene.placements if p.kind == "drawing"]
     gray, cam, pyramid = locator.frame(scene.image, None)
     right = refine(pyramid, placed.homography, locator.template)
     assert right is not None
+    return placed, gray, cam, pyramid, right
+
+
+def test_a_print_aligned_at_the_wrong_turn_is_aligned_again_and_read(model: DeepMorphModel, locator: Locator) -> None:
+    """The ghost aligned half turned about its ink (as a drawing that nearly looks the same turned
+    can be) reads nothing there; decoding aligns it again from its other turns, where it
+    correlates better, and reads its payload, with its true outline."""
+    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
     # aligned at the wrong turn, it correlates less than at the right one
     wrong = replace(
         right, homography=right.homography @ locator.template.other_turns[0], correlation=right.correlation - 0.05
@@ -902,11 +911,7 @@ def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_an
     """Read at the wrong turn, a symmetric drawing can land on another code word with
     corrections. Such a weak reading is compared with the readings at the other turns, and the
     one with fewer corrections wins; a strong first reading is not read again."""
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None
+    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
     symmetric = Locator(model)
     symmetric.template.__dict__["symmetric_turns"] = (_half_turn(locator.viewbox),)
     H, strong, probs = symmetric._read_and_check(gray, pyramid, right, "detector", True, False)
@@ -936,11 +941,8 @@ def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns
     read another word there, with corrections. A weak reading is therefore compared with the
     reading at the best other turn aligning at most ``TURN_TIE_MARGIN`` worse: only a stronger
     one is asked for there, and wins. A strong reading is not read again."""
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None and right.correlation >= locate_module.UNREAD_BLIND_CORRELATION
+    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    assert right.correlation >= locate_module.UNREAD_BLIND_CORRELATION
     turned = replace(right, homography=right.homography @ locator.template.other_turns[0])
     H, strong, probs = locator._read_and_check(gray, pyramid, right, "detector", True, False)
     assert strong.result.ok and strong.result.corrected_bits == 0
@@ -959,10 +961,10 @@ def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns
             margins.append(margin)
             return turned
 
-        def scripted(gray, pyramid, alignment, *args, first=first, bars=bars) -> tuple:
+        def scripted(gray, pyramid, alignment, *args, first=first, bars=bars, **kwargs) -> tuple:
             if alignment is right:
                 return (H, first, probs)
-            bars.append(args[4])  # stronger_than
+            bars.append(kwargs["stronger_than"])
             return (H, strong, probs)
 
         monkeypatch.setattr(locator.aligner, "other_turn", other_turn)
@@ -975,17 +977,15 @@ def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns
 def test_a_reading_asked_to_beat_another_passes_only_when_stronger(model: DeepMorphModel, locator: Locator) -> None:
     """Read at a print's alignment and asked to beat a reading with corrections, the print's own
     reading (none) passes; asked to beat itself, nothing passes, and no payload is vouched for."""
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, _, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None
+    placed, gray, _, pyramid, right = _easy_print_aligned(model, locator)
     _, strong, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False)
     assert strong.result.ok and strong.result.corrected_bits == 0
     weak = replace(strong.result, corrected_bits=2)
-    _, beats_weak, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False, None, weak)
+    _, beats_weak, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False, stronger_than=weak)
     assert beats_weak.result.ok and np.array_equal(beats_weak.result.payload, placed.payload)
-    _, beats_itself, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False, None, strong.result)
+    _, beats_itself, _ = locator._read_and_check(
+        gray, pyramid, right, "detector", True, False, stronger_than=strong.result
+    )
     assert not beats_itself.result.ok and beats_itself.status == "not run"
 
 
@@ -995,11 +995,8 @@ def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     """A print of a drawing that looks the same half turned aligns as well at either turn. Read
     at the wrong one it gives no payload; read again at the turn the drawing maps onto itself by
     (the ghost is given one here), its payload and its true outline come back."""
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None and right.correlation > 0.7
+    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    assert right.correlation > 0.7
     half = _half_turn(locator.viewbox)
     wrong = replace(right, homography=right.homography @ half)
     _, as_it_was, _ = locator._read_and_check(gray, pyramid, wrong, "detector", True, False)
@@ -1063,11 +1060,7 @@ def test_a_blind_proposal_aligned_poorly_gets_the_first_looks_only(
     synthesis. A drawing's own detector's, or a blind one aligned above the bar, gets them all."""
     from deepmorph_detect.locate import BLIND_READ_CORRELATION
 
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, _, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None
+    placed, gray, _, pyramid, right = _easy_print_aligned(model, locator)
     # at the wrong turn the first looks read nothing, so every later look would be tried
     wrong = replace(right, homography=right.homography @ _half_turn(locator.viewbox))
     later: list[str] = []
