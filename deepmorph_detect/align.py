@@ -5,7 +5,9 @@ a detector's outline with every cyclic corner order and, when that falls short, 
 the whole image framed by its ink with one quick solve. A candidate is kept when its alignment
 correlates well enough and its outline can be a print (:func:`plausible_outline`); the same
 drawing found twice is kept once. A detector's outline that aligns poorly in the photo is
-aligned again in flat light (shadows divided out), and the better alignment is kept.
+aligned again in flat light (shadows divided out), and the better alignment is kept. A drawing
+aligned but not read can be aligned again as a flat sheet, without perspective
+(:meth:`Aligner.as_flat_sheet`).
 """
 
 from __future__ import annotations
@@ -18,12 +20,15 @@ import numpy as np
 from deepmorph_core.photo import flatten_illumination
 from deepmorph_core.protocols import Candidate
 from deepmorph_detect.camera import project, viewbox_corners
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine, refine_affine
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 # a detector outline aligned in the photo below this is aligned in flat light too, and the better
 # kept: a sharp shadow across a print can bend the alignment to its edge and still pass the bar
 WEAK_ALIGNMENT = 0.65
+#: an alignment without perspective (:meth:`Aligner.as_flat_sheet`) that moves the outline's corners
+#: less than this share of its width on average reads as the one it came from: not read again
+SHEET_MOVE = 0.02
 SAME_DRAWING = 0.3  # two alignments whose centres are closer than this share of the diagonal
 
 _NEXT_CORNER = np.array([1, 2, 3, 0])
@@ -160,6 +165,20 @@ class Aligner:
             if self.accepts(again) and again.correlation > bar:
                 best, bar = again, again.correlation
         return best
+
+    def as_flat_sheet(self, pyramid: ImagePyramid, alignment: Alignment) -> Alignment | None:
+        """The print aligned again without perspective (:func:`~deepmorph_detect.refine.refine_affine`),
+        where this aligner accepts that and its outline moved by at least
+        :data:`SHEET_MOVE` of the frame's width; else ``None``. For a print aligned but not
+        read: a cast shadow's edge can bend a full homography away from the print."""
+        again = refine_affine(pyramid, alignment.homography, self.template)
+        if not self.accepts(again):
+            return None
+        frame = viewbox_corners(self.template.viewbox)
+        before, after = project(alignment.homography, frame), project(again.homography, frame)
+        width = max(float(np.linalg.norm(before[1] - before[0])), 1.0)
+        moved = float(np.linalg.norm(after - before, axis=1).mean())
+        return again if moved >= SHEET_MOVE * width else None
 
     def in_flat_light(self, gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:
         """The photo with shadows and light gradients divided out around a detector outline.

@@ -321,6 +321,11 @@ class Locator:
         aligning at most :data:`TURN_TIE_MARGIN` worse (its first looks; only a stronger reading
         is checked there, and wins): at the wrong turn such a drawing can read another word, with
         more corrections than the true one at the right turn.
+        A print still not read is aligned again as a flat sheet (:meth:`Aligner.as_flat_sheet
+        <deepmorph_detect.align.Aligner.as_flat_sheet>`: no perspective, so a cast shadow's edge
+        cannot bend a corner of its outline), and where that aligns at
+        :data:`BLIND_READ_CORRELATION` or better, all of the above is done there; the flat
+        sheet's outline then replaces the bent one for what follows.
         A print still not read but aligned at :data:`BLIND_READ_CORRELATION` or better is aligned
         again in the light its template shows (:class:`~deepmorph_detect.template_light.TemplateLight`:
         a cast shadow bends the alignment and reads as ink), and all of the above is done again
@@ -329,7 +334,15 @@ class Locator:
         with corrections, or not confident) is asked in full.
         """
         located = self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind)
-        if located.result.ok or alignment.correlation < BLIND_READ_CORRELATION:
+        if located.result.ok:
+            return located
+        sheet = self.aligner.as_flat_sheet(pyramid, alignment)
+        if sheet is not None and sheet.correlation >= BLIND_READ_CORRELATION:
+            again = self._decode_at(gray, pyramid, sheet, score, cam, source, soft, blind)
+            if again.result.ok:
+                return again
+            alignment = sheet
+        if alignment.correlation < BLIND_READ_CORRELATION:
             return located
         lit = self.light.align(gray, alignment.homography, self.aligner.accepts)
         if lit is None:

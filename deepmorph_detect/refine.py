@@ -33,6 +33,7 @@ LEVELS = (48, 128)  # template widths, coarse to fine
 COARSE_ITERATIONS = 15  # ECC iterations at the coarsest level (from the detector's rough outline)
 FINE_ITERATIONS = 4  # at each finer level: 6 give the same payloads and corners at 1.1x the time
 REFIT_ITERATIONS = 4  # refine_at: one level, from an alignment that is already close
+AFFINE_ITERATIONS = (15, 10)  # refine_affine's ECC iterations at each level, coarse to fine
 ECC_EPS = 1e-5  # ECC stops early when the correlation gains less than this in one iteration
 ORDER_MARGIN = 0.15  # a corner order this far behind the best in plain correlation is not tried
 SWEEP_TURNS = 24  # outline_sweep: turns of the detector's outline in 15-degree steps ...
@@ -273,6 +274,44 @@ def refine_at(
     return None if step is None else Alignment(*step, width)
 
 
+def nearest_affine(homography: np.ndarray, template: Template) -> np.ndarray:
+    """The affine map (SVG units -> image pixels) whose outline of the drawing's frame lies
+    nearest, in least squares, to ``homography``'s: the parallelogram closest to its quad."""
+    frame = viewbox_corners(template.viewbox).astype(np.float64)
+    quad = project(homography, frame)
+    affine, *_ = np.linalg.lstsq(np.hstack([frame, np.ones((4, 1))]), quad, rcond=None)
+    return np.vstack([affine.T, [0.0, 0.0, 1.0]])
+
+
+def refine_affine(
+    pyramid: ImagePyramid, homography: np.ndarray, template: Template, iterations: tuple[int, ...] = AFFINE_ITERATIONS
+) -> Alignment | None:
+    """The print aligned again as a flat sheet seen nearly head-on: from the parallelogram
+    nearest ``homography``'s outline (:func:`nearest_affine`), an affine ECC solve at each
+    template level (OpenCV's, forward-additive), perspective kept out.
+
+    A cast shadow's edge across a light fill is an edge the drawing does not have: a full
+    homography can bend a corner of the outline out to lay the drawing's edge on it, and
+    correlate well. An affine map cannot bend, so the print's own edges decide. ``None`` when
+    ECC diverges."""
+    H = nearest_affine(homography, template)
+    reached = None
+    for width, n in zip(sorted(template.images), iterations):
+        crop = warp_to_template(pyramid, H, template, width)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, n, ECC_EPS)
+        try:
+            rho, W = cv2.findTransformECC(
+                template.images[width], crop, np.eye(2, 3, dtype=np.float32), cv2.MOTION_AFFINE, criteria, None, 3
+            )
+        except cv2.error:  # diverged, or a degenerate warp
+            return None
+        S = template.to_svg_units(width)
+        H = H @ S @ np.vstack([W, [0.0, 0.0, 1.0]]).astype(np.float64) @ inverse3(S)
+        H /= H[2, 2]
+        reached = Alignment(H, float(rho), width)
+    return reached
+
+
 def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray]:
     """The homography with the frame's corners taken in each of the four cyclic orders
     (the drawing turned by 0, 90, 180 and 270 degrees within the same outline)."""
@@ -463,6 +502,8 @@ __all__ = [
     "ImagePyramid",
     "Template",
     "corner_orders",
+    "nearest_affine",
+    "refine_affine",
     "correlation",
     "outline_sweep",
     "quarter_turn",

@@ -126,6 +126,8 @@ def test_a_drawing_aligned_well_and_not_read_is_read_again_in_its_light(
         return located
 
     monkeypatch.setattr(locator, "_decode_at", decode_at)
+    # a print whose alignment no flat sheet moves (tests/detect/test_flat_sheet.py has those)
+    monkeypatch.setattr(locator.aligner, "as_flat_sheet", lambda pyramid, alignment: None)
     read = locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
     assert asked == [1.0] and read.result.ok and np.array_equal(read.result.payload, placed.payload)
     first.clear()
