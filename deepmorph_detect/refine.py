@@ -200,6 +200,7 @@ def _ecc_step(
     smooth: int,
     crop: np.ndarray | None = None,
     wide_basin: bool = False,
+    affine: bool = False,
 ) -> tuple[np.ndarray, float] | None:
     """One ECC solve at one template width: the improved homography and its correlation
     (``crop``: the photo already warped through ``H`` at ``width``, when the caller has it).
@@ -207,19 +208,21 @@ def _ecc_step(
     Solves start close and take the inverse-compositional form
     (:mod:`~deepmorph_detect.icalign`), about 3x faster, unless ``wide_basin``: then OpenCV's
     forward-additive ECC, whose basin is wider (the coarsest level, from a detector's rough
-    outline).
+    outline). ``affine``: OpenCV's, solving an affine correction only (:func:`refine_affine`).
     """
     if crop is None:
         crop = warp_to_template(pyramid, H, template, width)
-    if wide_basin:
-        W = np.eye(3, dtype=np.float32)
+    if wide_basin or affine:
+        motion, rows = (cv2.MOTION_AFFINE, 2) if affine else (cv2.MOTION_HOMOGRAPHY, 3)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, ECC_EPS)
         try:
             rho, W = cv2.findTransformECC(
-                template.images[width], crop, W, cv2.MOTION_HOMOGRAPHY, criteria, None, smooth
+                template.images[width], crop, np.eye(rows, 3, dtype=np.float32), motion, criteria, None, smooth
             )
         except cv2.error:  # diverged, or a degenerate warp
             return None
+        if affine:
+            W = np.vstack([W, [0.0, 0.0, 1.0]])
     else:
         solved = template.solver(width, smooth).align(crop, iterations, ECC_EPS)
         if solved is None:
@@ -294,21 +297,13 @@ def refine_affine(
     homography can bend a corner of the outline out to lay the drawing's edge on it, and
     correlate well. An affine map cannot bend, so the print's own edges decide. ``None`` when
     ECC diverges."""
-    H = nearest_affine(homography, template)
-    reached = None
+    H, reached = nearest_affine(homography, template), None
     for width, n in zip(sorted(template.images), iterations):
-        crop = warp_to_template(pyramid, H, template, width)
-        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, n, ECC_EPS)
-        try:
-            rho, W = cv2.findTransformECC(
-                template.images[width], crop, np.eye(2, 3, dtype=np.float32), cv2.MOTION_AFFINE, criteria, None, 3
-            )
-        except cv2.error:  # diverged, or a degenerate warp
+        step = _ecc_step(pyramid, H, template, width, n, 3, affine=True)
+        if step is None:
             return None
-        S = template.to_svg_units(width)
-        H = H @ S @ np.vstack([W, [0.0, 0.0, 1.0]]).astype(np.float64) @ inverse3(S)
-        H /= H[2, 2]
-        reached = Alignment(H, float(rho), width)
+        H, rho = step
+        reached = Alignment(H, rho, width)
     return reached
 
 
