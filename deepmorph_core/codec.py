@@ -43,6 +43,11 @@ BCH_M_RANGE = (5, 15)
 _CRC_CONFIGS = {8: crc.Crc8.CCITT, 16: crc.Crc16.XMODEM}
 _WHITENING_SEED = b"deepmorph payload codec whitening/1"
 _PROB_EPS = 1e-9
+#: a payload of at most this many bits has every difference between two of its code words listed
+#: (:meth:`PayloadCodec.rival_margin`: 2**16 rows); a longer one's are searched near the least
+#: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 BCH decodes, about 30 ms)
+LISTED_RIVALS_UP_TO = 16
+RIVAL_SEARCH_BITS = 10
 
 
 @cache
@@ -209,6 +214,22 @@ def _flip_patterns(n: int) -> np.ndarray:
     return out
 
 
+def _beyond_search(searched: np.ndarray, others: np.ndarray, t: int) -> float:
+    """The least support a code word can have that differs from another in at least ``t + 1`` of
+    the ``others`` bits and in at least ``2 t + 1`` bits in all (BCH's designed distance): over
+    how many of the ``searched`` bits it shares, the weakest of them and of the others (and every
+    other one of those with negative support, which can only lower the sum). Both arrays are sorted
+    ascending. ``inf`` when no such word fits in the bits."""
+    best = math.inf
+    for shared in range(len(searched) + 1):
+        need = max(t + 1, 2 * t + 1 - shared)
+        if need > len(others):
+            continue
+        total = searched[:shared].sum() + others[:need].sum() + np.minimum(others[need:], 0.0).sum()
+        best = min(best, float(total))
+    return best
+
+
 # --------------------------------------------------------------------------- decode result
 
 
@@ -294,6 +315,7 @@ class PayloadCodec:
         self._k = spec.payload_bits + spec.crc_bits
         self._bch = bchlib.BCH(spec.bch_t, m=spec.field_order) if spec.bch_t else None
         self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
+        self._differences: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return f"PayloadCodec({self.spec!r})"
@@ -408,6 +430,54 @@ class PayloadCodec:
         if arr.ndim != 2:
             raise DeepMorphError(f"probabilities must have shape (B, {self.spec.code_bits}), got {tuple(arr.shape)}")
         return [self.decode(row, soft=soft) for row in arr]
+
+    def rival_margin(self, code_bits: np.ndarray, support: np.ndarray) -> float:
+        """How much per-bit ``support`` prefers the code word ``code_bits`` to every other code
+        word: the least total support over the bits where another code word differs from it.
+
+        ``support`` is ``(code_bits,)``, about +1 where a photo shows the word's bit and -1 where it
+        shows the flipped one (:class:`~deepmorph_detect.synthesis.BitEvidence`). A photo of
+        another word shows the whole set of bits where the two differ flipped, never just a few:
+        a word with some bits shown flipped is still the likeliest one when every set a rival
+        needs adds up to more support than doubt.
+
+        The differences between code words are the words of one linear code (the CRCs start at
+        zero, BCH is linear, whitening cancels), the same for every word. A payload of at most
+        :data:`LISTED_RIVALS_UP_TO` bits has them listed, and the margin is exact. Above that it is
+        a lower bound: the rivals that differ in at most ``t`` bits beyond the
+        :data:`RIVAL_SEARCH_BITS` least supported ones are found by BCH-decoding every flip of
+        those bits (Chase-II); any other one differs in at least ``t + 1`` better supported bits.
+        ``inf`` for a code with one word.
+        """
+        code = np.asarray(code_bits, dtype=np.uint8)
+        shown = np.asarray(support, dtype=np.float64)
+        if shown.shape != (self.spec.code_bits,) or code.shape != shown.shape:
+            raise DeepMorphError(f"a code word and its support must have shape ({self.spec.code_bits},)")
+        if self.spec.payload_bits <= LISTED_RIVALS_UP_TO:
+            differences = self._code_differences()
+            return float((differences @ shown).min()) if len(differences) else math.inf
+        plain = code ^ self._mask
+        order = np.argsort(shown, kind="stable")
+        searched, others = order[:RIVAL_SEARCH_BITS], np.sort(shown[order[RIVAL_SEARCH_BITS:]])
+        margin = _beyond_search(np.sort(shown[searched]), others, self.spec.bch_t)
+        trials = np.repeat(plain[None], 2 ** len(searched) - 1, axis=0)
+        trials[:, searched] ^= _flip_patterns(len(searched))
+        for word in self._bch_correct(trials):
+            if word is None or np.array_equal(word, plain) or (self._crc is not None and not self._crc_ok(word)):
+                continue
+            margin = min(margin, float(shown[word != plain].sum()))
+        return margin
+
+    def _code_differences(self) -> np.ndarray:
+        """``(2**P - 1, N_b)`` every non-zero difference between two code words, as floats (kept)."""
+        if self._differences is None:
+            p = self.spec.payload_bits
+            units = np.vstack([np.zeros(p, np.uint8), np.eye(p, dtype=np.uint8)])
+            words = self.encode(units)
+            generator = (words[1:] ^ words[0]).astype(np.int64)  # (P, N_b)
+            payloads = (np.arange(1, 2**p)[:, None] >> np.arange(p - 1, -1, -1)) & 1
+            self._differences = ((payloads @ generator) % 2).astype(np.float32)
+        return self._differences
 
     def describe(self) -> dict[str, Any]:
         """What a program needs to decode code bits without DeepMorph, JSON-ready: the layout

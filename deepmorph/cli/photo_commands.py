@@ -201,7 +201,7 @@ def decode(
 
 
 def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
-    from deepmorph_detect.synthesis import disagreement
+    from deepmorph_detect.synthesis import disagreement_in
 
     if as_json:
         print_json(results)
@@ -218,7 +218,7 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
             elif d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             elif d.get("morph_check") == "contradicted":
-                why = disagreement(d["bits_contradicted"], d["weakest_bits_support"], d["bits_deviation"])
+                why = disagreement_in(d)
                 status = f"NOT VERIFIED (the CRC passed, but {why})"
             where = ""
             if "pose" in d:

@@ -522,3 +522,77 @@ def test_choose_codec_errors_are_one_line() -> None:
     assert str(info.value) == "invalid codec: payload_bits: Input should be greater than or equal to 1"
     with pytest.raises(DeepMorphError, match="^invalid codec: crc_bits: Input should be 0, 8 or 16$"):
         choose_codec(24, crc_bits=32)
+
+
+def _every_code_word(codec: PayloadCodec) -> np.ndarray:
+    """``(2**P, N_b)`` the code word of every payload, encoded one by one."""
+    p = codec.spec.payload_bits
+    payloads = (np.arange(2**p)[:, None] >> np.arange(p - 1, -1, -1)) & 1
+    return codec.encode(payloads.astype(np.uint8))
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        choose_codec(11, crc_bits=8, bch_t=1),
+        choose_codec(8, crc_bits=8, bch_t=2),
+        choose_codec(12, crc_bits=16, bch_t=1),
+    ],
+)
+def test_the_rival_margin_is_the_least_support_of_any_other_code_word(spec: CodecSpec) -> None:
+    """Listed, the margin is exact: the minimum over every other code word (encoded one by one)
+    of the support on the bits where it differs."""
+    codec = PayloadCodec(spec)
+    words = _every_code_word(codec)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        word = words[rng.integers(len(words))]
+        support = rng.normal(1.0, 1.0, spec.code_bits)
+        others = words[(words != word).any(1)]
+        exact = float(((others != word) * support).sum(1).min())
+        assert codec.rival_margin(word, support) == pytest.approx(exact, abs=1e-4)
+
+
+def test_a_clear_word_beats_its_rivals_by_the_code_distance_and_a_near_miss_loses() -> None:
+    codec = PayloadCodec(choose_codec(11, crc_bits=8, bch_t=1))
+    words = _every_code_word(codec)
+    distance = int(min((w != words[0]).sum() for w in words[1:]))
+    assert distance >= 3  # a CRC and BCH with t = 1
+    clear = np.ones(codec.spec.code_bits)
+    assert codec.rival_margin(words[0], clear) == pytest.approx(distance)
+    # three bits shown flipped: no rival needs only those, so the word still wins
+    shown = clear.copy()
+    shown[[0, 7, 19]] = -0.6
+    assert codec.rival_margin(words[0], shown) >= 1.0
+    # the photo of another word, asked about this one: that word is a rival the photo prefers
+    other = words[1234]
+    seen = np.where(other == words[0], 1.0, -1.0)
+    assert codec.rival_margin(words[0], seen) == pytest.approx(-(other != words[0]).sum())
+
+
+def test_a_long_payload_bounds_its_rival_margin_from_below(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above the listed size the rivals are searched around the least supported bits: never above
+    the exact margin, and exact when the nearest rival lies in the search."""
+    import deepmorph_core.codec as codec_module
+
+    codec = PayloadCodec(choose_codec(11, crc_bits=8, bch_t=1))
+    words = _every_code_word(codec)
+    rng = np.random.default_rng(9)
+    for scale in (0.3, 0.8, 1.5):
+        for _ in range(10):
+            word = words[rng.integers(len(words))]
+            support = rng.normal(1.0, scale, codec.spec.code_bits)
+            exact = codec.rival_margin(word, support)
+            monkeypatch.setattr(codec_module, "LISTED_RIVALS_UP_TO", 0)
+            bound = codec.rival_margin(word, support)
+            monkeypatch.setattr(codec_module, "LISTED_RIVALS_UP_TO", 16)
+            assert bound <= exact + 1e-9
+    # a clear word's rivals beyond the search differ in BCH's designed distance at least
+    monkeypatch.setattr(codec_module, "LISTED_RIVALS_UP_TO", 0)
+    assert codec.rival_margin(words[0], np.ones(codec.spec.code_bits)) >= 2 * codec.spec.bch_t + 1
+    # a near miss found in the search is found exactly
+    other = words[77]
+    seen = np.where(other == words[0], 1.0, -1.0)
+    assert codec.rival_margin(words[0], seen) == pytest.approx(-(other != words[0]).sum())
+    with pytest.raises(DeepMorphError, match="shape"):
+        codec.rival_margin(words[0], np.ones(3))

@@ -19,7 +19,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.photo import to_gray
 from deepmorph_core.render import render_svg
-from deepmorph_detect.check import PayloadCheck
+from deepmorph_detect.check import MorphFit, PayloadCheck
 from deepmorph_detect.fusion import FrameFuser
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.read import Reader, Reading
@@ -28,11 +28,13 @@ from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.synthesis import (
     MAX_CONTRADICTED,
     MAX_DEVIATION,
+    MIN_RIVAL_MARGIN,
     MIN_WEAKEST_SUM,
     WEAKEST_BITS,
     BitEvidence,
     MorphSynthesis,
     disagreement,
+    disagreement_in,
 )
 
 app = application()  # the command line's own commands and every installed plugin's
@@ -73,6 +75,7 @@ def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_on
     said = locator.checker.synthesis.evidence(pyramid, H, true_code)
     assert said.contradicted == 0 and said.agrees and said.fit > 0.9
     assert np.median(said.evidence) == pytest.approx(1.0, abs=0.3)  # +1: the photo shows the word's bit
+    assert model.codec.rival_margin(true_code, said.evidence) >= MIN_RIVAL_MARGIN  # no other word near
     for near in _near_payloads(payload)[:4]:
         code = model.codec.encode(near)
         differs = code != true_code
@@ -80,6 +83,7 @@ def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_on
         fit = locator.checker.fit_morph(pyramid, H, near)  # aligned to its own morph, as the check does
         said = locator.checker.synthesis.evidence(pyramid, fit.homography, code)
         assert not said.agrees and said.contradicted > MAX_CONTRADICTED
+        assert model.codec.rival_margin(code, said.evidence) < 0  # the printed word is likelier
         # the bits seen flipped are mostly the ones that differ from the printed word
         flipped = said.evidence < 0
         assert flipped[differs].mean() >= 0.5 > flipped[~differs].mean() + 0.25
@@ -235,6 +239,55 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert said.reason == "the photo barely shows its 5 weakest code bits (support -0.10, at least 0.5 needed)"
     assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
+
+
+def test_a_word_with_a_few_bits_shown_flipped_passes_when_no_other_word_is_nearly_as_likely() -> None:
+    """Four bits shown weakly flipped fail the bit rules, but every other code word needs more
+    support than that doubt: the word passes. Not when another word is nearly as likely, nor when
+    its morph does not explain the photo (clutter beats every rival too)."""
+    shown = np.ones(24, np.float32)
+    shown[[2, 9, 14, 20]] = [-0.4, -0.3, -0.5, -0.2]
+    assert not BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0).agrees  # the rival margin not asked
+    assert BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=1.6).agrees
+    near = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=0.5)
+    assert not near.agrees
+    assert near.reason == (
+        "the photo shows 4 of its code bits flipped, and another code word is nearly as likely (margin 0.50, at least 1.0)"
+    )
+    clutter = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, unlit=shown * 9.0, rival_margin=5.0)
+    assert clutter.deviation > MAX_DEVIATION and not clutter.agrees
+    assert clutter.reason.startswith("the photo shows 4")
+    # the JSON's null margin: no other code word near
+    fields = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=float("inf")).to_json()
+    assert fields["rival_margin"] is None and disagreement_in(fields) == ""
+    assert disagreement_in({**fields, "rival_margin": 0.5}).endswith("(margin 0.50, at least 1.0)")
+    del fields["rival_margin"]
+    assert disagreement_in(fields) == "the photo shows 4 of its code bits flipped"
+
+
+def test_the_check_asks_the_rivals_only_of_a_word_read_within_the_codes_corrections(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A word the bit rules withdraw, its morph explaining the photo: read within the code's t
+    corrections it passes when no other code word is nearly as likely; chosen by the soft search
+    (more than t corrections) it does not, whatever its margin."""
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(21))[0]
+    code = model.codec.encode(payload)
+    shown = np.ones(len(code), np.float32)
+    shown[[2, 9, 14]] = -0.3  # three bits shown weakly flipped: the bit rules withdraw it
+    assert model.codec.rival_margin(code, shown) >= MIN_RIVAL_MARGIN
+    fits = MorphFit(np.eye(3), 0.9, 0.85)
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: fits)
+    monkeypatch.setattr(checker.synthesis, "evidence", lambda *args, **kwargs: BitEvidence(code, shown, 0.9, 1.0))
+    t = model.codec.spec.bch_t
+    image = np.full((64, 64), 0.8, np.float32)
+    within = checker.check(image, np.eye(3), DecodeResult(payload, True, t, 0.95))
+    assert within.status == "passed" and within.bits is not None
+    assert within.bits.rival_margin == pytest.approx(model.codec.rival_margin(code, shown))
+    chosen = checker.check(image, np.eye(3), DecodeResult(payload, True, t + 2, 0.95))
+    assert chosen.status == "contradicted" and chosen.bits is not None and chosen.bits.rival_margin is None
+    assert not chosen.result.ok
 
 
 def test_a_photo_the_morph_does_not_explain_does_not_pass_the_bits() -> None:
