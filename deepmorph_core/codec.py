@@ -45,7 +45,7 @@ _WHITENING_SEED = b"deepmorph payload codec whitening/1"
 _PROB_EPS = 1e-9
 #: a payload of at most this many bits has every difference between two of its code words listed
 #: (:meth:`PayloadCodec.rival_margin`: 2**16 rows); a longer one's are searched near the least
-#: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 BCH decodes, about 30 ms)
+#: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 BCH decodes, about 20 ms)
 LISTED_RIVALS_UP_TO = 16
 RIVAL_SEARCH_BITS = 10
 
