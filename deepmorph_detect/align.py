@@ -174,8 +174,7 @@ class Aligner:
         again = refine_affine(pyramid, alignment.homography, self.template)
         if not self.accepts(again):
             return None
-        frame = viewbox_corners(self.template.viewbox)
-        before, after = project(alignment.homography, frame), project(again.homography, frame)
+        before, after = project(alignment.homography, self.frame_corners), project(again.homography, self.frame_corners)
         width = max(float(np.linalg.norm(before[1] - before[0])), 1.0)
         moved = float(np.linalg.norm(after - before, axis=1).mean())
         return again if moved >= SHEET_MOVE * width else None
