@@ -24,6 +24,9 @@ from deepmorph_core.print_size import PHONE_FOV_DEG
 
 #: The phone camera assumed without a calibration: the one ``deepmorph capacity`` plans prints for.
 DEFAULT_HFOV_DEG = PHONE_FOV_DEG
+#: the horizontal fields of view (degrees) of the cameras :func:`rigid_misfit` tries: phones'
+#: main and wide cameras
+PHONE_FOV_RANGE_DEG = (50.0, 57.5, 65.0, 72.5, 80.0)
 ASPECT_TOLERANCE = 0.01  # a calibration's image shape and the photo's may differ this much (rounding)
 
 
@@ -218,6 +221,36 @@ def homography_from_pose(camera: Camera, rvec: np.ndarray, tvec: np.ndarray) -> 
     return camera.matrix @ np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=np.float64).reshape(3)])
 
 
+def rigid_misfit(homography: np.ndarray, corners: np.ndarray, image_size: tuple[int, int]) -> float:
+    """How far an alignment's outline is from any outline a flat print can have in the photo.
+
+    ``homography`` (SVG units -> pixels) puts the drawing's frame ``corners`` (``(4, 2)`` SVG
+    units, TL, TR, BR, BL) somewhere in a ``(width, height)`` photo. A flat sheet seen by a
+    pinhole camera makes only some of the quadrilaterals a homography can: its pose has six
+    degrees of freedom, a homography eight. The outline is fitted by a pose (PnP) for cameras
+    centred in the photo with each field of view in :data:`PHONE_FOV_RANGE_DEG`; the answer is
+    the least mean corner distance, as a share of the outline's top edge. An alignment bent by a
+    cast shadow's edge is far from every such outline. A cropped photo moves the principal
+    point, so a large misfit says "look again", never "not a print".
+    """
+    quad = project(homography, corners)
+    width = max(float(np.linalg.norm(quad[1] - quad[0])), 1.0)
+    frame = np.asarray(corners, dtype=np.float64)
+    span = max(float(np.ptp(frame[:, 0])), 1e-9)
+    obj = np.column_stack([(frame - frame.mean(0)) / span, np.zeros(4)]).reshape(-1, 1, 3)
+    img = quad.reshape(-1, 1, 2)
+    best = math.inf
+    for fov in PHONE_FOV_RANGE_DEG:
+        camera = Camera.default(*image_size, fov)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.matrix, None, flags=cv2.SOLVEPNP_IPPE)
+        if not ok:
+            continue
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, camera.matrix, None, rvec, tvec)
+        seen, _ = cv2.projectPoints(obj, rvec, tvec, camera.matrix, None)
+        best = min(best, float(np.linalg.norm(seen.reshape(4, 2) - quad, axis=1).mean()) / width)
+    return best
+
+
 def rotation_error_deg(rvec_a: np.ndarray, rvec_b: np.ndarray) -> float:
     """Angle (degrees) of the rotation taking pose a to pose b."""
     Ra, _ = cv2.Rodrigues(np.asarray(rvec_a, dtype=np.float64).reshape(3, 1))
@@ -241,11 +274,13 @@ def project(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 __all__ = [
     "DEFAULT_HFOV_DEG",
+    "PHONE_FOV_RANGE_DEG",
     "Camera",
     "homography_from_pose",
     "load_calibration",
     "parse_camera",
     "project",
+    "rigid_misfit",
     "rotation_error_deg",
     "solve_pose",
     "translation_error",

@@ -24,12 +24,13 @@ from deepmorph_core.codec import PayloadCodec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
-from deepmorph_detect.align import WEAK_ALIGNMENT
+from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT
 from deepmorph_detect.camera import (
     Camera,
     homography_from_pose,
     parse_camera,
     project,
+    rigid_misfit,
     rotation_error_deg,
     solve_pose,
     translation_error,
@@ -97,6 +98,38 @@ def test_pnp_recovers_a_known_pose() -> None:
     pixels = project(homography_from_pose(cam, rvec, tvec), grid[:, :2])
     r, t = solve_pose(cam, grid, pixels)
     assert rotation_error_deg(r, rvec) < 1e-3 and translation_error(t, tvec) < 1e-5
+
+
+@pytest.mark.parametrize("fov", [52.0, 66.0, 78.0])
+def test_a_flat_print_seen_by_a_phone_fits_a_rigid_pose_and_a_bent_outline_does_not(fov: float) -> None:
+    """``rigid_misfit``: any pose of a flat print (tilted up to 60 degrees, anywhere in a 640 x
+    480 photo, a field of view from 52 to 78 degrees) fits within half a percent of the print's
+    width. One corner pulled out along its diagonal by a fifth of the width fits no pose for
+    most poses (a pose tilted towards that corner explains some of it), and a kite none."""
+    w, h = 640, 480
+    f = (w / 2) / np.tan(np.radians(fov) / 2)
+    cam = Camera(f, f, w / 2, h / 2)
+    corners = np.array([[0.0, 0.0], [24.0, 0.0], [24.0, 18.0], [0.0, 18.0]])  # a 4:3 viewBox
+    to_drawing = np.array([[1 / 24, 0, -0.5], [0, 1 / 24, -18 / 48], [0, 0, 1]])  # centred, width 1
+    rng = np.random.default_rng(int(fov))
+    pulled = []
+    for _ in range(40):
+        axis = rng.uniform(0, 2 * np.pi)
+        R_tilt, _ = cv2.Rodrigues(np.array([np.cos(axis), np.sin(axis), 0.0]) * np.radians(rng.uniform(0, 60)))
+        R_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)]))
+        rvec, _ = cv2.Rodrigues(R_tilt @ R_spin)
+        tvec = np.array([rng.uniform(-0.6, 0.6), rng.uniform(-0.4, 0.4), rng.uniform(2.5, 5.0)])
+        H = homography_from_pose(cam, rvec.ravel(), tvec) @ to_drawing
+        assert rigid_misfit(H, corners, (w, h)) < 0.005
+        quad = project(H, corners)
+        out = quad[2] - quad.mean(0)
+        quad[2] += 0.2 * np.linalg.norm(quad[1] - quad[0]) * out / np.linalg.norm(out)
+        bent = cv2.getPerspectiveTransform(corners.astype(np.float32), quad.astype(np.float32))
+        pulled.append(rigid_misfit(bent, corners, (w, h)))
+    assert np.median(pulled) > BENT_OUTLINE
+    kite = np.array([[300.0, 200.0], [380.0, 200.0], [420.0, 320.0], [300.0, 260.0]])
+    H = cv2.getPerspectiveTransform(corners.astype(np.float32), kite.astype(np.float32))
+    assert rigid_misfit(H, corners, (w, h)) > 0.05
 
 
 def test_the_pose_cube_stands_on_the_drawing() -> None:
