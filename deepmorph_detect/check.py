@@ -270,6 +270,8 @@ class PayloadChecker:
         bits = self.synthesis.evidence(
             pyramid, fit.homography, code, aligned >= DRAWING_LIKE_ALIGNMENT, not is_it_the_drawing
         )
+        if relit_from is not None:  # the light came from the drawing: no allowance for a shadow's excess
+            bits = replace(bits, relit=True)
         if not is_it_the_drawing and not bits.agrees and bits.explained:
             if result.corrected_bits <= self.model.codec.spec.bch_t:  # not a word the soft search chose
                 bits = replace(bits, rival_margin=self.model.codec.rival_margin(code, bits.evidence))
