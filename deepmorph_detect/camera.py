@@ -237,17 +237,13 @@ def rigid_misfit(homography: np.ndarray, corners: np.ndarray, image_size: tuple[
     width = max(float(np.linalg.norm(quad[1] - quad[0])), 1.0)
     frame = np.asarray(corners, dtype=np.float64)
     span = max(float(np.ptp(frame[:, 0])), 1e-9)
-    obj = np.column_stack([(frame - frame.mean(0)) / span, np.zeros(4)]).reshape(-1, 1, 3)
-    img = quad.reshape(-1, 1, 2)
+    plane = (frame - frame.mean(0)) / span  # the pose frame: centred, in drawing widths
+    sheet = np.column_stack([plane, np.zeros(len(plane))])
     best = math.inf
     for fov in PHONE_FOV_RANGE_DEG:
         camera = Camera.default(*image_size, fov)
-        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.matrix, None, flags=cv2.SOLVEPNP_IPPE)
-        if not ok:
-            continue
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, camera.matrix, None, rvec, tvec)
-        seen, _ = cv2.projectPoints(obj, rvec, tvec, camera.matrix, None)
-        best = min(best, float(np.linalg.norm(seen.reshape(4, 2) - quad, axis=1).mean()) / width)
+        seen = project(homography_from_pose(camera, *solve_pose(camera, sheet, quad)), plane)
+        best = min(best, float(np.linalg.norm(seen - quad, axis=1).mean()) / width)
     return best
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from deepmorph_core.codec import DecodeResult, PayloadCodec
 from deepmorph_detect.check import PayloadCheck
 from deepmorph_detect.results import Located
+from deepmorph_detect.synthesis import BIT_FIELDS
 
 MorphCheck = Callable[[np.ndarray, np.ndarray, DecodeResult], PayloadCheck]
 
@@ -95,14 +96,7 @@ class FrameFuser:
             if self.check is not None and tr.image is not None and tr.last.homography is not None:
                 checked = self.check(tr.image, tr.last.homography, fused)
             entry["morph_check"] = checked.status
-            for key in (
-                "morph_fit",
-                "bits_contradicted",
-                "weakest_bits_support",
-                "bits_deviation",
-                "bits_deviation_in_flat_light",
-                "rival_margin",
-            ):
+            for key in ("morph_fit", *BIT_FIELDS):
                 entry.pop(key, None)  # the last frame's own check, not the fused payload's
             if checked.fit is not None:
                 entry["morph_fit"] = round(checked.fit.gain, 4)

@@ -110,6 +110,17 @@ SHADOW_LIGHT_RANGE = (0.1, 10.0)  # a light outside it is an estimate gone wrong
 VARIANT_CACHE = 16  # code words whose one-bit variants stay rendered (videos repeat payloads)
 
 
+#: the per-bit check's fields of a detection's JSON (:meth:`BitEvidence.to_json`), each only
+#: where the check asked it
+BIT_FIELDS = (
+    "bits_contradicted",
+    "weakest_bits_support",
+    "bits_deviation",
+    "bits_deviation_in_flat_light",
+    "rival_margin",
+)
+
+
 @dataclass(frozen=True)
 class BitEvidence:
     """What the photo says about each bit of one code word.
@@ -525,14 +536,15 @@ def morph_template(
 
 
 __all__ = [
+    "BIT_FIELDS",
     "BLUR_SIGMAS",
     "CHECK_WIDTH",
     "HOPELESS_DEVIATION",
     "MAX_CONTRADICTED",
-    "MIN_RIVAL_MARGIN",
     "MAX_DEVIATION",
     "MAX_SHADOWED_DEVIATION",
     "MIN_OWN_EVIDENCE",
+    "MIN_RIVAL_MARGIN",
     "MIN_WEAKEST_SUM",
     "SHADOW_MARGIN",
     "SHADOW_SMOOTHING",
