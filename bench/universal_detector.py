@@ -23,6 +23,12 @@ clutter; shared out over the drawings) are located with the universal detector: 
 detection there is a false one.
 
     .venv/bin/python bench/universal_detector.py --models bench/results/colour_models --n 200 --negatives 10000
+
+``--bundles`` reads trained bundles (no detector of their own needed) in the same scenes with the
+universal detector alone (``--severities``; no negatives): prints read and wrong payloads, what a
+user of ``train`` without ``train-detector`` gets.
+
+    .venv/bin/python bench/universal_detector.py --bundles bench/results/colour_models/bar-chart.dmm --n 300
 """
 
 from __future__ import annotations
@@ -72,18 +78,29 @@ def score(kind: str, locator: Any, scene: Any) -> tuple[dict[str, int], list[flo
     return counts, errors, seconds
 
 
-def compare(name: str, path: Path, n: int, seed: int, tuned: Path | None) -> dict[str, Any]:
-    """The detectors on the same scenes of one drawing, per severity."""
+def compare(
+    name: str,
+    path: Path,
+    n: int,
+    seed: int,
+    tuned: Path | None,
+    own: bool = True,
+    severities: tuple[str, ...] = ("medium", "hard"),
+) -> dict[str, Any]:
+    """The detectors on the same scenes of one drawing, per severity (``own``: also the bundle's
+    own detector)."""
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.scenes import SceneMaker
 
     model = DeepMorphModel.load(path)
-    locators = {"own": Locator(model), "universal": Locator(model, detector="universal")}
+    locators = {"universal": Locator(model, detector="universal")}
+    if own:
+        locators = {"own": Locator(model), **locators}
     if tuned is not None and tuned.is_file():
         locators["tuned"] = Locator(DeepMorphModel.load(tuned))
     out: dict[str, Any] = {}
-    for sev in ("medium", "hard"):
+    for sev in severities:
         maker = SceneMaker(model, (640, 480), sev, seed=seed)
         scenes = [maker.make(drawings=1 + i % 2, distractors=1, aruco=i % 2 == 0) for i in range(n)]
         for loc in locators.values():  # first calls allocate and load
@@ -139,6 +156,23 @@ def negatives(paths: list[tuple[str, Path]], total: int, seed: int) -> dict[str,
     return out
 
 
+def universal_alone(bundles: list[Path], n: int, seed: int, severities: list[str], threads: int, out: Path) -> None:
+    """``--bundles``: each bundle's prints in :func:`compare`'s scenes, found by the universal
+    detector alone."""
+    rows, found = [], {}
+    for path in bundles:
+        res = compare(path.stem, path, n, seed, None, own=False, severities=tuple(severities))
+        found[str(path)] = res
+        for sev in severities:
+            r = res[f"{sev}/universal"]
+            rows.append([path.stem, sev, r["prints"], r["read"], f"{r['read_share']:.1%}", r["wrong"],
+                         f"{r['frame_s_median'] * 1000:.0f}"])  # fmt: skip
+    print(f"\nThe universal detector alone, {n} scenes per bundle and severity, {threads} thread(s):")
+    print(table(["bundle", "severity", "prints", "read", "share", "wrong", "frame ms"], rows))
+    write_json(out, {"benchmark": "universal_detector", "environment": environment(), "threads": threads, "n": n,
+                     "seed": seed, "bundles": found})  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", type=Path, help="folder of NAME-detector.dmm bundles")
@@ -148,9 +182,14 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", help="comma-separated drawing names")
     ap.add_argument("--tuned", action="store_true", help="also NAME-tuned.dmm of --models")
+    ap.add_argument("--bundles", type=Path, nargs="+", help="trained bundles read with the universal detector alone")
+    ap.add_argument("--severities", default="medium,hard", help="of --bundles' scenes")
     ap.add_argument("--out", type=Path, default=RESULTS / "universal_detector.json")
     args = ap.parse_args()
     threads = set_threads(args.threads)
+    if args.bundles:
+        universal_alone(args.bundles, args.n, args.seed, args.severities.split(","), threads, args.out)
+        return
     from deepmorph.training.universal import held_out
     from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 

@@ -449,24 +449,44 @@ class PayloadCodec:
         those bits (Chase-II); any other one differs in at least ``t + 1`` better supported bits.
         ``inf`` for a code with one word.
         """
+        return self._rivals(code_bits, support)[0]
+
+    def nearest_rival(self, code_bits: np.ndarray, support: np.ndarray) -> np.ndarray | None:
+        """The code word other than ``code_bits`` that per-bit ``support`` prefers least to it
+        (:meth:`rival_margin`'s nearest rival), ``(code_bits,)`` uint8; ``None`` for a code with
+        one word, or, above :data:`LISTED_RIVALS_UP_TO` payload bits, when the search near the
+        least supported bits finds none (every rival then differs in better supported bits)."""
+        return self._rivals(code_bits, support)[1]
+
+    def _rivals(self, code_bits: np.ndarray, support: np.ndarray) -> tuple[float, np.ndarray | None]:
+        """:meth:`rival_margin` and :meth:`nearest_rival` together."""
         code = np.asarray(code_bits, dtype=np.uint8)
         shown = np.asarray(support, dtype=np.float64)
         if shown.shape != (self.spec.code_bits,) or code.shape != shown.shape:
             raise DeepMorphError(f"a code word and its support must have shape ({self.spec.code_bits},)")
         if self.spec.payload_bits <= LISTED_RIVALS_UP_TO:
             differences = self._code_differences()
-            return float((differences @ shown).min()) if len(differences) else math.inf
+            if not len(differences):
+                return math.inf, None
+            sums = differences @ shown
+            nearest = int(np.argmin(sums))
+            return float(sums[nearest]), code ^ differences[nearest].astype(np.uint8)
         plain = code ^ self._mask
         order = np.argsort(shown, kind="stable")
         searched, others = order[:RIVAL_SEARCH_BITS], np.sort(shown[order[RIVAL_SEARCH_BITS:]])
         margin = _beyond_search(np.sort(shown[searched]), others, self.spec.bch_t)
+        found: tuple[float, np.ndarray] | None = None
         trials = np.repeat(plain[None], 2 ** len(searched) - 1, axis=0)
         trials[:, searched] ^= _flip_patterns(len(searched))
         for word in self._bch_correct(trials):
             if word is None or np.array_equal(word, plain) or (self._crc is not None and not self._crc_ok(word)):
                 continue
-            margin = min(margin, float(shown[word != plain].sum()))
-        return margin
+            total = float(shown[word != plain].sum())
+            if found is None or total < found[0]:
+                found = (total, word)
+        if found is None:
+            return margin, None
+        return min(margin, found[0]), (found[1] ^ self._mask).astype(np.uint8)
 
     def _code_differences(self) -> np.ndarray:
         """``(2**P - 1, N_b)`` every non-zero difference between two code words, as floats (kept)."""

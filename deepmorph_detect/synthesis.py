@@ -118,6 +118,7 @@ BIT_FIELDS = (
     "bits_deviation",
     "bits_deviation_in_flat_light",
     "rival_margin",
+    "nearest_rival_deviation",
 )
 
 
@@ -143,6 +144,13 @@ class BitEvidence:
         relit: asked of a photo lit by the drawing's own template
             (:mod:`~deepmorph_detect.template_light`), where the word's morph fits well whatever
             the photo: no allowance for a shadow's excess (:attr:`flat_deviation` is ``None``).
+        rival_deviation: the :attr:`deviation` of the code word :attr:`evidence` prefers least
+            to this one (:meth:`PayloadCodec.nearest_rival
+            <deepmorph_core.codec.PayloadCodec.nearest_rival>`), asked at the alignment to its
+            own morph, where the photo shows that word's bits where the two differ (their
+            evidence adding up above 0; :meth:`PayloadChecker.rival_deviation
+            <deepmorph_detect.check.PayloadChecker.rival_deviation>`); ``None`` where it was not
+            asked or the photo shows this word's bits there.
     """
 
     code: np.ndarray
@@ -152,6 +160,7 @@ class BitEvidence:
     unlit: np.ndarray | None = None
     rival_margin: float | None = None
     relit: bool = False
+    rival_deviation: float | None = None
 
     @property
     def contradicted(self) -> int:
@@ -197,7 +206,9 @@ class BitEvidence:
         (:attr:`rival_margin` at least :data:`MIN_RIVAL_MARGIN`); and its morph explaining the
         photo where its bits act (:attr:`deviation` at most :data:`MAX_DEVIATION`, or at most
         :data:`MAX_SHADOWED_DEVIATION` for a word the bit rules pass whose morph explains the
-        photo with the shadow divided out, :attr:`flat_deviation`)."""
+        photo with the shadow divided out, :attr:`flat_deviation`); and its nearest rival word,
+        whose bits the photo shows where the two differ, not explaining the photo better
+        (:attr:`rival_deviation` below :attr:`deviation`)."""
         return not self.reason
 
     def to_json(self) -> dict[str, Any]:
@@ -211,12 +222,17 @@ class BitEvidence:
             fields["bits_deviation_in_flat_light"] = round(self.flat_deviation, 3)
         if self.rival_margin is not None:
             fields["rival_margin"] = round(self.rival_margin, 3) if np.isfinite(self.rival_margin) else None
+        if self.rival_deviation is not None:
+            fields["nearest_rival_deviation"] = round(self.rival_deviation, 3)
         return fields
 
     @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
-        return disagreement(self.contradicted, self.weakest_sum, self.deviation, self.rival_margin, self.flat_deviation)
+        return disagreement(
+            self.contradicted, self.weakest_sum, self.deviation, self.rival_margin, self.flat_deviation,
+            self.rival_deviation,
+        )  # fmt: skip
 
 
 def disagreement(
@@ -225,18 +241,26 @@ def disagreement(
     deviation: float,
     rival_margin: float | None = None,
     flat_deviation: float | None = None,
+    rival_deviation: float | None = None,
 ) -> str:
     """Which part of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
     too many bits shown flipped or its weakest bits barely shown, with another code word nearly
     as likely where the rival margin was asked (``rival_margin``: ``None`` when not, ``inf`` when
     no other word is near); or a photo its morph does not explain (``flat_deviation``: the
-    deviation with a cast shadow divided out, where one was)."""
+    deviation with a cast shadow divided out, where one was); or a photo that the nearest rival
+    word explains better, its bits shown where the two differ (``rival_deviation``)."""
     asked = rival_margin is not None
     why = _bits_disagreement(contradicted, weakest_sum, deviation, flat_deviation)
     if why and deviation <= MAX_DEVIATION and asked:
-        if rival_margin >= MIN_RIVAL_MARGIN:
-            return ""
-        why += f", and another code word is nearly as likely (margin {rival_margin:.2f}, at least {MIN_RIVAL_MARGIN})"
+        if rival_margin < MIN_RIVAL_MARGIN:
+            near = f"margin {rival_margin:.2f}, at least {MIN_RIVAL_MARGIN}"
+            return f"{why}, and another code word is nearly as likely ({near})"
+        why = ""
+    if not why and rival_deviation is not None and rival_deviation < deviation:
+        why = (
+            f"the nearest other code word explains the photo better, its bits shown where the two differ "
+            f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
+        )
     return why
 
 
@@ -248,8 +272,9 @@ def disagreement_in(fields: dict[str, Any]) -> str:
         rival = math.inf if fields["rival_margin"] is None else float(fields["rival_margin"])
     flat = fields.get("bits_deviation_in_flat_light")
     return disagreement(
-        fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"], rival, flat
-    )
+        fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"], rival, flat,
+        fields.get("nearest_rival_deviation"),
+    )  # fmt: skip
 
 
 def _bits_disagreement(

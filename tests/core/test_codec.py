@@ -570,6 +570,31 @@ def test_a_clear_word_beats_its_rivals_by_the_code_distance_and_a_near_miss_lose
     assert codec.rival_margin(words[0], seen) == pytest.approx(-(other != words[0]).sum())
 
 
+def test_the_nearest_rival_is_the_code_word_whose_differing_bits_have_the_least_support(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Listed or searched, the nearest rival is a code word other than the word, and the support
+    over the bits where it differs is the rival margin (exact when the rival lies in the search)."""
+    import deepmorph_core.codec as codec_module
+
+    codec = PayloadCodec(choose_codec(11, crc_bits=8, bch_t=1))
+    words = _every_code_word(codec)
+    rng = np.random.default_rng(13)
+    for _ in range(20):
+        word = words[rng.integers(len(words))]
+        support = rng.normal(1.0, 1.0, codec.spec.code_bits)
+        rival = codec.nearest_rival(word, support)
+        assert rival is not None and rival.dtype == np.uint8 and (rival != word).any()
+        assert (words == rival).all(1).any()  # a code word
+        assert float(support[rival != word].sum()) == pytest.approx(codec.rival_margin(word, support), abs=1e-4)
+    # the photo of another word asked about this one: that word, listed and searched
+    other = words[321]
+    seen = np.where(other == words[0], 1.0, -1.0)
+    assert np.array_equal(codec.nearest_rival(words[0], seen), other)
+    monkeypatch.setattr(codec_module, "LISTED_RIVALS_UP_TO", 0)
+    assert np.array_equal(codec.nearest_rival(words[0], seen), other)
+
+
 def test_a_long_payload_bounds_its_rival_margin_from_below(monkeypatch: pytest.MonkeyPatch) -> None:
     """Above the listed size the rivals are searched around the least supported bits: never above
     the exact margin, and exact when the nearest rival lies in the search."""

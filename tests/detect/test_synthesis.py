@@ -291,6 +291,68 @@ def test_the_check_asks_the_rivals_only_of_a_word_read_within_the_codes_correcti
     assert not chosen.result.ok
 
 
+def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A print too small for its code: a wrong word passes the bit rules. It passes the check only
+    when its nearest rival, asked at its own morph's alignment, explains the photo worse, or
+    the photo shows the word's bits rather than the rival's where the two differ; the verdict
+    and its reason survive the JSON."""
+    import deepmorph_detect.check as check_module
+    from deepmorph_detect.refine import Alignment
+
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(29))[0]
+    code = model.codec.encode(payload)
+    wobble = np.where(np.arange(len(code)) % 2 == 0, 1.0, -1.0).astype(np.float32)
+    # the bits where the nearest payload's word differs barely shown: the rival search finds it
+    near = min((model.codec.encode(p) for p in _near_payloads(payload)), key=lambda c: int((c != code).sum()))
+    read_as = BitEvidence(code, np.where(near == code, 1.0 + 0.6 * wobble, 0.2), 0.9, 1.0)
+    assert read_as.agrees and read_as.deviation == pytest.approx(0.6)
+    rival = model.codec.nearest_rival(code, read_as.evidence)
+    assert rival is not None and (rival != code).any()
+    differ = rival != code
+    asked: list[np.ndarray] = []
+
+    def evidence_with(rival_evidence: np.ndarray):
+        def evidence(pyramid, homography, asked_code, *args, **kwargs) -> BitEvidence:
+            asked.append(np.asarray(asked_code))
+            return read_as if np.array_equal(asked_code, code) else BitEvidence(rival, rival_evidence, 0.9, 1.0)
+
+        return evidence
+
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), 0.9, 0.85))
+    monkeypatch.setattr(check_module, "refine_at", lambda *args, **kwargs: Alignment(np.eye(3), 0.9, 128))
+    image = np.full((64, 64), 0.8, np.float32)
+    read = DecodeResult(payload, True, 1, 0.92)
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(1.0 + 0.3 * wobble))
+    better = checker.check(image, np.eye(3), read)
+    assert np.array_equal(asked[-1], rival)  # the rival was asked about its own word
+    assert better.status == "contradicted" and not better.result.ok
+    assert better.bits.rival_deviation == pytest.approx(0.3)
+    reason = (
+        "the nearest other code word explains the photo better, its bits shown where the two differ "
+        "(deviation 0.30 against 0.60)"
+    )
+    assert better.bits.reason == reason
+    assert disagreement_in(better.bits.to_json()) == reason
+    # a rival that fails the bit rules itself (three shared bits shown flipped) is asked all the same
+    flipped = np.ones(len(code), np.float32)
+    flipped[np.flatnonzero(~differ)[:3]] = -1.0
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(flipped))
+    assert checker.check(image, np.eye(3), read).status == "contradicted"
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(1.0 + 0.8 * wobble))
+    worse = checker.check(image, np.eye(3), read)
+    assert worse.status == "passed" and worse.bits.rival_deviation == pytest.approx(0.8)
+    assert disagreement_in(worse.bits.to_json()) == ""
+    # explaining the rest better, but the photo shows the word's bits where the two differ
+    shows_word = np.where(differ, -1.0, 1.0).astype(np.float32)
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(shows_word))
+    shown = checker.check(image, np.eye(3), read)
+    assert shown.status == "passed" and shown.bits.rival_deviation is None
+    assert "nearest_rival_deviation" not in shown.bits.to_json()
+
+
 def test_the_check_allows_a_shadows_excess_only_outside_the_templates_light(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -599,15 +661,22 @@ def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
     locator = Locator(face, detector=None)
     payload = random_payloads(1, 12, np.random.default_rng(6))[0]
     photo, H = _colour_photo(face, face.codec.encode(payload), np.random.default_rng(6))
-    asked: list[bool] = []
+    asked: list[tuple[bytes, bool]] = []  # (code word, in colour) of every word asked
     evidence = locator.checker.synthesis.evidence
-    monkeypatch.setattr(locator.checker.synthesis, "evidence", lambda *a: asked.append(a[3]) or evidence(*a))
+    monkeypatch.setattr(
+        locator.checker.synthesis, "evidence", lambda *a: asked.append((a[2].tobytes(), a[3])) or evidence(*a)
+    )
     weak = DecodeResult(payload, ok=True, corrected_bits=1, confidence=0.9)
     pyramid = ImagePyramid(photo)
     assert locator.checker.check(pyramid, H, weak).status == "passed"
     for relit_from in (DRAWING_LIKE_ALIGNMENT - 0.2, DRAWING_LIKE_ALIGNMENT + 0.1):
         locator.checker.check(pyramid, H, weak, relit_from=relit_from)
-    assert asked == [True, False, True]
+    word = face.codec.encode(payload).tobytes()
+    assert [colour for code, colour in asked if code == word] == [True, False, True]
+    # a rival word passing too is asked as the word before it was
+    for (before, colour_before), (code, colour) in zip(asked, asked[1:]):
+        if code != word:
+            assert before == word and colour == colour_before
 
 
 def _shadowed_colour_photo(
