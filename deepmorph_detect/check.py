@@ -230,9 +230,8 @@ class PayloadChecker:
         per-bit check: there the drawing and any morph near it fit better than in the photo, so
         no fit measured there vouches for it. It is asked only whether its morph explains the
         photo where the photo itself aligned at :data:`DRAWING_LIKE_ALIGNMENT` or better.
-        A word the bit rules withdraw, read within the code's ``t`` corrections and its morph
-        explaining the photo, passes all the same where no other code word is nearly as likely
-        (:attr:`~deepmorph_detect.synthesis.BitEvidence.rival_margin`).
+        A word the bit rules pass is withdrawn where its nearest rival explains the photo better
+        (:meth:`rival_deviation`).
         A colour drawing's bits are asked in its colours (one contrast field per colour channel,
         :meth:`MorphSynthesis.evidence <deepmorph_detect.synthesis.MorphSynthesis.evidence>`)
         only where the unmorphed drawing aligned at :data:`DRAWING_LIKE_ALIGNMENT` or better,
@@ -270,11 +269,6 @@ class PayloadChecker:
         bits = self.synthesis.evidence(
             pyramid, fit.homography, code, aligned >= DRAWING_LIKE_ALIGNMENT, not is_it_the_drawing
         )
-        if relit_from is not None:  # the light came from the drawing: no allowance for a shadow's excess
-            bits = replace(bits, relit=True)
-        if not is_it_the_drawing and not bits.agrees and bits.explained:
-            if result.corrected_bits <= self.model.codec.spec.bch_t:  # not a word the soft search chose
-                bits = replace(bits, rival_margin=self.model.codec.rival_margin(code, bits.evidence))
         if not is_it_the_drawing and bits.agrees:
             bits = replace(bits, rival_deviation=self.rival_deviation(pyramid, homography, bits, aligned))
         if bits.explained if is_it_the_drawing else bits.agrees:

@@ -30,7 +30,6 @@ Two uses (:class:`~deepmorph_detect.locate.Locator`):
 
 from __future__ import annotations
 
-import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
@@ -63,26 +62,6 @@ MIN_WEAKEST_SUM = 0.5
 # well enough to be checked, leaves residuals many times a bit's change (8.9 on the one wrong
 # payload a negative scene gave), which the two rules above can miss on a short code
 MAX_DEVIATION = 1.0
-# ... except for a word whose bits the photo shows with a cast shadow divided out (the two rules
-# above, and a deviation there of at most MAX_DEVIATION): such a word passes with a deviation of
-# the photo as it is up to this. A shadow's edge across the bits leaves residuals in the photo as
-# it is that dividing out its light removes: right words of hard colour close-ups read at their
-# true pose left 1.0-2.0 there; words of clutter that passed in flat light left 4.6 and 15
-# (1000 unrelated images). Not in a photo lit by the drawing's own template: there a word of
-# clutter in a pink heart's unrelated images left 0.93 in flat light and 2.33 as it is
-MAX_SHADOWED_DEVIATION = 2.5
-# ... where the first two rules withdraw a word whose morph explains the photo and which was read
-# within the code's t corrections, it passes all the same when every other code word needs bits
-# whose evidence adds up to at least this (:meth:`PayloadCodec.rival_margin
-# <deepmorph_core.codec.PayloadCodec.rival_margin>`: a whole bit's change). A right word under a
-# cast shadow can show three or four bits flipped where every other word needs more; a wrong
-# word's true one is among its rivals. Asked with the shadow divided out but explained only on the
-# photo as it is: on 1000 unrelated images, words of clutter explained the photo so lit (deviation
-# 0.47-0.97) and beat every rival by up to 5.6. Not for a word the soft search chose (more than t
-# corrections): the evidence is measured at the alignment to the word's own morph, which bends
-# towards it, and a blue face's hard close-up gave such a word, 9 bits from the truth, a margin of
-# 3.4 over every rival
-MIN_RIVAL_MARGIN = 1.0
 # a bit whose evidence on the word's own real-renderer render falls below this is one the soft
 # rasterizer models wrongly (MorphSynthesis.evidence); its evidence is corrected by that error
 MIN_OWN_EVIDENCE = 0.5
@@ -117,7 +96,6 @@ BIT_FIELDS = (
     "weakest_bits_support",
     "bits_deviation",
     "bits_deviation_in_flat_light",
-    "rival_margin",
     "nearest_rival_deviation",
 )
 
@@ -136,14 +114,6 @@ class BitEvidence:
             one divided out (:meth:`MorphSynthesis.shadows`): whether the word's morph explains
             the photo at all (:attr:`deviation`) is judged on it, as dividing out a light read
             off the photo also takes up another drawing's strokes.
-        rival_margin: how much :attr:`evidence` prefers the word to every other code word
-            (:meth:`PayloadCodec.rival_margin <deepmorph_core.codec.PayloadCodec.rival_margin>`),
-            where it was asked (:meth:`PayloadChecker.check
-            <deepmorph_detect.check.PayloadChecker.check>`: a word read within the code's ``t``
-            corrections that the bit rules withdrew).
-        relit: asked of a photo lit by the drawing's own template
-            (:mod:`~deepmorph_detect.template_light`), where the word's morph fits well whatever
-            the photo: no allowance for a shadow's excess (:attr:`flat_deviation` is ``None``).
         rival_deviation: the :attr:`deviation` of the code word :attr:`evidence` prefers least
             to this one (:meth:`PayloadCodec.nearest_rival
             <deepmorph_core.codec.PayloadCodec.nearest_rival>`), asked at the alignment to its
@@ -158,8 +128,6 @@ class BitEvidence:
     fit: float
     blur_px: float
     unlit: np.ndarray | None = None
-    rival_margin: float | None = None
-    relit: bool = False
     rival_deviation: float | None = None
 
     @property
@@ -184,14 +152,6 @@ class BitEvidence:
         return float(np.median(np.abs(asked - 1.0)))
 
     @property
-    def flat_deviation(self) -> float | None:
-        """:attr:`deviation` with the cast shadow divided out (of :attr:`evidence`), where one
-        was (``None`` where the photo was asked only as it is, or was :attr:`relit`)."""
-        if self.unlit is None or self.relit:
-            return None
-        return float(np.median(np.abs(self.evidence - 1.0)))
-
-    @property
     def explained(self) -> bool:
         """Whether the word's morph explains the photo where its bits act (:attr:`deviation` at
         most :data:`MAX_DEVIATION`): the part of :attr:`agrees` that tells a print of the drawing
@@ -202,12 +162,9 @@ class BitEvidence:
     def agrees(self) -> bool:
         """Whether the photo shows this code word: at most :data:`MAX_CONTRADICTED` bits
         contradicted, its weakest bits still supported (:attr:`weakest_sum` at least
-        :data:`MIN_WEAKEST_SUM`) or, failing those two, no other code word nearly as likely
-        (:attr:`rival_margin` at least :data:`MIN_RIVAL_MARGIN`); and its morph explaining the
-        photo where its bits act (:attr:`deviation` at most :data:`MAX_DEVIATION`, or at most
-        :data:`MAX_SHADOWED_DEVIATION` for a word the bit rules pass whose morph explains the
-        photo with the shadow divided out, :attr:`flat_deviation`); and its nearest rival word,
-        whose bits the photo shows where the two differ, not explaining the photo better
+        :data:`MIN_WEAKEST_SUM`), its morph explaining the photo where its bits act
+        (:attr:`deviation` at most :data:`MAX_DEVIATION`), and its nearest rival word, whose bits
+        the photo shows where the two differ, not explaining the photo better
         (:attr:`rival_deviation` below :attr:`deviation`)."""
         return not self.reason
 
@@ -218,10 +175,6 @@ class BitEvidence:
             "weakest_bits_support": round(self.weakest_sum, 3),
             "bits_deviation": round(self.deviation, 3),
         }
-        if self.flat_deviation is not None:
-            fields["bits_deviation_in_flat_light"] = round(self.flat_deviation, 3)
-        if self.rival_margin is not None:
-            fields["rival_margin"] = round(self.rival_margin, 3) if np.isfinite(self.rival_margin) else None
         if self.rival_deviation is not None:
             fields["nearest_rival_deviation"] = round(self.rival_deviation, 3)
         return fields
@@ -229,58 +182,14 @@ class BitEvidence:
     @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
-        return disagreement(
-            self.contradicted, self.weakest_sum, self.deviation, self.rival_margin, self.flat_deviation,
-            self.rival_deviation,
-        )  # fmt: skip
+        return disagreement(self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation)
 
 
-def disagreement(
-    contradicted: int,
-    weakest_sum: float,
-    deviation: float,
-    rival_margin: float | None = None,
-    flat_deviation: float | None = None,
-    rival_deviation: float | None = None,
-) -> str:
+def disagreement(contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None) -> str:
     """Which part of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
-    too many bits shown flipped or its weakest bits barely shown, with another code word nearly
-    as likely where the rival margin was asked (``rival_margin``: ``None`` when not, ``inf`` when
-    no other word is near); or a photo its morph does not explain (``flat_deviation``: the
-    deviation with a cast shadow divided out, where one was); or a photo that the nearest rival
-    word explains better, its bits shown where the two differ (``rival_deviation``)."""
-    asked = rival_margin is not None
-    why = _bits_disagreement(contradicted, weakest_sum, deviation, flat_deviation)
-    if why and deviation <= MAX_DEVIATION and asked:
-        if rival_margin < MIN_RIVAL_MARGIN:
-            near = f"margin {rival_margin:.2f}, at least {MIN_RIVAL_MARGIN}"
-            return f"{why}, and another code word is nearly as likely ({near})"
-        why = ""
-    if not why and rival_deviation is not None and rival_deviation < deviation:
-        why = (
-            f"the nearest other code word explains the photo better, its bits shown where the two differ "
-            f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
-        )
-    return why
-
-
-def disagreement_in(fields: dict[str, Any]) -> str:
-    """:func:`disagreement` from a detection's JSON fields (:meth:`BitEvidence.to_json`), where a
-    ``null`` rival margin means no other code word is near."""
-    rival = None
-    if "rival_margin" in fields:
-        rival = math.inf if fields["rival_margin"] is None else float(fields["rival_margin"])
-    flat = fields.get("bits_deviation_in_flat_light")
-    return disagreement(
-        fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"], rival, flat,
-        fields.get("nearest_rival_deviation"),
-    )  # fmt: skip
-
-
-def _bits_disagreement(
-    contradicted: int, weakest_sum: float, deviation: float, flat_deviation: float | None = None
-) -> str:
-    """:func:`disagreement` by the bits alone: the first of its bit rules a code word fails."""
+    too many bits shown flipped, its weakest bits barely shown, a photo its morph does not
+    explain, or a photo that the nearest rival word explains better, its bits shown where the two
+    differ (``rival_deviation``)."""
     if contradicted > MAX_CONTRADICTED:
         return f"the photo shows {contradicted} of its code bits flipped"
     if weakest_sum < MIN_WEAKEST_SUM:
@@ -288,13 +197,25 @@ def _bits_disagreement(
             f"the photo barely shows its {WEAKEST_BITS} weakest code bits "
             f"(support {weakest_sum:.2f}, at least {MIN_WEAKEST_SUM} needed)"
         )
-    if deviation <= MAX_DEVIATION:
-        return ""
-    if flat_deviation is not None and flat_deviation <= MAX_DEVIATION and deviation <= MAX_SHADOWED_DEVIATION:
-        return ""  # the shadow's edge across the bits explains the rest
-    return (
-        f"its morph does not explain the photo where its bits act (deviation {deviation:.2f}, at most {MAX_DEVIATION})"
-    )
+    if deviation > MAX_DEVIATION:
+        return (
+            f"its morph does not explain the photo where its bits act "
+            f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
+        )
+    if rival_deviation is not None and rival_deviation < deviation:
+        return (
+            f"the nearest other code word explains the photo better, its bits shown where the two differ "
+            f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
+        )
+    return ""
+
+
+def disagreement_in(fields: dict[str, Any]) -> str:
+    """:func:`disagreement` from a detection's JSON fields (:meth:`BitEvidence.to_json`)."""
+    return disagreement(
+        fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"],
+        fields.get("nearest_rival_deviation"),
+    )  # fmt: skip
 
 
 class MorphSynthesis:
@@ -567,9 +488,7 @@ __all__ = [
     "HOPELESS_DEVIATION",
     "MAX_CONTRADICTED",
     "MAX_DEVIATION",
-    "MAX_SHADOWED_DEVIATION",
     "MIN_OWN_EVIDENCE",
-    "MIN_RIVAL_MARGIN",
     "MIN_WEAKEST_SUM",
     "SHADOW_MARGIN",
     "SHADOW_SMOOTHING",

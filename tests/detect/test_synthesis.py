@@ -28,8 +28,6 @@ from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.synthesis import (
     MAX_CONTRADICTED,
     MAX_DEVIATION,
-    MAX_SHADOWED_DEVIATION,
-    MIN_RIVAL_MARGIN,
     MIN_WEAKEST_SUM,
     WEAKEST_BITS,
     BitEvidence,
@@ -76,7 +74,7 @@ def test_the_photo_confirms_every_bit_of_its_code_word_and_contradicts_a_near_on
     said = locator.checker.synthesis.evidence(pyramid, H, true_code)
     assert said.contradicted == 0 and said.agrees and said.fit > 0.9
     assert np.median(said.evidence) == pytest.approx(1.0, abs=0.3)  # +1: the photo shows the word's bit
-    assert model.codec.rival_margin(true_code, said.evidence) >= MIN_RIVAL_MARGIN  # no other word near
+    assert model.codec.rival_margin(true_code, said.evidence) >= 1.0  # no other word near
     for near in _near_payloads(payload)[:4]:
         code = model.codec.encode(near)
         differs = code != true_code
@@ -242,53 +240,25 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
 
 
-def test_a_word_with_a_few_bits_shown_flipped_passes_when_no_other_word_is_nearly_as_likely() -> None:
-    """Four bits shown weakly flipped fail the bit rules, but every other code word needs more
-    support than that doubt: the word passes. Not when another word is nearly as likely, nor when
-    its morph does not explain the photo (clutter beats every rival too)."""
-    shown = np.ones(24, np.float32)
-    shown[[2, 9, 14, 20]] = [-0.4, -0.3, -0.5, -0.2]
-    assert not BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0).agrees  # the rival margin not asked
-    assert BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=1.6).agrees
-    near = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=0.5)
-    assert not near.agrees
-    assert near.reason == (
-        "the photo shows 4 of its code bits flipped, and another code word is nearly as likely (margin 0.50, at least 1.0)"
-    )
-    clutter = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, unlit=shown * 9.0, rival_margin=5.0)
-    assert clutter.deviation > MAX_DEVIATION and not clutter.agrees
-    assert clutter.reason.startswith("the photo shows 4")
-    # the JSON's null margin: no other code word near
-    fields = BitEvidence(np.zeros(24, np.uint8), shown, 0.8, 1.0, rival_margin=float("inf")).to_json()
-    assert fields["rival_margin"] is None and disagreement_in(fields) == ""
-    assert disagreement_in({**fields, "rival_margin": 0.5}).endswith("(margin 0.50, at least 1.0)")
-    del fields["rival_margin"]
-    assert disagreement_in(fields) == "the photo shows 4 of its code bits flipped"
-
-
-def test_the_check_asks_the_rivals_only_of_a_word_read_within_the_codes_corrections(
+def test_a_word_with_a_few_bits_shown_flipped_is_withdrawn_however_far_its_rivals(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A word the bit rules withdraw, its morph explaining the photo: read within the code's t
-    corrections it passes when no other code word is nearly as likely; chosen by the soft search
-    (more than t corrections) it does not, whatever its margin."""
+    """Three bits shown weakly flipped fail the bit rules, even where every other code word needs
+    more evidence than that doubt: such rescues passed wrong words of small prints in hard scenes
+    (the true word explained the photo better but was not among the near rivals)."""
     checker = locator.checker
     payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(21))[0]
     code = model.codec.encode(payload)
     shown = np.ones(len(code), np.float32)
-    shown[[2, 9, 14]] = -0.3  # three bits shown weakly flipped: the bit rules withdraw it
-    assert model.codec.rival_margin(code, shown) >= MIN_RIVAL_MARGIN
-    fits = MorphFit(np.eye(3), 0.9, 0.85)
-    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: fits)
+    shown[[2, 9, 14]] = -0.3
+    assert model.codec.rival_margin(code, shown) >= 1.0  # every other word needs more
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), 0.9, 0.85))
     monkeypatch.setattr(checker.synthesis, "evidence", lambda *args, **kwargs: BitEvidence(code, shown, 0.9, 1.0))
-    t = model.codec.spec.bch_t
     image = np.full((64, 64), 0.8, np.float32)
-    within = checker.check(image, np.eye(3), DecodeResult(payload, True, t, 0.95))
-    assert within.status == "passed" and within.bits is not None
-    assert within.bits.rival_margin == pytest.approx(model.codec.rival_margin(code, shown))
-    chosen = checker.check(image, np.eye(3), DecodeResult(payload, True, t + 2, 0.95))
-    assert chosen.status == "contradicted" and chosen.bits is not None and chosen.bits.rival_margin is None
-    assert not chosen.result.ok
+    checked = checker.check(image, np.eye(3), DecodeResult(payload, True, 1, 0.95))
+    assert checked.status == "contradicted" and not checked.result.ok
+    assert checked.bits.reason == "the photo shows 3 of its code bits flipped"
+    assert disagreement_in(checked.bits.to_json()) == checked.bits.reason
 
 
 def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
@@ -353,11 +323,12 @@ def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     assert "nearest_rival_deviation" not in shown.bits.to_json()
 
 
-def test_the_check_allows_a_shadows_excess_only_outside_the_templates_light(
+def test_a_word_its_morph_leaves_unexplained_is_withdrawn_whatever_flat_light_shows(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A word whose bits the photo shows in flat light, the photo as it is left 1.5 unexplained:
-    it passes in the photo, and not in a photo lit by the drawing's own template."""
+    """A word whose bits the photo shows with a shadow divided out, the photo as it is left 1.5
+    unexplained: withdrawn, in the photo and in one lit by the drawing's own template. Allowing a
+    shadow's excess passed wrong words of small prints in hard scenes."""
     checker = locator.checker
     payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(23))[0]
     code = model.codec.encode(payload)
@@ -368,10 +339,10 @@ def test_the_check_allows_a_shadows_excess_only_outside_the_templates_light(
         checker.synthesis, "evidence", lambda *args, **kwargs: BitEvidence(code, shown, 0.9, 1.0, unlit=shadowed)
     )
     image = np.full((64, 64), 0.8, np.float32)
-    in_photo = checker.check(image, np.eye(3), DecodeResult(payload, True, 1, 0.95))
-    assert in_photo.status == "passed" and in_photo.bits.deviation == pytest.approx(1.5)
-    relit = checker.check(image, np.eye(3), DecodeResult(payload, True, 1, 0.95), relit_from=0.9)
-    assert relit.status == "contradicted" and relit.bits.relit and not relit.result.ok
+    for relit_from in (None, 0.9):
+        checked = checker.check(image, np.eye(3), DecodeResult(payload, True, 1, 0.95), relit_from=relit_from)
+        assert checked.status == "contradicted" and checked.bits.deviation == pytest.approx(1.5)
+        assert checked.bits.reason.startswith("its morph does not explain the photo")
 
 
 def test_a_photo_the_morph_does_not_explain_does_not_pass_the_bits() -> None:
@@ -390,68 +361,6 @@ def test_a_photo_the_morph_does_not_explain_does_not_pass_the_bits() -> None:
     # a print read with noise of +-0.5 about +1 on every bit still agrees
     noisy = 1.0 + 0.5 * np.cos(np.arange(16, dtype=np.float32))
     assert BitEvidence(np.zeros(16, np.uint8), noisy, 0.9, 1.0).agrees
-
-
-def _recorded(evidence: list[float], unlit: list[float], fit: float) -> BitEvidence:
-    """A 24-bit word's evidence recorded on a real photo: with a cast shadow divided out, and of
-    the photo as it is."""
-    return BitEvidence(
-        np.zeros(24, np.uint8), np.array(evidence, np.float32), fit, 1.0, unlit=np.array(unlit, np.float32)
-    )
-
-
-def test_a_word_its_bits_show_in_flat_light_passes_where_a_shadow_leaves_the_photo_unexplained() -> None:
-    """Evidence recorded on real photos (``crystal-oscillator``, 24 code bits). Right words of two
-    hard close-ups under a cast shadow, read at the simulator's true pose: with the shadow divided
-    out their bits are clearly shown and their morph explains the photo; the photo as it is is
-    left 1.11 and 1.42 unexplained. Such a word passes up to ``MAX_SHADOWED_DEVIATION``. Words of
-    clutter (an unrelated image) look as good in flat light, and leave the photo as it is 4.56
-    unexplained: they are refused, as is a word whose bits flat light does not show, and any word
-    asked in a photo lit by the drawing's own template."""
-    right_44 = _recorded(
-        [1.467, 0.858, 0.808, 1.501, 1.2, 0.811, 0.729, 0.835, 0.98, 1.3, 0.295, 0.315,
-         0.809, 0.785, 1.986, 0.462, 0.777, 1.566, 0.578, 0.651, 0.78, 1.695, 0.444, 0.777],
-        [1.489, 2.096, -0.94, 2.274, 1.572, -0.489, -1.025, 0.233, 1.897, 2.158, 1.366, -0.662,
-         0.909, -0.636, 3.452, 1.11, 2.134, 2.748, -0.547, 0.86, 1.807, 2.687, 0.048, 1.719],
-        0.8,
-    )  # fmt: skip
-    right_131 = _recorded(
-        [0.882, 1.646, 1.1, 1.167, 0.594, 0.424, 1.794, 1.221, 2.573, 1.025, 1.23, 1.815,
-         1.292, 2.042, 0.33, 1.182, 0.438, 2.286, 0.979, 1.226, 0.839, 0.637, 1.579, 1.54],
-        [-4.207, 3.067, -1.321, 0.481, -0.321, 0.732, 5.939, 2.601, 1.925, -0.518, 5.373, -0.183,
-         0.442, 1.426, -2.321, -0.719, -0.676, 3.019, 0.029, 0.511, 0.971, -1.309, 2.303, 0.978],
-        0.9,
-    )  # fmt: skip
-    for word, unexplained in ((right_44, 1.11), (right_131, 1.42)):
-        assert word.deviation == pytest.approx(unexplained, abs=0.01) and word.deviation > MAX_DEVIATION
-        assert word.flat_deviation <= MAX_DEVIATION and word.contradicted == 0
-        assert word.agrees and word.reason == ""
-        fields = word.to_json()
-        assert fields["bits_deviation_in_flat_light"] == pytest.approx(word.flat_deviation, abs=1e-3)
-        assert disagreement_in(fields) == ""
-        # the JSON of a check that did not divide a shadow out: the photo as it is decides
-        del fields["bits_deviation_in_flat_light"]
-        assert disagreement_in(fields).startswith("its morph does not explain the photo")
-        # "is it the drawing at all" is still asked of the photo as it is
-        assert not word.explained
-    clutter = _recorded(
-        [1.98, 2.069, 1.495, 0.943, 0.517, 1.626, 2.079, 1.39, 0.217, 2.727, 0.19, 1.469,
-         0.98, 2.267, 2.155, 0.976, 0.997, 1.837, 1.434, 0.87, 1.138, 2.241, 0.721, 0.311],
-        [11.864, 2.14, 1.207, -6.496, -2.296, 6.302, 7.346, 3.574, -26.198, 8.893, 5.131, 6.257,
-         6.205, 6.591, 8.482, 0.207, 4.741, 20.701, 4.316, 5.404, 4.366, 5.716, -0.472, 1.376],
-        0.74,
-    )  # fmt: skip
-    assert clutter.flat_deviation <= MAX_DEVIATION and clutter.contradicted <= MAX_CONTRADICTED
-    assert clutter.deviation > MAX_SHADOWED_DEVIATION and not clutter.agrees
-    assert clutter.reason == "its morph does not explain the photo where its bits act (deviation 4.56, at most 1.0)"
-    # in a photo lit by the drawing's own template any morph near it fits: no allowance there
-    relit = replace(right_131, relit=True)
-    assert relit.flat_deviation is None and not relit.agrees
-    assert "bits_deviation_in_flat_light" not in relit.to_json()
-    # bits flat light shows flipped: no allowance for the shadow
-    flipped = replace(right_131, evidence=np.where(np.arange(24) < 3, -0.6, right_131.evidence).astype(np.float32))
-    assert flipped.flat_deviation <= MAX_DEVIATION and not flipped.agrees
-    assert flipped.reason == "the photo shows 3 of its code bits flipped"
 
 
 def test_a_fused_payload_reports_its_own_per_bit_check(model: DeepMorphModel, locator: Locator) -> None:

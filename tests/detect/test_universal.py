@@ -202,8 +202,7 @@ def test_a_blind_reading_is_checked_for_the_drawing_where_its_morph_fits_as_no_o
 
     def faint_bits(*args: object) -> BitEvidence:
         """The photo's evidence, with three bits shown flipped yet the morph explaining it: what
-        the bars of a bar chart give, whose moves a homography nearly absorbs (shown clearly
-        flipped: a code word that differs there and in two more bits is nearly as likely)."""
+        the bars of a bar chart give, whose moves a homography nearly absorbs."""
         asked.append(1)
         real = evidence(*args)
         flipped = real.evidence.copy()
@@ -224,22 +223,9 @@ def test_a_blind_reading_is_checked_for_the_drawing_where_its_morph_fits_as_no_o
     assert asked and det.morph.unmorphed_correlation >= check_module.DRAWING_LIKE_ALIGNMENT
     assert det.result.ok and det.bits.explained and not det.bits.agrees  # asked only whether it is the drawing
     monkeypatch.setattr(check_module, "DRAWING_LIKE_ALIGNMENT", det.morph.unmorphed_correlation + 0.001)
-    # the whole check, which three flipped bits fail, another word nearly as likely: nothing is
-    # vouched for (and a blind proposer's drawing whose payload is not read is not reported)
+    # the whole check, which three flipped bits fail: nothing is vouched for (and a blind
+    # proposer's drawing whose payload is not read is not reported)
     assert [d for d in locator.locate(scene.image) if d.result.ok] == []
-    # shown only faintly flipped, every other code word needs more: the word passes
-    monkeypatch.setattr(check_module, "TRUSTED_MORPH_FIT", 2.0)
-
-    def faintly_flipped(*args: object) -> BitEvidence:
-        real = evidence(*args)
-        shown = np.ones_like(real.evidence)
-        shown[:3] = -0.2
-        return BitEvidence(real.code, shown, real.fit, real.blur_px)
-
-    monkeypatch.setattr(locator.checker.synthesis, "evidence", faintly_flipped)
-    det = read()
-    assert det.result.ok and det.morph_check == "passed" and det.bits.contradicted == 3
-    assert det.bits.rival_margin is not None and det.bits.rival_margin >= 1.0
 
 
 def test_a_proposal_that_is_not_the_drawing_takes_the_wider_searches_once(monkeypatch: pytest.MonkeyPatch) -> None:
