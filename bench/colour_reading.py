@@ -4,9 +4,10 @@ next to the same drawing flattened to black and white.
 The panel is :mod:`bench/colour.py`'s, by its rule. Train each drawing as a user would, on one
 thread with the other core idle, then point this script at the bundles:
 
-    for n in advance bad-decision business-contact binoculars; do
-      deepmorph train ../shared/data/drawings/flat-color-icons/$n.svg --move 0.5 --payload-bits auto \\
-        --threads 1 --out bench/results/colour_models/$n.dmm
+    for n in flat-color-icons/{bar-chart,crystal-oscillator,reading,switch-camera} \\
+             fluent-emoji-flat/{face-without-mouth,pink-heart,backhand-index-pointing-left-light,books}; do
+      deepmorph train ../shared/data/drawings/$n.svg --move 0.5 --payload-bits auto \\
+        --threads 1 --out bench/results/colour_models/$(basename $n).dmm
     done
     .venv/bin/python bench/colour_reading.py bench/results/colour_models/*.dmm
 
