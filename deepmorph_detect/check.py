@@ -300,10 +300,7 @@ class PayloadChecker:
         rival = codec.nearest_rival(bits.code, bits.evidence)
         if rival is None:
             return None
-        decoded = codec.decode(rival.astype(np.float64), soft=False)  # a code word: its payload
-        if not decoded.ok:
-            return None
-        fit = refine_at(pyramid, homography, self.morphs.of_payload(decoded.payload), MORPH_WIDTH)
+        fit = refine_at(pyramid, homography, self.morphs.of_code(rival), MORPH_WIDTH)
         if fit is None:
             return None
         theirs = self.synthesis.evidence(pyramid, fit.homography, rival, aligned >= DRAWING_LIKE_ALIGNMENT, True)

@@ -95,7 +95,6 @@ BIT_FIELDS = (
     "bits_contradicted",
     "weakest_bits_support",
     "bits_deviation",
-    "bits_deviation_in_flat_light",
     "nearest_rival_deviation",
 )
 
