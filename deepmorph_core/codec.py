@@ -45,9 +45,12 @@ _WHITENING_SEED = b"deepmorph payload codec whitening/1"
 _PROB_EPS = 1e-9
 #: a payload of at most this many bits has every difference between two of its code words listed
 #: (:meth:`PayloadCodec.rival_margin`: 2**16 rows); a longer one's are searched near the least
-#: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 BCH decodes, about 20 ms)
+#: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 flips)
 LISTED_RIVALS_UP_TO = 16
 RIVAL_SEARCH_BITS = 10
+#: ... by syndromes (0.3-0.8 ms) for BCH codes that correct up to this many bits (a table of every
+#: correction: 1.8k rows for 60 code bits at t = 2), else by BCH decoding each flip (10-30 ms)
+MAX_SYNDROME_T = 2
 
 
 @cache
@@ -316,6 +319,8 @@ class PayloadCodec:
         self._bch = bchlib.BCH(spec.bch_t, m=spec.field_order) if spec.bch_t else None
         self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
         self._differences: np.ndarray | None = None
+        self._columns: np.ndarray | None = None
+        self._correction_table: tuple[np.ndarray, np.ndarray] | None = None
 
     def __repr__(self) -> str:
         return f"PayloadCodec({self.spec!r})"
@@ -445,8 +450,9 @@ class PayloadCodec:
         zero, BCH is linear, whitening cancels), the same for every word. A payload of at most
         :data:`LISTED_RIVALS_UP_TO` bits has them listed, and the margin is exact. Above that it is
         a lower bound: the rivals that differ in at most ``t`` bits beyond the
-        :data:`RIVAL_SEARCH_BITS` least supported ones are found by BCH-decoding every flip of
-        those bits (Chase-II); any other one differs in at least ``t + 1`` better supported bits.
+        :data:`RIVAL_SEARCH_BITS` least supported ones are found by taking every flip of those
+        bits to the code word within ``t`` bits of it (Chase-II; by syndromes up to
+        :data:`MAX_SYNDROME_T`); any other one differs in at least ``t + 1`` better supported bits.
         ``inf`` for a code with one word.
         """
         return self._rivals(code_bits, support)[0]
@@ -471,10 +477,23 @@ class PayloadCodec:
             sums = differences @ shown
             nearest = int(np.argmin(sums))
             return float(sums[nearest]), code ^ differences[nearest].astype(np.uint8)
-        plain = code ^ self._mask
         order = np.argsort(shown, kind="stable")
         searched, others = order[:RIVAL_SEARCH_BITS], np.sort(shown[order[RIVAL_SEARCH_BITS:]])
         margin = _beyond_search(np.sort(shown[searched]), others, self.spec.bch_t)
+        if self.spec.bch_t <= MAX_SYNDROME_T and self._is_code_word(code):
+            found = self._nearest_by_syndrome(code, shown, searched)
+        else:
+            found = self._nearest_by_bch(code, shown, searched)
+        if found is None:
+            return margin, None
+        return min(margin, found[0]), found[1]
+
+    def _nearest_by_bch(
+        self, code: np.ndarray, shown: np.ndarray, searched: np.ndarray
+    ) -> tuple[float, np.ndarray] | None:
+        """The least supported code word that BCH decoding finds within ``t`` bits of a flip of the
+        ``searched`` bits of ``code``, and its support; ``None`` where there is none."""
+        plain = code ^ self._mask
         found: tuple[float, np.ndarray] | None = None
         trials = np.repeat(plain[None], 2 ** len(searched) - 1, axis=0)
         trials[:, searched] ^= _flip_patterns(len(searched))
@@ -484,9 +503,75 @@ class PayloadCodec:
             total = float(shown[word != plain].sum())
             if found is None or total < found[0]:
                 found = (total, word)
-        if found is None:
-            return margin, None
-        return min(margin, found[0]), (found[1] ^ self._mask).astype(np.uint8)
+        return None if found is None else (found[0], (found[1] ^ self._mask).astype(np.uint8))
+
+    def _nearest_by_syndrome(
+        self, code: np.ndarray, shown: np.ndarray, searched: np.ndarray
+    ) -> tuple[float, np.ndarray] | None:
+        """:meth:`_nearest_by_bch` for a code word by syndromes, in one pass over every flip.
+
+        A flip ``s`` of the searched bits reaches a code word within ``t`` more bits ``x`` exactly
+        where ``H (s + x) = 0``, ``H`` checking the differences between code words (their
+        linear code, :meth:`_check_columns`): ``x`` is the correction whose syndrome is ``s``'s.
+        Two corrections of at most ``t`` bits never share a syndrome (their sum would be a code
+        difference lighter than BCH's ``2t + 1``), so this finds the words BCH decoding and the
+        CRC find, about 40× as fast (1023 flips of a 24-bit payload's code)."""
+        n = self.spec.code_bits
+        columns = self._check_columns()
+        patterns = _flip_patterns(len(searched)).astype(bool)
+        syndromes = np.bitwise_xor.reduce(np.where(patterns, columns[searched], np.uint64(0)), axis=1)
+        differences = np.zeros((len(patterns), n), dtype=np.uint8)
+        differences[:, searched] = patterns
+        reached = syndromes == 0
+        corrections, correction_syndromes = self._corrections()
+        if len(correction_syndromes):
+            at = np.minimum(np.searchsorted(correction_syndromes, syndromes), len(correction_syndromes) - 1)
+            hit = ~reached & (correction_syndromes[at] == syndromes)
+            for column in corrections[at[hit]].T:
+                used = column >= 0
+                rows = np.flatnonzero(hit)[used]
+                differences[rows, column[used]] ^= 1
+            reached |= hit
+        reached &= differences.any(axis=1)
+        if not reached.any():
+            return None
+        totals = np.where(reached, differences @ shown, np.inf)
+        nearest = int(np.argmin(totals))
+        return float(totals[nearest]), code ^ differences[nearest]
+
+    def _check_columns(self) -> np.ndarray:
+        """``(N_b,)`` uint64: each code bit's column of the parity checks of the code words'
+        differences, as bits of an integer. The code is systematic (``[payload | CRC | BCH]``
+        under the whitening), so the differences' generator is ``[I | A]`` and the checks
+        ``[A^T | I]``: a payload bit's column is its row of ``A``, every other bit's a unit."""
+        if self._columns is None:
+            p = self.spec.payload_bits
+            units = np.vstack([np.zeros(p, np.uint8), np.eye(p, dtype=np.uint8)])
+            words = self.encode(units)
+            generator = (words[1:] ^ words[0]).astype(np.uint64)  # (P, N_b)
+            weights = np.left_shift(np.uint64(1), np.arange(self.spec.code_bits - p, dtype=np.uint64))
+            self._columns = np.concatenate([(generator[:, p:] * weights).sum(axis=1), weights])
+        return self._columns
+
+    def _corrections(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every set of 1 to ``t`` code bits (``(K, t)`` indices, -1 past a smaller set's end) and
+        their syndromes ``(K,)``, sorted by syndrome (:meth:`_nearest_by_syndrome`)."""
+        if self._correction_table is None:
+            t, n = self.spec.bch_t, self.spec.code_bits
+            columns = self._check_columns()
+            sets = [c for r in range(1, t + 1) for c in itertools.combinations(range(n), r)]
+            indices = np.full((len(sets), max(t, 1)), -1, dtype=np.int64)
+            for row, subset in enumerate(sets):
+                indices[row, : len(subset)] = subset
+            syndromes = np.bitwise_xor.reduce(np.where(indices >= 0, columns[indices], np.uint64(0)), axis=1)
+            order = np.argsort(syndromes, kind="stable")
+            self._correction_table = (indices[order], syndromes[order])
+        return self._correction_table
+
+    def _is_code_word(self, code: np.ndarray) -> bool:
+        """Whether ``code`` (``(N_b,)`` 0/1) is one of the code's words."""
+        zero = self.encode(np.zeros(self.spec.payload_bits, dtype=np.uint8))
+        return not np.bitwise_xor.reduce(np.where((code ^ zero).astype(bool), self._check_columns(), np.uint64(0)))
 
     def _code_differences(self) -> np.ndarray:
         """``(2**P - 1, N_b)`` every non-zero difference between two code words, as floats (kept)."""

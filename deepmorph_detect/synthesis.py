@@ -245,21 +245,25 @@ class MorphSynthesis:
         key = code.tobytes()
         renders = self._variants.get(key)
         if renders is None:
-            n = len(code)
-            codes = np.repeat(code[None], n + 1, axis=0)
-            codes[np.arange(1, n + 1), np.arange(n)] ^= 1
-            values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
-            with torch.no_grad():
-                soft = (self.rasterizer.render_rgb(values) if self.colour else 1.0 - self.rasterizer(values)).numpy()
-            real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[3], self.template.viewbox)
-            if real.shape != soft.shape[2:]:
-                real = cv2.resize(real, soft.shape[:1:-1], interpolation=cv2.INTER_AREA)
-            renders = (soft, real)
+            renders = self._rendered(code, np.arange(len(code)))
             self._variants[key] = renders
             if len(self._variants) > VARIANT_CACHE:
                 self._variants.popitem(last=False)
         self._variants.move_to_end(key)
         return renders
+
+    def _rendered(self, code: np.ndarray, bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`variants` of only the one-bit variants of ``bits`` (indices into ``code``):
+        ``(len(bits) + 1, C, h, w)`` and ``(h, w)``."""
+        codes = np.repeat(code[None], len(bits) + 1, axis=0)
+        codes[np.arange(1, len(bits) + 1), bits] ^= 1
+        values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
+        with torch.no_grad():
+            soft = (self.rasterizer.render_rgb(values) if self.colour else 1.0 - self.rasterizer(values)).numpy()
+        real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[3], self.template.viewbox)
+        if real.shape != soft.shape[2:]:
+            real = cv2.resize(real, soft.shape[:1:-1], interpolation=cv2.INTER_AREA)
+        return soft, real
 
     def _light_fields(self, shape: tuple[int, int]) -> np.ndarray:
         """``(h * w, k)`` smooth basis functions (polynomials in x, y up to degree
@@ -308,15 +312,7 @@ class MorphSynthesis:
         the word's morph leaves unexplained (:attr:`BitEvidence.unlit`); false, as :meth:`read`
         asks, only the photo as it is.
         """
-        photo = self.rectified(pyramid, homography)
-        soft, real = self.variants(code)
-        colour = self.colour and in_colour
-        if self.colour and not colour:  # the renders in the reading channel's one gray
-            soft = self._gray(soft)
-        if soft.shape[2:] != photo.shape:
-            size = photo.shape[::-1]
-            soft = np.stack([[cv2.resize(c, size, interpolation=cv2.INTER_AREA) for c in r] for r in soft])
-            real = cv2.resize(real, size, interpolation=cv2.INTER_AREA)
+        photo, soft, real, colour = self._asked_in(pyramid, homography, self.variants(code), in_colour)
         code = np.asarray(code, dtype=np.uint8)
         at_blur: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # both passes mostly find the same blur
         evidence, fit, sigma = self._asked(photo, soft, real, colour, at_blur)
@@ -324,6 +320,38 @@ class MorphSynthesis:
             return BitEvidence(code, evidence, fit, sigma)
         shown, fit, sigma = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, at_blur)
         return BitEvidence(code, shown, fit, sigma, unlit=evidence)
+
+    def shown_on(
+        self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, bits: np.ndarray, in_colour: bool = True
+    ) -> np.ndarray:
+        """``(len(bits),)`` what :meth:`evidence` (``lit``) says of the bits ``bits`` of ``code``
+        alone, rendering only their variants: a bit's evidence compares the photo with the word's
+        render and its own variant, in the light and blur fitted to the word's render, so it does
+        not depend on the other bits. The check asks a rival word's differing bits first and the
+        rest only where those show the rival's (:meth:`PayloadChecker.rival_deviation
+        <deepmorph_detect.check.PayloadChecker.rival_deviation>`)."""
+        code = np.asarray(code, dtype=np.uint8)
+        bits = np.asarray(bits, dtype=np.int64)
+        photo, soft, real, colour = self._asked_in(pyramid, homography, self._rendered(code, bits), in_colour)
+        shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {})
+        return shown
+
+    def _asked_in(
+        self, pyramid: ImagePyramid, homography: np.ndarray, renders: tuple[np.ndarray, np.ndarray], in_colour: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """The rectified photo and ``renders`` (:meth:`variants`) sized as it and in the colours
+        asked (``in_colour``: a colour drawing's in colour, else in its reading channel's gray),
+        and whether they are in colour."""
+        photo = self.rectified(pyramid, homography)
+        soft, real = renders
+        colour = self.colour and in_colour
+        if self.colour and not colour:  # the renders in the reading channel's one gray
+            soft = self._gray(soft)
+        if soft.shape[2:] != photo.shape:
+            size = photo.shape[::-1]
+            soft = np.stack([[cv2.resize(c, size, interpolation=cv2.INTER_AREA) for c in r] for r in soft])
+            real = cv2.resize(real, size, interpolation=cv2.INTER_AREA)
+        return photo, soft, real, colour
 
     def _asked(
         self,

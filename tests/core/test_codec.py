@@ -595,6 +595,45 @@ def test_the_nearest_rival_is_the_code_word_whose_differing_bits_have_the_least_
     assert np.array_equal(codec.nearest_rival(words[0], seen), other)
 
 
+@pytest.mark.parametrize(
+    ("payload_bits", "crc_bits", "bch_t"), [(14, 8, 0), (11, 16, 2), (12, 8, 2), (24, 8, 1), (29, 8, 1)]
+)
+def test_the_rival_search_by_syndromes_finds_what_bch_decoding_finds(
+    payload_bits: int, crc_bits: int, bch_t: int
+) -> None:
+    """Above the listed size, every flip of the least supported bits is taken to the code word
+    within ``t`` bits of it by syndromes; BCH decoding and the CRC, flip by flip, find the same
+    nearest word with the same support, and none where they find none."""
+    from deepmorph_core.codec import RIVAL_SEARCH_BITS
+
+    codec = PayloadCodec(choose_codec(payload_bits, crc_bits=crc_bits, bch_t=bch_t))
+    n = codec.spec.code_bits
+    rng = np.random.default_rng(payload_bits + bch_t)
+    differences = codec._code_differences() if payload_bits <= 16 else None
+    found = 0
+    for trial in range(40):
+        word = codec.encode(rng.integers(0, 2, payload_bits).astype(np.uint8))
+        if trial % 2:  # a photo of another word: their differing bits shown flipped, weakly
+            near = codec.encode(rng.integers(0, 2, payload_bits).astype(np.uint8))
+            if payload_bits <= 16:  # one that differs in few enough bits for the search
+                light = differences[differences.sum(axis=1) <= RIVAL_SEARCH_BITS + bch_t]
+                near = word ^ light[rng.integers(len(light))].astype(np.uint8)
+            shown = np.where(near == word, 1.0, -0.2) + rng.normal(0.0, 0.3, n)
+        else:
+            shown = rng.normal(1.0, (0.3, 1.5)[trial % 4 // 2], n)
+        searched = np.argsort(shown, kind="stable")[:RIVAL_SEARCH_BITS]
+        by_bch = codec._nearest_by_bch(word, shown, searched)
+        by_syndrome = codec._nearest_by_syndrome(word, shown, searched)
+        assert (by_bch is None) == (by_syndrome is None)
+        if by_bch is not None:
+            found += 1
+            assert np.array_equal(by_bch[1], by_syndrome[1])
+            assert by_syndrome[0] == pytest.approx(by_bch[0], abs=1e-9)
+            assert codec.decode(by_syndrome[1].astype(np.float64)).ok
+    assert found >= 10
+    assert not codec._is_code_word(word ^ np.eye(n, dtype=np.uint8)[0])
+
+
 def test_a_long_payload_bounds_its_rival_margin_from_below(monkeypatch: pytest.MonkeyPatch) -> None:
     """Above the listed size the rivals are searched around the least supported bits: never above
     the exact margin, and exact when the nearest rival lies in the search."""

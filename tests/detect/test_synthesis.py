@@ -284,18 +284,25 @@ def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     differ = rival != code
     asked: list[np.ndarray] = []
 
-    def evidence_with(rival_evidence: np.ndarray):
+    def photo_shows(rival_evidence: np.ndarray) -> None:
+        """The photo as the synthesis asks it: ``read_as`` of the word, ``rival_evidence`` of the rival."""
+
         def evidence(pyramid, homography, asked_code, *args, **kwargs) -> BitEvidence:
             asked.append(np.asarray(asked_code))
             return read_as if np.array_equal(asked_code, code) else BitEvidence(rival, rival_evidence, 0.9, 1.0)
 
-        return evidence
+        def shown_on(pyramid, homography, asked_code, bits, *args) -> np.ndarray:
+            assert np.array_equal(asked_code, rival) and np.array_equal(bits, np.flatnonzero(differ))
+            return rival_evidence[bits]
+
+        monkeypatch.setattr(checker.synthesis, "evidence", evidence)
+        monkeypatch.setattr(checker.synthesis, "shown_on", shown_on)
 
     monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), 0.9, 0.85))
     monkeypatch.setattr(check_module, "refine_at", lambda *args, **kwargs: Alignment(np.eye(3), 0.9, 128))
     image = np.full((64, 64), 0.8, np.float32)
     read = DecodeResult(payload, True, 1, 0.92)
-    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(1.0 + 0.3 * wobble))
+    photo_shows(1.0 + 0.3 * wobble)
     better = checker.check(image, np.eye(3), read)
     assert np.array_equal(asked[-1], rival)  # the rival was asked about its own word
     assert better.status == "contradicted" and not better.result.ok
@@ -309,18 +316,25 @@ def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     # a rival that fails the bit rules itself (three shared bits shown flipped) is asked all the same
     flipped = np.ones(len(code), np.float32)
     flipped[np.flatnonzero(~differ)[:3]] = -1.0
-    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(flipped))
+    photo_shows(flipped)
     assert checker.check(image, np.eye(3), read).status == "contradicted"
-    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(1.0 + 0.8 * wobble))
+    photo_shows(1.0 + 0.8 * wobble)
     worse = checker.check(image, np.eye(3), read)
     assert worse.status == "passed" and worse.bits.rival_deviation == pytest.approx(0.8)
     assert disagreement_in(worse.bits.to_json()) == ""
     # explaining the rest better, but the photo shows the word's bits where the two differ
     shows_word = np.where(differ, -1.0, 1.0).astype(np.float32)
-    monkeypatch.setattr(checker.synthesis, "evidence", evidence_with(shows_word))
+    photo_shows(shows_word)
     shown = checker.check(image, np.eye(3), read)
     assert shown.status == "passed" and shown.bits.rival_deviation is None
+    assert np.array_equal(asked[-1], code)  # the rival's other bits never asked
     assert "nearest_rival_deviation" not in shown.bits.to_json()
+    # a rival differing in more than a quarter of the bits is asked about them all at once
+    monkeypatch.setattr(check_module, "RIVAL_BITS_FIRST_SHARE", 0.0)
+    assert checker.check(image, np.eye(3), read).bits.rival_deviation is None
+    assert np.array_equal(asked[-1], rival)
+    photo_shows(1.0 + 0.3 * wobble)
+    assert checker.check(image, np.eye(3), read).status == "contradicted"
 
 
 def test_a_word_its_morph_leaves_unexplained_is_withdrawn_whatever_flat_light_shows(
@@ -559,6 +573,36 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
     assert np.mean(gains) > 0.03, gains
 
 
+def test_some_bits_are_asked_as_the_whole_word_asks_them(
+    model: DeepMorphModel, locator: Locator, face: DeepMorphModel
+) -> None:
+    """A bit's evidence depends on the word's render and its own variant only: asked about a few
+    bits, rendering only their variants (as the check asks a rival's differing bits first), the
+    photo says what it says of them asked about the whole word, in gray and in colour. (The
+    Bézier plugin flattens a batch's curves to one piece count, within 0.05 px of the curve, so
+    the face's renders differ by that between batches.)"""
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(4))[0]
+    photo, H = _small_print(model, payload, 80, seed=4)
+    near_payload = _near_payloads(payload)[2]
+    near = model.codec.encode(near_payload)
+    differ = np.flatnonzero(near != model.codec.encode(payload))
+    synthesis, pyramid = locator.checker.synthesis, ImagePyramid(photo)
+    H = locator.checker.fit_morph(pyramid, H, near_payload).homography  # aligned to its morph, as the check asks
+    whole = synthesis.evidence(pyramid, H, near)
+    assert whole.evidence[differ].sum() < 0  # the photo shows the printed word's bits there
+    assert np.allclose(synthesis.shown_on(pyramid, H, near, differ), whole.evidence[differ], atol=1e-4)
+    colour = _face_synthesis(face)
+    rng = np.random.default_rng(7)
+    code = face.codec.encode(random_payloads(1, 12, rng)[0])
+    photo, H = _colour_photo(face, code, rng)
+    some = np.array([0, 3, len(code) - 1])
+    for in_colour in (True, False):
+        whole = colour.evidence(ImagePyramid(photo), H, code, in_colour=in_colour)
+        assert np.allclose(
+            colour.shown_on(ImagePyramid(photo), H, code, some, in_colour), whole.evidence[some], atol=0.03
+        )
+
+
 def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
     face: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -571,10 +615,10 @@ def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
     payload = random_payloads(1, 12, np.random.default_rng(6))[0]
     photo, H = _colour_photo(face, face.codec.encode(payload), np.random.default_rng(6))
     asked: list[tuple[bytes, bool]] = []  # (code word, in colour) of every word asked
-    evidence = locator.checker.synthesis.evidence
-    monkeypatch.setattr(
-        locator.checker.synthesis, "evidence", lambda *a: asked.append((a[2].tobytes(), a[3])) or evidence(*a)
-    )
+    synthesis = locator.checker.synthesis
+    evidence, shown_on = synthesis.evidence, synthesis.shown_on
+    monkeypatch.setattr(synthesis, "evidence", lambda *a: asked.append((a[2].tobytes(), a[3])) or evidence(*a))
+    monkeypatch.setattr(synthesis, "shown_on", lambda *a: asked.append((a[2].tobytes(), a[4])) or shown_on(*a))
     weak = DecodeResult(payload, ok=True, corrected_bits=1, confidence=0.9)
     pyramid = ImagePyramid(photo)
     assert locator.checker.check(pyramid, H, weak).status == "passed"
