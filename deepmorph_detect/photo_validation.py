@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -50,6 +52,51 @@ def printed(
     return colour_print(render_svg_rgb(svg, width), colours, rng)
 
 
+@dataclass(frozen=True)
+class CloseUp:
+    """One close-up of :func:`close_ups`: the photo, and the payload and code bits it shows."""
+
+    photo: np.ndarray
+    payload: np.ndarray
+    code: np.ndarray
+
+
+def close_up_width(model: DeepMorphModel, print_px: float | None = None) -> int:
+    """The close-up photo's width for ``model``: :data:`PHOTO_PX`, or wide enough that the print
+    spans the width the model was trained for (``model.print_px``), or about ``print_px``."""
+    if print_px is not None:
+        return photo_for_print(print_px)
+    if model.print_px is not None:  # its prints span at least the width it was trained for
+        return math.ceil(model.print_px / CLOSE_UP_SIZE[0])
+    return PHOTO_PX
+
+
+def close_ups(
+    model: DeepMorphModel,
+    samples: int,
+    seed: int = 0,
+    severity: str = VALIDATION_SEVERITY,
+    print_px: float | None = None,
+) -> Iterator[CloseUp]:
+    """``samples`` close-ups of fresh payloads' codes (:func:`validate_close_ups`'s, by ``seed``):
+    each code rendered, printed (:func:`printed`) and photographed close at ``severity``, in a
+    photo :func:`close_up_width` wide."""
+    model.eval()
+    codec = model.codec
+    rng = np.random.default_rng(seed + 7)
+    payloads = random_payloads(samples, codec.spec.payload_bits, rng)
+    codes = codec.encode(payloads)
+    md = model.drawing
+    colours = build_pipeline(severity, PRINT_PX, colour=True, channel=md.channel) if md.colour else None
+    added = model_added_steps(model)
+    photo_px = close_up_width(model, print_px)
+    high = round(CLOSE_UP_SIZE[1] * photo_px)
+    for code, payload in zip(codes, payloads):
+        values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
+        art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
+        yield CloseUp(close_up_photo(art, severity, rng, size=photo_px, extra=added), payload, code)
+
+
 def validate_close_ups(  # noqa: PLR0913
     model: DeepMorphModel,
     samples: int,
@@ -63,36 +110,20 @@ def validate_close_ups(  # noqa: PLR0913
     prints span that width or more), or with the drawing about ``print_px`` camera pixels wide; with the
     model's detector, or the one named by ``detector`` (``"none"``: whole images only)."""
     start = time.perf_counter()
-    model.eval()
-    codec = model.codec
-    rng = np.random.default_rng(seed + 7)
-    payloads = random_payloads(samples, codec.spec.payload_bits, rng)
-    codes = codec.encode(payloads)
     locator = Locator(model, detector=detector)
-    md = model.drawing
-    colours = build_pipeline(severity, PRINT_PX, colour=True, channel=md.channel) if md.colour else None
-    added = model_added_steps(model)
-    if print_px is not None:
-        photo_px = photo_for_print(print_px)
-    elif model.print_px is not None:  # its prints span at least the width it was trained for
-        photo_px = math.ceil(model.print_px / CLOSE_UP_SIZE[0])
-    else:
-        photo_px = PHOTO_PX
+    photo_px = close_up_width(model, print_px)
     low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
     tally = PayloadTally()
     right_bits = missed = unread = 0
-    for code, payload in zip(codes, payloads):
-        values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-        art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
-        photo = close_up_photo(art, severity, rng, size=photo_px, extra=added)
-        found = locator.locate(photo)
+    for shot in close_ups(model, samples, seed, severity, print_px):
+        found = locator.locate(shot.photo)
         if not found:
             # found but not read (a blind detector reports only what it reads), or not found
-            missed += not locator.aligns(photo)
+            missed += not locator.aligns(shot.photo)
             unread += 1
             continue
-        right_bits += int(((found[0].probabilities > 0.5) == (code == 1)).sum())
-        tally.add([f.result.payload for f in found if f.result.ok], payload)
+        right_bits += int(((found[0].probabilities > 0.5) == (shot.code == 1)).sum())
+        tally.add([f.result.payload for f in found if f.result.ok], shot.payload)
     return ValidationRecord(
         name="close-ups",
         description=f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain",
@@ -100,10 +131,19 @@ def validate_close_ups(  # noqa: PLR0913
         samples=samples,
         read=tally.read,
         wrong=tally.wrong,
-        bit_accuracy=right_bits / ((samples - unread) * codec.spec.code_bits) if unread < samples else None,
+        bit_accuracy=right_bits / ((samples - unread) * model.codec.spec.code_bits) if unread < samples else None,
         missed=missed,
         seconds=round(time.perf_counter() - start, 2),
     )
 
 
-__all__ = ["PHOTO_PX", "PRINT_PX", "photo_for_print", "printed", "validate_close_ups"]
+__all__ = [
+    "PHOTO_PX",
+    "PRINT_PX",
+    "CloseUp",
+    "close_up_width",
+    "close_ups",
+    "photo_for_print",
+    "printed",
+    "validate_close_ups",
+]

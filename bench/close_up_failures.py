@@ -1,0 +1,131 @@
+"""Where a model's close-ups fail: the same close-ups ``bench/colour_reading.py`` reads (by
+``--seed``: medium at the seed, hard at the seed + 1), each failure put in one class.
+
+    .venv/bin/python bench/close_up_failures.py bench/results/colour_models/*.dmm
+
+A close-up that is not read is:
+
+* **not aligned**: no proposal of the detector aligned to the drawing;
+* **no word**: aligned, but no look read a payload that passed the CRC;
+* **right word withdrawn**: the right payload passed the CRC and its check withdrew it; the
+  check's first reason is counted (the morph fit no better than the unmorphed drawing's; more
+  than two bits shown flipped; the weakest bits barely shown; the morph leaving the photo
+  unexplained; the nearest rival explaining it better), from the attempt that broke fewest rules;
+* **other words only**: payloads that passed the CRC, none of them right, all withdrawn;
+* **wrong**: a wrong payload reported (never expected; the check exists to stop it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+
+KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words only", "wrong")
+REASONS = ("morph fit", "bits flipped", "weakest bits", "unexplained", "rival")
+
+
+def _reasons(check: Any) -> tuple[str, ...]:
+    """The rules a withdrawn attempt broke (:class:`~deepmorph_detect.check.PayloadCheck`)."""
+    from deepmorph_detect.synthesis import MAX_CONTRADICTED, MAX_DEVIATION, MIN_WEAKEST_SUM
+
+    if check.status == "failed" or check.bits is None:
+        return ("morph fit",)
+    bits = check.bits
+    broken = (
+        ("bits flipped", bits.contradicted > MAX_CONTRADICTED),
+        ("weakest bits", bits.weakest_sum < MIN_WEAKEST_SUM),
+        ("unexplained", bits.deviation > MAX_DEVIATION),
+        ("rival", bits.rival_deviation is not None and bits.rival_deviation < bits.deviation),
+    )
+    return tuple(name for name, hit in broken if hit)
+
+
+def classify(model: Any, samples: int, seed: int, severity: str, detector: str) -> tuple[Counter, Counter]:
+    """Counts of :data:`KINDS` over ``samples`` close-ups, and of the withdrawn right words' reasons."""
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.photo_validation import close_ups
+
+    locator = Locator(model, detector=detector)
+    attempts: list[tuple[bool, Any]] = []  # (the right payload?, its check) of every payload checked
+    truth: list[np.ndarray] = []
+    check = locator.checker.check
+
+    def recorded(image, homography, result, *args, **kwargs):  # noqa: ANN001, ANN202
+        verdict = check(image, homography, result, *args, **kwargs)
+        if result.ok:
+            attempts.append((bool(np.array_equal(result.payload, truth[0])), verdict))
+        return verdict
+
+    locator.checker.check = recorded
+    kinds: Counter = Counter()
+    reasons: Counter = Counter()
+    for shot in close_ups(model, samples, seed, severity):
+        truth[:] = [shot.payload]
+        attempts.clear()
+        found = [f for f in locator.locate(shot.photo) if f.result.ok]
+        right = [check for is_right, check in attempts if is_right]
+        if any(np.array_equal(f.result.payload, shot.payload) for f in found):
+            kind = "read"
+        elif found:
+            kind = "wrong"
+        elif right:
+            kind = "right word withdrawn"
+            reasons[min((_reasons(c) or ("?",) for c in right), key=len)[0]] += 1
+        elif attempts:
+            kind = "other words only"
+        else:
+            kind = "no word" if locator.aligns(shot.photo) else "not aligned"
+        kinds[kind] += 1
+    return kinds, reasons
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("models", nargs="+", type=Path, help="trained bundles (.dmm)")
+    p.add_argument("--close-ups", type=int, default=200, help="per severity")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--detector", default="universal")
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--out", type=Path, default=RESULTS / "close_up_failures.json")
+    args = p.parse_args(argv)
+    set_threads(args.threads)
+    from deepmorph_core.model import DeepMorphModel
+
+    start = time.perf_counter()
+    rows = []
+    for path in args.models:
+        model = DeepMorphModel.load(path).eval()
+        for severity, seed in (("medium", args.seed), ("hard", args.seed + 1)):
+            kinds, reasons = classify(model, args.close_ups, seed, severity, args.detector)
+            rows.append({"model": path.stem, "severity": severity, **{k: kinds[k] for k in KINDS},
+                         "withdrawn_because": {r: reasons[r] for r in REASONS if reasons[r]}})  # fmt: skip
+            print(f"{path.stem} {severity}: {dict(kinds)}", flush=True)
+    headers = ["model", "severity", *KINDS, "withdrawn because"]
+    body = [
+        [
+            r["model"],
+            r["severity"],
+            *(r[k] for k in KINDS),
+            ", ".join(f"{k} {v}" for k, v in r["withdrawn_because"].items()),
+        ]
+        for r in rows
+    ]
+    print(f"\nClose-ups of {args.close_ups} per model and severity, {args.detector} detector:")
+    print(table(headers, body))
+    write_json(args.out, {"benchmark": "close_up_failures", "environment": environment(), "rows": rows,
+                          "wall_s": round(time.perf_counter() - start, 1)})  # fmt: skip
+    print(f"\nwrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
