@@ -48,8 +48,8 @@ _PROB_EPS = 1e-9
 #: supported bits, :data:`RIVAL_SEARCH_BITS` of them (2**10 - 1 flips)
 LISTED_RIVALS_UP_TO = 16
 RIVAL_SEARCH_BITS = 10
-#: ... by syndromes (0.3-0.8 ms) for BCH codes that correct up to this many bits (a table of every
-#: correction: 1.8k rows for 60 code bits at t = 2), else by BCH decoding each flip (10-30 ms)
+#: ... by syndromes (0.2-0.4 ms) for BCH codes that correct up to this many bits (a table of every
+#: correction: 1.8k rows for 60 code bits at t = 2), else by BCH decoding each flip (4-15 ms)
 MAX_SYNDROME_T = 2
 
 
@@ -515,7 +515,7 @@ class PayloadCodec:
         linear code, :meth:`_check_columns`): ``x`` is the correction whose syndrome is ``s``'s.
         Two corrections of at most ``t`` bits never share a syndrome (their sum would be a code
         difference lighter than BCH's ``2t + 1``), so this finds the words BCH decoding and the
-        CRC find, about 40× as fast (1023 flips of a 24-bit payload's code)."""
+        CRC find, 17-62x as fast (``bench/rival_search.py``)."""
         n = self.spec.code_bits
         columns = self._check_columns()
         patterns = _flip_patterns(len(searched)).astype(bool)
