@@ -320,6 +320,7 @@ class PayloadCodec:
         self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
         self._differences: np.ndarray | None = None
         self._columns: np.ndarray | None = None
+        self._zero_word: np.ndarray | None = None
         self._correction_table: tuple[np.ndarray, np.ndarray] | None = None
 
     def __repr__(self) -> str:
@@ -546,12 +547,18 @@ class PayloadCodec:
         ``[A^T | I]``: a payload bit's column is its row of ``A``, every other bit's a unit."""
         if self._columns is None:
             p = self.spec.payload_bits
-            units = np.vstack([np.zeros(p, np.uint8), np.eye(p, dtype=np.uint8)])
-            words = self.encode(units)
-            generator = (words[1:] ^ words[0]).astype(np.uint64)  # (P, N_b)
+            self._zero_word, generator = self._difference_generator()
+            generator = generator.astype(np.uint64)
             weights = np.left_shift(np.uint64(1), np.arange(self.spec.code_bits - p, dtype=np.uint64))
             self._columns = np.concatenate([(generator[:, p:] * weights).sum(axis=1), weights])
         return self._columns
+
+    def _difference_generator(self) -> tuple[np.ndarray, np.ndarray]:
+        """The zero payload's code word ``(N_b,)``, and ``(P, N_b)`` each payload bit's code word
+        minus it: the generator of the differences between code words."""
+        p = self.spec.payload_bits
+        words = self.encode(np.vstack([np.zeros(p, np.uint8), np.eye(p, dtype=np.uint8)]))
+        return words[0], words[1:] ^ words[0]
 
     def _corrections(self) -> tuple[np.ndarray, np.ndarray]:
         """Every set of 1 to ``t`` code bits (``(K, t)`` indices, -1 past a smaller set's end) and
@@ -570,16 +577,14 @@ class PayloadCodec:
 
     def _is_code_word(self, code: np.ndarray) -> bool:
         """Whether ``code`` (``(N_b,)`` 0/1) is one of the code's words."""
-        zero = self.encode(np.zeros(self.spec.payload_bits, dtype=np.uint8))
-        return not np.bitwise_xor.reduce(np.where((code ^ zero).astype(bool), self._check_columns(), np.uint64(0)))
+        columns = self._check_columns()  # sets the zero payload's word too
+        return not np.bitwise_xor.reduce(np.where((code ^ self._zero_word).astype(bool), columns, np.uint64(0)))
 
     def _code_differences(self) -> np.ndarray:
         """``(2**P - 1, N_b)`` every non-zero difference between two code words, as floats (kept)."""
         if self._differences is None:
             p = self.spec.payload_bits
-            units = np.vstack([np.zeros(p, np.uint8), np.eye(p, dtype=np.uint8)])
-            words = self.encode(units)
-            generator = (words[1:] ^ words[0]).astype(np.int64)  # (P, N_b)
+            generator = self._difference_generator()[1].astype(np.int64)
             payloads = (np.arange(1, 2**p)[:, None] >> np.arange(p - 1, -1, -1)) & 1
             self._differences = ((payloads @ generator) % 2).astype(np.float32)
         return self._differences
