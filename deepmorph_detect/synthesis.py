@@ -30,6 +30,7 @@ Two uses (:class:`~deepmorph_detect.locate.Locator`):
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
@@ -41,6 +42,7 @@ import torch
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
+from deepmorph_detect.light_field import grid_fields
 from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 from deepmorph_detect.template_light import DARKEST_REFLECTANCE, far_from_edges, smoothed_light
 
@@ -87,6 +89,8 @@ LIGHT_READ_SHARE = 0.3  # the light is read on paper and inks at least this shar
 SHADOW_RENDER_BLUR = 1.0  # blur (px at the render's width) of the render the light is read against
 SHADOW_LIGHT_RANGE = (0.1, 10.0)  # a light outside it is an estimate gone wrong, not a shadow: held to it
 VARIANT_CACHE = 16  # code words whose one-bit variants stay rendered (videos repeat payloads)
+GRID_EDGE_MARGIN = 2  # a grid light (GridLight) is read this many px beyond the blur's reach of the word's edges
+GRID_RIDGE = 1e-3  # ... and its knots held towards the smooth light by this share of the fit's mean weight
 
 
 #: the per-bit check's fields of a detection's JSON (:meth:`BitEvidence.to_json`), each only
@@ -217,6 +221,33 @@ def disagreement_in(fields: dict[str, Any]) -> str:
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class GridLight:
+    """A light that follows a cast shadow, for asking a word's bits: contrast and brightness
+    fields on a grid of knots over the print (:func:`~deepmorph_detect.light_field.grid_fields`),
+    fitted only where the word's render is flat. Fitted everywhere, such a light takes up the
+    bits' own edges (it made a wrong word on a pink heart show every bit at +1).
+
+    Attributes:
+        fields: ``(h * w, knots)`` the grid's fields.
+        flat: ``(h * w,)`` 1 where the word's render is flat, else 0.
+        knots: how many fields the grid has.
+    """
+
+    fields: np.ndarray
+    flat: np.ndarray
+    knots: int
+
+    @classmethod
+    def of(cls, render: np.ndarray, blur: float, grid: int) -> GridLight:
+        """The grid light for ``render`` (``(C, h, w)``, the word's, unblurred) printed with a
+        blur of ``blur`` px: flat beyond the blur's reach plus :data:`GRID_EDGE_MARGIN` px of
+        its edges."""
+        h, w = render.shape[-2:]
+        flat = far_from_edges(render, GRID_EDGE_MARGIN + math.ceil(2 * blur))
+        return cls(grid_fields(h, w, grid), flat.ravel().astype(np.float64), grid * grid)
+
+
 class MorphSynthesis:
     """Renders a model's morphs with the soft rasterizer and compares them with photos."""
 
@@ -293,7 +324,13 @@ class MorphSynthesis:
         return warp_to_template(pyramid, homography, self.template, self.width).astype(np.float32)
 
     def evidence(
-        self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, in_colour: bool = True, lit: bool = True
+        self,
+        pyramid: ImagePyramid,
+        homography: np.ndarray,
+        code: np.ndarray,
+        in_colour: bool = True,
+        lit: bool = True,
+        light_grid: int = 0,
     ) -> BitEvidence:
         """The photo's evidence on every bit of ``code``; ``homography`` must already be aligned
         to the morph of ``code`` (an alignment to another morph bends towards that one).
@@ -310,19 +347,28 @@ class MorphSynthesis:
         in its reading channel's gray, as :meth:`read` asks. ``lit``: the bits are asked with the
         light of a cast shadow divided out (:meth:`shadows`), and the photo as it is says how much
         the word's morph leaves unexplained (:attr:`BitEvidence.unlit`); false, as :meth:`read`
-        asks, only the photo as it is.
+        asks, only the photo as it is. ``light_grid``: the light's contrast and brightness fields
+        are a ``light_grid x light_grid`` grid of knots
+        (:func:`~deepmorph_detect.light_field.grid_fields`: a cast shadow's darkening), not
+        smooth polynomials; the print's blur is still fitted in the smooth light.
         """
         photo, soft, real, colour = self._asked_in(pyramid, homography, self.variants(code), in_colour)
         code = np.asarray(code, dtype=np.uint8)
         at_blur: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # both passes mostly find the same blur
-        evidence, fit, sigma = self._asked(photo, soft, real, colour, at_blur)
+        evidence, fit, sigma = self._asked(photo, soft, real, colour, at_blur, light_grid)
         if not lit:
             return BitEvidence(code, evidence, fit, sigma)
-        shown, fit, sigma = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, at_blur)
+        shown, fit, sigma = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, at_blur, light_grid)
         return BitEvidence(code, shown, fit, sigma, unlit=evidence)
 
     def shown_on(
-        self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, bits: np.ndarray, in_colour: bool = True
+        self,
+        pyramid: ImagePyramid,
+        homography: np.ndarray,
+        code: np.ndarray,
+        bits: np.ndarray,
+        in_colour: bool = True,
+        light_grid: int = 0,
     ) -> np.ndarray:
         """``(len(bits),)`` what :meth:`evidence` (``lit``) says of the bits ``bits`` of ``code``
         alone, rendering only their variants: a bit's evidence compares the photo with the word's
@@ -333,7 +379,7 @@ class MorphSynthesis:
         code = np.asarray(code, dtype=np.uint8)
         bits = np.asarray(bits, dtype=np.int64)
         photo, soft, real, colour = self._asked_in(pyramid, homography, self._rendered(code, bits), in_colour)
-        shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {})
+        shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {}, light_grid)
         return shown
 
     def _asked_in(
@@ -360,11 +406,13 @@ class MorphSynthesis:
         real: np.ndarray,
         colour: bool,
         at_blur: dict[float, tuple[np.ndarray, np.ndarray]],
+        light_grid: int = 0,
     ) -> tuple[np.ndarray, float, float]:
         """:meth:`evidence` of ``photo`` from the renders :meth:`variants` gives (``soft`` in the
         colours asked, ``colour``), sized as the photo: ``(N_b,)`` evidence, the fit of the word's
         render and the print's blur. ``at_blur`` keeps, per blur, the blurred renders and the
-        evidence of the word's own real render, which do not depend on the photo."""
+        evidence of the word's own real render, which do not depend on the photo (one dict per
+        ``light_grid``). ``light_grid``: the bits are asked in a light of that grid's fields."""
         fields = self._light_fields(photo.shape)
 
         def looks(render: np.ndarray) -> np.ndarray:
@@ -375,11 +423,13 @@ class MorphSynthesis:
 
         # the print's blur: the one whose render looks most like it
         fit, sigma = max((correlation(looks(_blurred(soft[0], s)), photo), s) for s in BLUR_SIGMAS)
+        grid = GridLight.of(soft[0], sigma, light_grid) if light_grid else None
+        asked_in = fields if grid is None else np.concatenate([fields, grid.fields], axis=1)
         if sigma not in at_blur:
             blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
-            at_blur[sigma] = blurred, self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields)
+            at_blur[sigma] = blurred, self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, asked_in, grid)
         blurred, own = at_blur[sigma]
-        said = self._ask(photo, blurred, fields)
+        said = self._ask(photo, blurred, asked_in, grid)
         evidence = said - np.where(own < MIN_OWN_EVIDENCE, own - 1.0, 0.0)
         return evidence.astype(np.float32), float(fit), float(sigma)
 
@@ -412,31 +462,45 @@ class MorphSynthesis:
         return np.einsum("ncyx,c->nyx", renders, np.asarray(self.rasterizer.channel, dtype=renders.dtype))[:, None]
 
     @staticmethod
-    def _light(photo: np.ndarray, render: np.ndarray, fields: np.ndarray) -> np.ndarray:
+    def _light(photo: np.ndarray, render: np.ndarray, fields: np.ndarray, grid: GridLight | None = None) -> np.ndarray:
         """The light on the print as coefficients: for each of the render's ``C`` channels
         (``(C, h * w)``) a contrast field, then one brightness field, each a combination of the
         smooth ``fields`` (``(h * w, k)``), least squares against ``photo``: ``(C + 1, k)``.
 
         One contrast field per colour channel: the photo's gray is a linear mix of the printed
         colours that the capture changed (faded ink, white balance, the camera's tint), so a
-        colour print is fitted as its own mix rather than as one fixed gray."""
+        colour print is fitted as its own mix rather than as one fixed gray.
+
+        ``grid``: ``fields`` end with a grid's (:class:`GridLight`), fitted only where the
+        render is flat, and held towards the smooth fields where a knot sees little of it."""
         design = np.concatenate([fields * channel[:, None] for channel in render] + [fields], axis=1)
-        coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
+        if grid is None:
+            coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
+            return coef.reshape(len(render) + 1, fields.shape[1])
+        weighted = design * grid.flat[:, None]
+        normal = design.T @ weighted
+        on_grid = np.tile(np.arange(fields.shape[1]) >= fields.shape[1] - grid.knots, len(render) + 1)
+        normal[np.diag_indices_from(normal)] += np.where(on_grid, GRID_RIDGE * float(np.diagonal(normal).mean()), 0.0)
+        coef = np.linalg.lstsq(normal, weighted.T @ photo.ravel(), rcond=None)[0]
         return coef.reshape(len(render) + 1, fields.shape[1])
 
-    def _in_light(self, photo: np.ndarray, renders: np.ndarray, fields: np.ndarray) -> np.ndarray:
+    def _in_light(
+        self, photo: np.ndarray, renders: np.ndarray, fields: np.ndarray, grid: GridLight | None = None
+    ) -> np.ndarray:
         """``renders`` (``(n, C, h * w)``) in the light :meth:`_light` fits between the first of
         them and ``photo``: ``(n, h * w)``, what each would look like in the photo."""
-        light = fields @ self._light(photo, renders[0], fields).T
+        light = fields @ self._light(photo, renders[0], fields, grid).T
         return np.einsum("pc,ncp->np", light[:, :-1], renders) + light[:, -1]
 
-    def _ask(self, photo: np.ndarray, blurred: np.ndarray, fields: np.ndarray) -> np.ndarray:
+    def _ask(
+        self, photo: np.ndarray, blurred: np.ndarray, fields: np.ndarray, grid: GridLight | None = None
+    ) -> np.ndarray:
         """``(N_b,)`` evidence of ``photo`` (``(h, w)``) on each bit, from ``blurred``: the
         word's render and its one-bit variants, blurred like the print, ``(N_b + 1, C, h * w)``;
-        ``fields``: the light's smooth basis (:meth:`_light_fields`)."""
+        ``fields``: the light's smooth basis (:meth:`_light_fields`), ending with ``grid``'s."""
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
-        models = self._in_light(photo, blurred, fields)
+        models = self._in_light(photo, blurred, fields, grid)
         residuals = photo.ravel()[None] - models
         changes = models[1:] - models[0]
         # a small misalignment: what a small motion of the word's render explains is evidence

@@ -22,21 +22,28 @@ FACE = Path(__file__).parents[1] / "data" / "fluent-emoji-flat" / "face-without-
 PRINT_PX, OFFSET, PAGE = 192, 64, 320
 
 
-@pytest.fixture(scope="module")
-def face() -> tuple[Template, TemplateLight, np.ndarray, np.ndarray]:
+def printed_face() -> tuple[Template, np.ndarray, np.ndarray, np.ndarray]:
     """A yellow face (one large fill) printed 192 px wide on white paper: its template, its
-    light, the page and the homography (SVG units -> page pixels) it sits at."""
+    render at that width, the page and the homography (SVG units -> page pixels) it sits at."""
     from deepmorph_core.morphable import MorphableDrawing
 
     svg = FACE.read_text()
     viewbox = MorphableDrawing.load(FACE, move=0.5).drawing.viewbox
     _, renderer = template_renderer(svg, viewbox, LEVELS)
     template = Template.from_svg(svg, viewbox, LEVELS, renderer)
+    render = renderer(svg, PRINT_PX, viewbox)
     page = np.ones((PAGE, PAGE), np.float32)
-    page[OFFSET : OFFSET + PRINT_PX, OFFSET : OFFSET + PRINT_PX] = renderer(svg, PRINT_PX, viewbox)
+    page[OFFSET : OFFSET + PRINT_PX, OFFSET : OFFSET + PRINT_PX] = render
     k = PRINT_PX / viewbox[2]
     H = np.array([[k, 0, OFFSET - k * viewbox[0]], [0, k, OFFSET - k * viewbox[1]], [0, 0, 1]])
-    return template, TemplateLight(template, renderer(svg, PRINT_PX, viewbox)), page, H
+    return template, render, page, H
+
+
+@pytest.fixture(scope="module")
+def face() -> tuple[Template, TemplateLight, np.ndarray, np.ndarray]:
+    """The printed face: its template, its light, the page and its homography."""
+    template, render, page, H = printed_face()
+    return template, TemplateLight(template, render), page, H
 
 
 def _shadowed(page: np.ndarray, turn: float) -> np.ndarray:
