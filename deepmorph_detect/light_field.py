@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from deepmorph_detect.icalign import inverse3
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, warp_to_template
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, motion_images, warp_to_template
 
 LIGHT_GRID = 8  # knots across the frame (each way) of the alignment's light fields
 ITERATIONS = 15  # Gauss-Newton updates at most
@@ -67,20 +67,6 @@ def _gram(image: np.ndarray, hy: np.ndarray, hx: np.ndarray) -> np.ndarray:
     pairs_y = (hy[:, :, None] * hy[:, None, :]).reshape(len(hy), k * k)  # (h, (a, c))
     summed = pairs_y.T @ (image @ pairs_x)  # ((a, c), (b, d))
     return summed.reshape(k, k, k, k).transpose(0, 2, 1, 3).reshape(k * k, k * k)
-
-
-def _motion_images(photo: np.ndarray) -> np.ndarray:
-    """``(8, h, w)`` how ``photo`` changes with each parameter of a small homography composed
-    on the template's side, in frame coordinates scaled to [-1, 1]."""
-    h, w = photo.shape
-    gy, gx = np.gradient(photo)
-    gx = gx * (w - 1) / 2.0
-    gy = gy * (h - 1) / 2.0
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    x = 2.0 * x / (w - 1) - 1.0
-    y = 2.0 * y / (h - 1) - 1.0
-    radial = gx * x + gy * y
-    return np.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y])
 
 
 def _smoothed(image: np.ndarray) -> np.ndarray:
@@ -129,7 +115,7 @@ def _aligned(
     n = 8 + 2 * kk
     for _ in range(iterations):
         photo = _smoothed(warp_to_template(pyramid, H, template, width))
-        motion = _motion_images(photo)
+        motion = motion_images(photo)
         # unknowns: 8 motion parameters, then the contrast knots, then the brightness knots;
         # residual = photo + motion . dp - (contrast * t + brightness), weighted
         normal = np.empty((n, n))

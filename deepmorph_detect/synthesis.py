@@ -43,7 +43,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.light_field import grid_fields
-from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
+from deepmorph_detect.refine import ImagePyramid, Template, correlation, motion_images, refine_at, warp_to_template
 from deepmorph_detect.template_light import DARKEST_REFLECTANCE, far_from_edges, smoothed_light
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (wider reads fewer small prints, slower)
@@ -229,7 +229,8 @@ class GridLight:
     bits' own edges (it made a wrong word on a pink heart show every bit at +1).
 
     Attributes:
-        fields: ``(h * w, knots)`` the grid's fields.
+        fields: ``(h * w, k + knots)`` the fields the light is fitted on: the smooth ones, then
+            the grid's.
         flat: ``(h * w,)`` 1 where the word's render is flat, else 0.
         knots: how many fields the grid has.
     """
@@ -239,13 +240,14 @@ class GridLight:
     knots: int
 
     @classmethod
-    def of(cls, render: np.ndarray, blur: float, grid: int) -> GridLight:
+    def of(cls, smooth: np.ndarray, render: np.ndarray, blur: float, grid: int) -> GridLight:
         """The grid light for ``render`` (``(C, h, w)``, the word's, unblurred) printed with a
-        blur of ``blur`` px: flat beyond the blur's reach plus :data:`GRID_EDGE_MARGIN` px of
-        its edges."""
+        blur of ``blur`` px, on top of the ``smooth`` fields (``(h * w, k)``): flat beyond the
+        blur's reach plus :data:`GRID_EDGE_MARGIN` px of its edges."""
         h, w = render.shape[-2:]
         flat = far_from_edges(render, GRID_EDGE_MARGIN + math.ceil(2 * blur))
-        return cls(grid_fields(h, w, grid), flat.ravel().astype(np.float64), grid * grid)
+        fields = np.concatenate([smooth, grid_fields(h, w, grid)], axis=1)
+        return cls(fields, flat.ravel().astype(np.float64), grid * grid)
 
 
 class MorphSynthesis:
@@ -308,15 +310,7 @@ class MorphSynthesis:
     def _motion_basis(self, model: np.ndarray) -> np.ndarray:
         """``(h * w, 8)`` orthonormal basis of the changes that a small motion (the eight
         parameters of a homography, linearised) makes to ``model``."""
-        h, w = model.shape
-        gy, gx = np.gradient(model.astype(np.float64))
-        y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-        x = 2 * x / max(w - 1, 1) - 1
-        y = 2 * y / max(h - 1, 1) - 1
-        radial = x * gx + y * gy
-        motions = [gx, gy, x * gx, y * gx, x * gy, y * gy, x * radial, y * radial]
-        columns = np.stack(motions).reshape(len(motions), -1).T
-        basis, _ = np.linalg.qr(columns)
+        basis, _ = np.linalg.qr(motion_images(model).reshape(8, -1).T)
         return basis
 
     def rectified(self, pyramid: ImagePyramid, homography: np.ndarray) -> np.ndarray:
@@ -354,7 +348,8 @@ class MorphSynthesis:
         """
         photo, soft, real, colour = self._asked_in(pyramid, homography, self.variants(code), in_colour)
         code = np.asarray(code, dtype=np.uint8)
-        at_blur: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # both passes mostly find the same blur
+        # both passes mostly find the same blur
+        at_blur: dict[float, tuple[np.ndarray, np.ndarray, GridLight | None]] = {}
         evidence, fit, sigma = self._asked(photo, soft, real, colour, at_blur, light_grid)
         if not lit:
             return BitEvidence(code, evidence, fit, sigma)
@@ -405,14 +400,15 @@ class MorphSynthesis:
         soft: np.ndarray,
         real: np.ndarray,
         colour: bool,
-        at_blur: dict[float, tuple[np.ndarray, np.ndarray]],
+        at_blur: dict[float, tuple[np.ndarray, np.ndarray, GridLight | None]],
         light_grid: int = 0,
     ) -> tuple[np.ndarray, float, float]:
         """:meth:`evidence` of ``photo`` from the renders :meth:`variants` gives (``soft`` in the
         colours asked, ``colour``), sized as the photo: ``(N_b,)`` evidence, the fit of the word's
         render and the print's blur. ``at_blur`` keeps, per blur, the blurred renders and the
-        evidence of the word's own real render, which do not depend on the photo (one dict per
-        ``light_grid``). ``light_grid``: the bits are asked in a light of that grid's fields."""
+        evidence of the word's own real render and the grid light, none of which depend on the
+        photo (one dict per ``light_grid``). ``light_grid``: the bits are asked in a light of
+        that grid's fields."""
         fields = self._light_fields(photo.shape)
 
         def looks(render: np.ndarray) -> np.ndarray:
@@ -423,13 +419,13 @@ class MorphSynthesis:
 
         # the print's blur: the one whose render looks most like it
         fit, sigma = max((correlation(looks(_blurred(soft[0], s)), photo), s) for s in BLUR_SIGMAS)
-        grid = GridLight.of(soft[0], sigma, light_grid) if light_grid else None
-        asked_in = fields if grid is None else np.concatenate([fields, grid.fields], axis=1)
         if sigma not in at_blur:
             blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
-            at_blur[sigma] = blurred, self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, asked_in, grid)
-        blurred, own = at_blur[sigma]
-        said = self._ask(photo, blurred, asked_in, grid)
+            grid = GridLight.of(fields, soft[0], sigma, light_grid) if light_grid else None
+            own = self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields, grid)
+            at_blur[sigma] = blurred, own, grid
+        blurred, own, grid = at_blur[sigma]
+        said = self._ask(photo, blurred, fields, grid)
         evidence = said - np.where(own < MIN_OWN_EVIDENCE, own - 1.0, 0.0)
         return evidence.astype(np.float32), float(fit), float(sigma)
 
@@ -471,8 +467,9 @@ class MorphSynthesis:
         colours that the capture changed (faded ink, white balance, the camera's tint), so a
         colour print is fitted as its own mix rather than as one fixed gray.
 
-        ``grid``: ``fields`` end with a grid's (:class:`GridLight`), fitted only where the
-        render is flat, and held towards the smooth fields where a knot sees little of it."""
+        ``grid``: ``fields`` are its fields (:class:`GridLight`: the smooth ones, then a grid's),
+        fitted only where the render is flat, and held towards the smooth fields where a knot
+        sees little of it."""
         design = np.concatenate([fields * channel[:, None] for channel in render] + [fields], axis=1)
         if grid is None:
             coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
@@ -497,10 +494,11 @@ class MorphSynthesis:
     ) -> np.ndarray:
         """``(N_b,)`` evidence of ``photo`` (``(h, w)``) on each bit, from ``blurred``: the
         word's render and its one-bit variants, blurred like the print, ``(N_b + 1, C, h * w)``;
-        ``fields``: the light's smooth basis (:meth:`_light_fields`), ending with ``grid``'s."""
+        ``fields``: the light's smooth basis (:meth:`_light_fields`); ``grid``: a grid light on
+        top of it (:class:`GridLight`)."""
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
-        models = self._in_light(photo, blurred, fields, grid)
+        models = self._in_light(photo, blurred, fields if grid is None else grid.fields, grid)
         residuals = photo.ravel()[None] - models
         changes = models[1:] - models[0]
         # a small misalignment: what a small motion of the word's render explains is evidence
