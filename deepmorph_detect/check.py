@@ -218,6 +218,7 @@ class PayloadChecker:
         blind: bool = False,
         whole_frame: bool = False,
         relit_from: float | None = None,
+        in_shadow: bool = False,
     ) -> PayloadCheck:
         """The morph check of a decoded payload (one frame's, or one fused over frames): a
         payload that passed the CRC keeps its ``ok`` only when its morph fits the photo better
@@ -258,18 +259,25 @@ class PayloadChecker:
         A word withdrawn so is asked again in a cast shadow's light, always in full, bit by bit:
         its morph fits aligned in a grid of light (:func:`~deepmorph_detect.light_field.align_in_light_field`;
         ECC's one light bends them to a shadow's edge) and its bits asked in a
-        :data:`SHADOW_GRID` grid of light; it passes where that verdict passes.
+        :data:`SHADOW_GRID` grid of light; it passes where that verdict passes. ``in_shadow``:
+        ``homography`` is an alignment in a grid of light
+        (:func:`~deepmorph_detect.light_field.realign_in_light_field`), and the word is asked
+        only so: from there ECC's morph fit slides back to where a shadow's edge bent it and
+        compares with an alignment ECC did not make (a crystal oscillator's wrong word passed
+        in hard scenes that way).
         """
         if not result.ok:
             return PayloadCheck(result, None, "not run")
         pyramid = self.pyramid(image)
-        verdict = self._verdict(pyramid, homography, result, unmorphed, bitwise, blind, whole_frame, relit_from)
-        if verdict.status == "passed":
-            return verdict
-        in_shadow = self._verdict(
+        verdict = None
+        if not in_shadow:
+            verdict = self._verdict(pyramid, homography, result, unmorphed, bitwise, blind, whole_frame, relit_from)
+            if verdict.status == "passed":
+                return verdict
+        shadowed = self._verdict(
             pyramid, homography, result, None, bitwise is not False, blind, whole_frame, relit_from, SHADOW_GRID
         )
-        return in_shadow if in_shadow.status == "passed" else verdict
+        return shadowed if verdict is None or shadowed.status == "passed" else verdict
 
     def _verdict(  # noqa: PLR0913
         self,

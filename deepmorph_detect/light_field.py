@@ -97,6 +97,22 @@ def align_in_light_field(
     return Alignment(H, rho, width)
 
 
+#: (template width, light grid) of :func:`realign_in_light_field`'s steps, coarse to fine: from a
+#: first alignment bent by a shadow's edge, a fine light at once takes up the misalignment
+REALIGN_STEPS = ((48, 3), (128, LIGHT_GRID))
+
+
+def realign_in_light_field(pyramid: ImagePyramid, alignment: Alignment, template: Template) -> Alignment | None:
+    """``alignment`` (the unmorphed drawing's) aligned again in a grid of light, coarse to fine
+    (:data:`REALIGN_STEPS`); ``None`` when a solve breaks down."""
+    for width, grid in REALIGN_STEPS:
+        realigned = align_in_light_field(pyramid, alignment.homography, template, width, grid)
+        if realigned is None:
+            return None
+        alignment = realigned
+    return alignment
+
+
 def _aligned(
     pyramid: ImagePyramid, homography: np.ndarray, template: Template, width: int, grid: int, iterations: int
 ) -> np.ndarray | None:
@@ -159,4 +175,4 @@ def _aligned(
     return H
 
 
-__all__ = ["LIGHT_GRID", "align_in_light_field", "grid_fields", "hats"]
+__all__ = ["LIGHT_GRID", "REALIGN_STEPS", "align_in_light_field", "grid_fields", "hats", "realign_in_light_field"]

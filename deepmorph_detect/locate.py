@@ -40,6 +40,7 @@ from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickn
 from deepmorph_detect.camera import Camera
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker, is_weak
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
+from deepmorph_detect.light_field import realign_in_light_field
 from deepmorph_detect.pose import Placer
 from deepmorph_detect.propose import (
     WHOLE_FRAME,
@@ -332,6 +333,13 @@ class Locator:
         in the photo so lit; a reading there never skips the per-bit check (the light came from
         the drawing itself, so any morph near it fits that photo well), which a weak one (read
         with corrections, or not confident) is asked in full.
+        A print still not read is aligned again in a grid of light
+        (:func:`~deepmorph_detect.light_field.realign_in_light_field`: a cast shadow's edge bends
+        ECC's alignment, which fits one light for the whole print) and all of the above is done
+        there, each reading checked in the shadow's light alone and bit by bit
+        (``in_shadow`` of :meth:`PayloadChecker.check <deepmorph_detect.check.PayloadChecker.check>`):
+        ECC's morph fit, started there, slides back to the bent pose, where a wrong word can
+        pass the smooth light's rules.
         """
         located = self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind)
         if located.result.ok:
@@ -345,9 +353,14 @@ class Locator:
         if alignment.correlation < BLIND_READ_CORRELATION:
             return located
         lit = self.light.align(gray, alignment.homography, self.aligner.accepts)
-        if lit is None:
+        if lit is not None:
+            again = self._decode_at(gray, lit[0], lit[1], score, cam, source, soft, blind, alignment.correlation)
+            if again.result.ok:
+                return again
+        in_field = realign_in_light_field(pyramid, alignment, self.template)
+        if in_field is None:
             return located
-        again = self._decode_at(gray, lit[0], lit[1], score, cam, source, soft, blind, alignment.correlation)
+        again = self._decode_at(gray, pyramid, in_field, score, cam, source, soft, blind, in_shadow=True)
         return again if again.result.ok else located
 
     def _decode_at(
@@ -361,16 +374,20 @@ class Locator:
         soft: bool,
         blind: bool,
         relit_from: float | None = None,
+        in_shadow: bool = False,
     ) -> Located:
         """:meth:`decode_drawing` in one photo (the photo itself, or the photo lit by the
         template's light, ``relit_from`` the alignment in the photo itself): the readings at the
-        alignment, at the symmetric turns and at the other turns."""
-        H, checked, probs = self._read_and_check(gray, pyramid, alignment, source, soft, blind, relit_from)
+        alignment, at the symmetric turns and at the other turns. ``in_shadow``: the alignment is
+        in a grid of light, and every reading is checked in the shadow's light alone."""
+        H, checked, probs = self._read_and_check(
+            gray, pyramid, alignment, source, soft, blind, relit_from, in_shadow=in_shadow
+        )
         for turn in self.template.symmetric_turns:
             if _settled(checked.result):
                 break
             turned = replace(alignment, homography=alignment.homography @ turn)
-            other = self._read_and_check(gray, pyramid, turned, source, soft, blind, relit_from)
+            other = self._read_and_check(gray, pyramid, turned, source, soft, blind, relit_from, in_shadow=in_shadow)
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
         if not _settled(checked.result) and alignment.correlation >= UNREAD_BLIND_CORRELATION:
@@ -380,7 +397,7 @@ class Locator:
                 # a weak reading gives way only to a stronger one: only those are checked there
                 than = checked.result if checked.result.ok else None
                 other = self._read_and_check(
-                    gray, pyramid, realigned, source, soft, blind, relit_from, stronger_than=than
+                    gray, pyramid, realigned, source, soft, blind, relit_from, stronger_than=than, in_shadow=in_shadow
                 )
                 if other[1].result.ok:
                     (H, checked, probs), alignment = other, realigned
@@ -396,13 +413,15 @@ class Locator:
         blind: bool,
         relit_from: float | None = None,
         stronger_than: DecodeResult | None = None,
+        in_shadow: bool = False,
     ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
         """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
         place the drawing by (the passed payload's morph fit, else the alignment's), the
         verdict, and the code bits' probabilities. ``relit_from``: in a photo lit by the
         template's light, the alignment in the photo itself (:meth:`PayloadChecker.check
         <deepmorph_detect.check.PayloadChecker.check>`). ``stronger_than``: only readings
-        stronger than this one are checked (and can pass); the others count as not read."""
+        stronger than this one are checked (and can pass); the others count as not read.
+        ``in_shadow``: checked in the shadow's light alone (:meth:`_decode_at`)."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
         whole = source == WHOLE_FRAME
@@ -421,7 +440,15 @@ class Locator:
             if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
                 continue
             attempt = self.checker.check(
-                pyramid, H, reading.result, alignment, bitwise, blind, whole_frame=whole, relit_from=relit_from
+                pyramid,
+                H,
+                reading.result,
+                alignment,
+                bitwise,
+                blind,
+                whole_frame=whole,
+                relit_from=relit_from,
+                in_shadow=in_shadow,
             )
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities

@@ -18,7 +18,10 @@ import deepmorph_primitives.plugin as builtin_plugin
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import Registry, load_registry, set_default_registry
+from deepmorph_detect.camera import Camera
 from deepmorph_detect.locate import Locator
+from deepmorph_detect.refine import Alignment, ImagePyramid, refine
+from deepmorph_detect.scenes import Placement, SceneMaker
 
 # Property tests are deterministic (same examples every run) so that CI cannot flake.
 settings.register_profile("deepmorph", derandomize=True, deadline=None)
@@ -109,3 +112,16 @@ def model() -> DeepMorphModel:
 def locator(model: DeepMorphModel) -> Locator:
     """A locator for the bundled ghost."""
     return Locator(model)
+
+
+def easy_print_aligned(
+    model: DeepMorphModel, locator: Locator
+) -> tuple[Placement, np.ndarray, Camera, ImagePyramid, Alignment]:
+    """One print in an easy scene (seed 11): its placement, the photo as ``locator`` frames it
+    (gray, camera, pyramid), and its alignment refined from the true outline."""
+    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
+    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, cam, pyramid = locator.frame(scene.image, None)
+    right = refine(pyramid, placed.homography, locator.template)
+    assert right is not None
+    return placed, gray, cam, pyramid, right

@@ -45,7 +45,7 @@ from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
 from deepmorph_detect.results import Located, Pose
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
-from tests.conftest import shaken_clip
+from tests.conftest import easy_print_aligned, shaken_clip
 
 app = application()  # the command line's own commands and every installed plugin's
 
@@ -680,12 +680,13 @@ def test_a_morph_fit_that_loses_at_once_is_checked_again_longer(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A short ECC solve on the decoded morph can lose to the unmorphed drawing by noise; the
-    longer refit of both is the verdict. When it loses too, ``ok`` is withdrawn."""
+    longer refit of both is the verdict. When it loses too, and in a grid of light as well,
+    ``ok`` is withdrawn."""
     import deepmorph_detect.check as check_module
 
     scene = SceneMaker(model, severity="easy", seed=12).make(drawings=1)
     truth = scene.placements[0]
-    real_refine_at = check_module.refine_at
+    real_refine_at, real_in_light = check_module.refine_at, check_module.align_in_light_field
 
     def losing(pyramid, homography, template, width, iterations=5, *, always=False):
         found = real_refine_at(pyramid, homography, template, width, iterations)
@@ -700,6 +701,16 @@ def test_a_morph_fit_that_loses_at_once_is_checked_again_longer(
     assert np.array_equal(det.result.payload, truth.payload)
 
     monkeypatch.setattr(check_module, "refine_at", lambda *a, **k: losing(*a, **k, always=True))
+    (det,) = [d for d in locator.locate(scene.image) if _matches(d, truth)]
+    assert det.result.ok  # the morph wins in a grid of light
+
+    def losing_in_light(pyramid, homography, template, width):
+        found = real_in_light(pyramid, homography, template, width)
+        if found is not None and template is not locator.template:
+            return replace(found, correlation=found.correlation - 0.5)
+        return found
+
+    monkeypatch.setattr(check_module, "align_in_light_field", losing_in_light)
     (det,) = [d for d in locator.locate(scene.image) if _matches(d, truth)]
     assert det.morph_check == "failed" and not det.result.ok
 
@@ -909,24 +920,11 @@ def test_the_other_turns_of_a_frame_are_those_that_do_not_map_the_drawing_onto_i
     np.testing.assert_allclose(battery.other_turns[0][:2, :2], -np.eye(2), atol=1e-12)  # the half turn first
 
 
-def _easy_print_aligned(
-    model: DeepMorphModel, locator: Locator
-) -> tuple[Placement, np.ndarray, Camera, ImagePyramid, Alignment]:
-    """One print in an easy scene (seed 11): its placement, the photo as ``locator`` frames it
-    (gray, camera, pyramid), and its alignment refined from the true outline."""
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None
-    return placed, gray, cam, pyramid, right
-
-
 def test_a_print_aligned_at_the_wrong_turn_is_aligned_again_and_read(model: DeepMorphModel, locator: Locator) -> None:
     """The ghost aligned half turned about its ink (as a drawing that nearly looks the same turned
     can be) reads nothing there; decoding aligns it again from its other turns, where it
     correlates better, and reads its payload, with its true outline."""
-    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     # aligned at the wrong turn, it correlates less than at the right one
     wrong = replace(
         right, homography=right.homography @ locator.template.other_turns[0], correlation=right.correlation - 0.05
@@ -944,7 +942,7 @@ def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_an
     """Read at the wrong turn, a symmetric drawing can land on another code word with
     corrections. Such a weak reading is compared with the readings at the other turns, and the
     one with fewer corrections wins; a strong first reading is not read again."""
-    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     symmetric = Locator(model)
     symmetric.template.__dict__["symmetric_turns"] = (_half_turn(locator.viewbox),)
     H, strong, probs = symmetric._read_and_check(gray, pyramid, right, "detector", True, False)
@@ -957,7 +955,7 @@ def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_an
     ):
         calls = []
 
-        def scripted(*args: object, first: PayloadCheck = first, calls: list[int] = calls) -> tuple:
+        def scripted(*args: object, first: PayloadCheck = first, calls: list[int] = calls, **kwargs: object) -> tuple:
             calls.append(1)
             return (H, first if len(calls) == 1 else strong, probs)
 
@@ -974,7 +972,7 @@ def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns
     read another word there, with corrections. A weak reading is therefore compared with the
     reading at the best other turn aligning at most ``TURN_TIE_MARGIN`` worse: only a stronger
     one is asked for there, and wins. A strong reading is not read again."""
-    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     assert right.correlation >= locate_module.UNREAD_BLIND_CORRELATION
     turned = replace(right, homography=right.homography @ locator.template.other_turns[0])
     H, strong, probs = locator._read_and_check(gray, pyramid, right, "detector", True, False)
@@ -1010,7 +1008,7 @@ def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns
 def test_a_reading_asked_to_beat_another_passes_only_when_stronger(model: DeepMorphModel, locator: Locator) -> None:
     """Read at a print's alignment and asked to beat a reading with corrections, the print's own
     reading (none) passes; asked to beat itself, nothing passes, and no payload is vouched for."""
-    placed, gray, _, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, _, pyramid, right = easy_print_aligned(model, locator)
     _, strong, _ = locator._read_and_check(gray, pyramid, right, "detector", True, False)
     assert strong.result.ok and strong.result.corrected_bits == 0
     weak = replace(strong.result, corrected_bits=2)
@@ -1028,7 +1026,7 @@ def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     """A print of a drawing that looks the same half turned aligns as well at either turn. Read
     at the wrong one it gives no payload; read again at the turn the drawing maps onto itself by
     (the ghost is given one here), its payload and its true outline come back."""
-    placed, gray, cam, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     assert right.correlation > 0.7
     half = _half_turn(locator.viewbox)
     wrong = replace(right, homography=right.homography @ half)
@@ -1093,7 +1091,7 @@ def test_a_blind_proposal_aligned_poorly_gets_the_first_looks_only(
     synthesis. A drawing's own detector's, or a blind one aligned above the bar, gets them all."""
     from deepmorph_detect.locate import BLIND_READ_CORRELATION
 
-    placed, gray, _, pyramid, right = _easy_print_aligned(model, locator)
+    placed, gray, _, pyramid, right = easy_print_aligned(model, locator)
     # at the wrong turn the first looks read nothing, so every later look would be tried
     wrong = replace(right, homography=right.homography @ _half_turn(locator.viewbox))
     later: list[str] = []

@@ -19,8 +19,8 @@ from deepmorph_detect.align import BENT_OUTLINE, MIN_CORRELATION, WEAK_ALIGNMENT
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
-from deepmorph_detect.refine import LEVELS, ImagePyramid, Template, nearest_affine, refine, refine_affine
-from deepmorph_detect.scenes import SceneMaker
+from deepmorph_detect.refine import LEVELS, ImagePyramid, Template, nearest_affine, refine_affine
+from tests.conftest import easy_print_aligned
 
 DATA = Path(__file__).parents[1] / "data"
 CRYSTAL = DATA / "flat-color-icons" / "crystal-oscillator.svg"
@@ -130,18 +130,15 @@ def test_a_print_aligned_and_not_read_is_read_again_as_a_flat_sheet_then_in_its_
     either, aligned again in its template's light from the flat sheet's outline, not the bent
     one."""
     locator = Locator(model)
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
-    assert right is not None
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     bent = replace(right, homography=right.homography @ np.diag([1.1, 1.0, 1.0]))
     read_at: list[np.ndarray] = []
     real = locator._decode_at
 
     def decode_at(gray, pyramid, alignment, *args, **kwargs):
         located = real(gray, pyramid, alignment, *args, **kwargs)
-        read_at.append(alignment.homography)
+        if not kwargs.get("in_shadow"):  # the grid of light's step comes last (test_light_field.py)
+            read_at.append(alignment.homography)
         if alignment is bent or not sheet_reads:
             located.result = replace(located.result, ok=False)
         return located

@@ -13,8 +13,10 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.check import SHADOW_GRID
-from deepmorph_detect.light_field import align_in_light_field, grid_fields, hats
+from deepmorph_detect.light_field import align_in_light_field, grid_fields, hats, realign_in_light_field
+from deepmorph_detect.locate import Locator
 from deepmorph_detect.refine import ImagePyramid, Template, refine_at
+from tests.conftest import easy_print_aligned
 from tests.detect.test_synthesis import (  # the face model's fixtures, shared
     _face_synthesis,
     _near_payloads,
@@ -63,6 +65,24 @@ def test_a_print_under_a_cast_shadow_stays_aligned_in_a_grid_of_light(face_print
         assert np.abs(project(aligned.homography, corners) - truth).max() < 1.0
         assert 0.0 < aligned.correlation < 1.0
     assert max(ecc_off) > 10
+
+
+@pytest.mark.parametrize("turn", [0.4, 1.9])
+def test_a_print_ecc_bent_to_a_shadows_edge_is_aligned_again_in_a_grid_of_light(face_print, turn: float) -> None:
+    """From where ECC ended, bent 11-45 px off the print by the shadow's edge, the chain's
+    realignment comes back within a pixel of it."""
+    template, page, H = face_print
+    pyramid = ImagePyramid(_shadowed(page, turn))
+    corners = viewbox_corners(template.viewbox)
+    truth = project(H, corners)
+    for shift in (3.0, 6.0):
+        start = H.copy()
+        start[:2, 2] += (shift, -shift)
+        bent = refine_at(pyramid, start, template, 128, iterations=20)
+        assert bent is not None and np.abs(project(bent.homography, corners) - truth).max() > 10
+        again = realign_in_light_field(pyramid, bent, template)
+        assert again is not None and again.width == 128
+        assert np.abs(project(again.homography, corners) - truth).max() < 1.0
 
 
 def test_asked_in_a_grid_of_light_the_printed_word_agrees_and_near_words_do_not(
@@ -118,7 +138,6 @@ def test_a_right_word_under_a_cast_shadow_passes_the_check_in_its_light_and_near
     light (the shadow's edge bends its morph fit); asked again in the shadow's grid of light,
     it passes, as the other three do. No word one payload bit away passes, asked either way."""
     from deepmorph_core.codec import DecodeResult
-    from deepmorph_detect.locate import Locator
 
     checker = Locator(face).checker
     rng = np.random.default_rng(1)
@@ -133,3 +152,47 @@ def test_a_right_word_under_a_cast_shadow_passes_the_check_in_its_light_and_near
         for near in _near_payloads(payload)[k : k + 3]:
             assert not checker.check(pyramid, H, replace(read, payload=near)).result.ok
     assert smooth_failed >= 1
+
+
+def test_an_unread_print_is_aligned_again_in_a_grid_of_light_and_checked_only_there(
+    model: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chain's last step: a print aligned well, read neither in the photo nor in its
+    template's light, is aligned again in a grid of light and read there. A reading there is
+    checked in the shadow's light alone, and in full even when confident (ECC's morph fit,
+    started there, slides back to the bent pose, and would compare with an alignment that ECC
+    did not make); where its bits are contradicted there it is not read."""
+    from deepmorph_detect.synthesis import BitEvidence
+
+    locator = Locator(model)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
+    real_decode, real_verdict = locator._decode_at, locator.checker._verdict
+    steps: list[bool] = []
+    grids: list[tuple[bool, int]] = []
+
+    def decode_at(*args, in_shadow: bool = False, **kwargs):
+        steps.append(in_shadow)
+        located = real_decode(*args, in_shadow=in_shadow, **kwargs)
+        if not in_shadow:  # as if neither the photo nor its template's light had read it
+            located.result = replace(located.result, ok=False)
+        return located
+
+    def verdict(pyramid, H, result, unmorphed, bitwise, *args):
+        grids.append((bitwise, args[3] if len(args) == 4 else 0))
+        return real_verdict(pyramid, H, result, unmorphed, bitwise, *args)
+
+    monkeypatch.setattr(locator, "_decode_at", decode_at)
+    monkeypatch.setattr(locator.checker, "_verdict", verdict)
+    monkeypatch.setattr(locator.aligner, "as_flat_sheet", lambda pyramid, alignment: None)
+    read = locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True)
+    assert steps[-1] is True and read.result.ok and np.array_equal(read.result.payload, placed.payload)
+    assert grids[-1] == (True, SHADOW_GRID)  # asked bit by bit, in the shadow's grid, and only so
+    assert np.abs(read.corners - placed.corners).max() < 2
+    evidence = locator.checker.synthesis.evidence
+
+    def contradicted(*args: object) -> BitEvidence:
+        real = evidence(*args)
+        return BitEvidence(real.code, -real.evidence, real.fit, real.blur_px)
+
+    monkeypatch.setattr(locator.checker.synthesis, "evidence", contradicted)
+    assert not locator.decode_drawing(gray, pyramid, right, 1.0, cam, "detector", True).result.ok

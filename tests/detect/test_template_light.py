@@ -14,9 +14,9 @@ from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.fastrender import template_renderer
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
 from deepmorph_detect.refine import LEVELS, ImagePyramid, Template, refine
-from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.synthesis import BitEvidence
 from deepmorph_detect.template_light import EDGE_MARGINS, TemplateLight
+from tests.conftest import easy_print_aligned
 
 FACE = Path(__file__).parents[1] / "data" / "fluent-emoji-flat" / "face-without-mouth.svg"
 PRINT_PX, OFFSET, PAGE = 192, 64, 320
@@ -106,10 +106,7 @@ def test_a_drawing_aligned_well_and_not_read_is_read_again_in_its_light(
     from dataclasses import replace
 
     locator = Locator(model)
-    scene = SceneMaker(model, severity="easy", seed=11).make(drawings=1, distractors=0, aruco=False)
-    (placed,) = [p for p in scene.placements if p.kind == "drawing"]
-    gray, cam, pyramid = locator.frame(scene.image, None)
-    right = refine(pyramid, placed.homography, locator.template)
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     assert right is not None and right.correlation > BLIND_READ_CORRELATION
     asked: list[float] = []
     real = locator.light.align
