@@ -12,8 +12,9 @@ cell follows (a sharp penumbra) counts little.
 OpenCV's ``findTransformECC`` fits one contrast and brightness, and kornia's registration
 (gradient descent on a photometric loss) none, which is why this solver is our own. Its normal
 equations use the grid's separable structure (each knot's field is a hat in x times a hat in y):
-a 128-px alignment takes about 50 ms on one thread, ECC's about 1 ms, so it runs only for a word
-the check has withdrawn (``docs/detection.md``).
+a 128-px alignment takes about 50 ms on one thread, ECC's about 1 ms, so it runs only where ECC's
+has failed: for a word the check has withdrawn, and for a print aligned well and not read
+(:func:`realign_in_light_field`; ``docs/detection.md``).
 """
 
 from __future__ import annotations

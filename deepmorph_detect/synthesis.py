@@ -492,12 +492,14 @@ class MorphSynthesis:
         them and ``photo``: ``(n, h * w)``, what each would look like in the photo. ``grid``:
         also in its shade (:meth:`GridLight.shade`), the smooth light fitted to the photo with
         the shade divided out, in turn, :data:`SHADE_ROUNDS` times."""
-        shade = np.ones(photo.size)
-        for _ in range(SHADE_ROUNDS if grid is not None else 1):
+        light = fields @ self._light(photo, renders[0], fields).T
+        if grid is None:
+            return np.einsum("pc,ncp->np", light[:, :-1], renders) + light[:, -1]
+        asked = photo.ravel().astype(np.float64)
+        shade = grid.shade(asked, np.einsum("pc,cp->p", light[:, :-1], renders[0]) + light[:, -1])
+        for _ in range(SHADE_ROUNDS - 1):
             light = fields @ self._light(photo / shade.reshape(photo.shape), renders[0], fields).T
-            if grid is not None:
-                lit = np.einsum("pc,cp->p", light[:, :-1], renders[0]) + light[:, -1]
-                shade = grid.shade(photo.ravel().astype(np.float64), lit)
+            shade = grid.shade(asked, np.einsum("pc,cp->p", light[:, :-1], renders[0]) + light[:, -1])
         return shade[None] * (np.einsum("pc,ncp->np", light[:, :-1], renders) + light[:, -1])
 
     def _ask(
