@@ -37,7 +37,7 @@ from deepmorph_core.photo import to_gray
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Candidate, Detector
 from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
-from deepmorph_detect.camera import Camera
+from deepmorph_detect.camera import Camera, project
 from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker, is_weak
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.light_field import realign_in_light_field
@@ -51,7 +51,7 @@ from deepmorph_detect.propose import (
 )
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
-from deepmorph_detect.results import Located
+from deepmorph_detect.results import Located, measure_width
 from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
 
@@ -74,6 +74,12 @@ TURN_TIE_MARGIN = 0.02
 #: unread alignments (0.63-0.89) of patches of other drawings' ink 2-34 % of the image wide, and
 #: of one frame 8.6 times as wide; 64-px close-ups of the ghost too small to read fill 55-66 %
 FILLS_FRAME = 0.5
+#: ... and where the photo shows it whole (:meth:`Locator.shown_whole`): its ink in the image, at
+#: most this share of the ink's width out, and its outline one a flat print makes. Colour drawings
+#: framed from the whole image of scenes without any print were reported at 0.80-0.86 with their
+#: ink running off the image or their outline 0.68 of its width from any a flat print makes. Of
+#: nine unread reports in 400 close-ups of one, three stay (0.012-0.022 from a flat print's outline)
+INK_OUTSIDE = 0.1
 #: A blind proposer's drawing (the universal detector's) aligned below this is read by the first
 #: looks only: on 360 scenes of three colour models every print read had aligned at 0.81 or better,
 #: while the later looks at other drawings aligned at 0.55-0.7 took a third of the reading's time.
@@ -259,34 +265,51 @@ class Locator:
             if refused:  # trained for prints at least print_px wide: a narrower one is too small, never a payload
                 read = located.result
                 located.result = replace(read, payload=np.zeros_like(read.payload), ok=False, corrected_bits=-1)
-            if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[1]):
+            if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[:2]):
                 results.append(located)
         return results
 
-    def reports_unread(self, located: Located, candidate: Candidate, image_width: int) -> bool:
+    def reports_unread(self, located: Located, candidate: Candidate, image_size: tuple[int, int]) -> bool:
         """Whether a drawing whose payload is not read is reported: with no payload to vouch for
         it, only its alignment does.
 
         * A blind proposer's (``Candidate.blind``, the universal detector): never. It proposes
           every drawing, and other ones align to complex drawings at 0.80-0.89.
         * The whole image's, framed by its ink (which does not know the drawing): only where the
-          print's frame is :data:`FILLS_FRAME` to ``1 / FILLS_FRAME`` of the image's width, what
-          that framing is for (a scan, a print filling the frame), and aligns at
+          print's frame is :data:`FILLS_FRAME` to ``1 / FILLS_FRAME`` of the image's width and
+          the photo shows it whole (:meth:`shown_whole`), what that framing is for (a scan, a
+          print filling the frame), and aligns at
           :data:`UNREAD_BLIND_CORRELATION` or better, or :data:`UNREAD_MARGIN` above
           ``min_correlation`` when too small to read (a tiny scan: the answer the user needs is
           its size).
         * A detector's that knows the drawing: :data:`UNREAD_MARGIN` above ``min_correlation``.
+
+        ``image_size`` is the photo's ``(height, width)``.
         """
         if candidate.blind:
             return False
         bar = self.min_correlation + UNREAD_MARGIN
         if candidate.homography is not None:
+            image_width = image_size[1]
             width = located.width_px
             if width is None or not FILLS_FRAME * image_width <= width <= image_width / FILLS_FRAME:
+                return False
+            if located.homography is None or not self.shown_whole(located.homography, image_size):
                 return False
             if not located.too_small:
                 bar = UNREAD_BLIND_CORRELATION
         return located.correlation >= bar
+
+    def shown_whole(self, homography: np.ndarray, image_size: tuple[int, int]) -> bool:
+        """Whether ``homography`` puts the drawing in the photo of ``image_size`` ``(height,
+        width)`` as a print the photo shows whole: its ink inside the photo, at most
+        :data:`INK_OUTSIDE` of its width out, and its outline one a flat print makes
+        (:meth:`~deepmorph_detect.align.Aligner.bent`)."""
+        ink = project(homography, self.ink.box)
+        slack = INK_OUTSIDE * measure_width(ink)
+        height, width = image_size
+        inside = bool((ink >= -slack).all() and (ink <= np.array([width, height]) + slack).all())
+        return inside and not self.aligner.bent(Alignment(homography, 0.0, 0), image_size)
 
     def decode_drawing(
         self,
@@ -499,6 +522,7 @@ __all__ = [
     "UNREAD_BLIND_CORRELATION",
     "TURN_TIE_MARGIN",
     "FILLS_FRAME",
+    "INK_OUTSIDE",
     "BLIND_READ_CORRELATION",
     "Locator",
     "detector_for",

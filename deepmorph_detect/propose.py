@@ -45,17 +45,21 @@ class InkFrame:
         centre: ``(2,)`` mean ink position, template pixels.
         spread: summed variance of the ink positions, template pixels squared.
         level: the template width they were measured at.
+        box: ``(4, 2)`` corners (TL, TR, BR, BL, SVG units) of the box around the ink.
     """
 
     centre: np.ndarray
     spread: float
     level: int
+    box: np.ndarray
 
     @classmethod
     def of(cls, template: Template) -> InkFrame:
         finest = max(template.images)
         ys, xs = np.nonzero(template.images[finest] < 0.5)
-        return cls(np.array([xs.mean(), ys.mean()]), float(xs.var() + ys.var()), finest)
+        x0, y0, x1, y1 = xs.min(), ys.min(), xs.max() + 1, ys.max() + 1
+        box = project(template.to_svg_units(finest), np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], np.float64))
+        return cls(np.array([xs.mean(), ys.mean()]), float(xs.var() + ys.var()), finest, box)
 
 
 def whole_frame(gray: np.ndarray, ink: InkFrame, template: Template, frame_corners: np.ndarray) -> list[Candidate]:

@@ -18,6 +18,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
+from deepmorph_detect.refine import Alignment
 from deepmorph_detect.results import Located
 from deepmorph_detect.scenes import close_up_photo
 
@@ -91,27 +92,43 @@ def test_info_gives_the_smallest_print() -> None:
 
 def test_which_unread_drawings_are_reported(locator) -> None:
     """An unread drawing is reported on its alignment alone: never a blind proposer's; the whole
-    image's only where it fills half the image (at 0.8, or 0.6 when too small); a detector's
-    that knows the drawing from 0.6. Cases from 640-px-wide photos unless said."""
+    image's only where it fills half the image and the photo shows it whole (at 0.8, or 0.6 when
+    too small); a detector's that knows the drawing from 0.6. Cases from 640 x 480 photos unless said."""
     unread = DecodeResult(np.zeros(5, np.uint8), False, -1, 0.9)
 
-    def located(width: float, correlation: float) -> Located:
-        corners = np.array([[0, 0], [width, 0], [width, width], [0, width]], np.float64)
-        return Located(unread, np.full(5, 0.5, np.float32), corners=corners, correlation=correlation, needs_px=96.0)
+    def located(width: float, correlation: float, left: float = 0.0, top: float = 0.0, outline=None) -> Located:
+        corners = np.array([[0, 0], [width, 0], [width, width], [0, width]], np.float64) + (left, top)
+        corners = corners if outline is None else np.array(outline, np.float64)
+        H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
+        return Located(
+            unread, np.full(5, 0.5, np.float32), corners=corners, homography=H, correlation=correlation, needs_px=96.0
+        )
 
     def proposal(whole: bool = False, blind: bool = False) -> Candidate:
         return Candidate(np.zeros((4, 2)), 1.0, (0, 0, 1, 1), np.eye(3) if whole else None, blind=blind)
 
     reports = locator.reports_unread
-    assert not reports(located(400, 0.99), proposal(blind=True), 640)
+    photo = (480, 640)
+    assert not reports(located(400, 0.99), proposal(blind=True), photo)
     # a patch of another drawing's ink a third of the frame wide (0.82 in a scene without any print)
-    assert not reports(located(218, 0.82), proposal(whole=True), 640)
-    assert reports(located(400, 0.82), proposal(whole=True), 640)
-    assert not reports(located(5493, 0.81), proposal(whole=True), 640)  # a degenerate frame, 8.6 times the image
-    assert not reports(located(400, 0.75), proposal(whole=True), 640)
-    assert reports(located(41, 0.72), proposal(whole=True), 64)  # a tiny scan, too small to read
-    assert not reports(located(41, 0.64), proposal(whole=True), 640)
-    assert reports(located(150, 0.62), proposal(), 640) and not reports(located(150, 0.58), proposal(), 640)
+    assert not reports(located(218, 0.82), proposal(whole=True), photo)
+    assert reports(located(400, 0.82), proposal(whole=True), photo)
+    assert not reports(located(5493, 0.81), proposal(whole=True), photo)  # a degenerate frame, 8.6 times the image
+    assert not reports(located(400, 0.75), proposal(whole=True), photo)
+    assert reports(located(41, 0.72), proposal(whole=True), (64, 64))  # a tiny scan, too small to read
+    assert not reports(located(41, 0.64), proposal(whole=True), photo)
+    assert reports(located(150, 0.62), proposal(), photo) and not reports(located(150, 0.58), proposal(), photo)
+    # the ink running off the image: clutter framed from the whole image, not a print it shows whole
+    inside, off = located(400, 0.86, 200, 40), located(400, 0.86, 330, 40)
+    assert locator.shown_whole(inside.homography, photo) and reports(inside, proposal(whole=True), photo)
+    assert not locator.shown_whole(off.homography, photo)
+    assert not reports(off, proposal(whole=True), photo)
+    assert not reports(located(400, 0.86, -200, 40), proposal(whole=True), photo)
+    assert not reports(located(400, 0.86, 100, 300), proposal(whole=True), photo)
+    # inside, but an outline no flat print makes (0.12 of its width from the nearest): bent to fit clutter
+    bent = located(0, 0.86, outline=[[100, 100], [500, 60], [540, 420], [80, 300]])
+    assert locator.aligner.bent(Alignment(bent.homography, 0.86), photo)
+    assert not locator.shown_whole(bent.homography, photo) and not reports(bent, proposal(whole=True), photo)
 
 
 def test_a_model_trained_for_wider_prints_reads_no_payload_from_narrower_ones(locator) -> None:
