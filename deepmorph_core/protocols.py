@@ -188,7 +188,8 @@ class Candidate:
             drawing's frame exactly (the whole image framed by its ink); ``None`` otherwise.
         source: what proposed it (``"detector"``, ``"whole-frame"``, a detector's name ...).
         sized: the outline's size comes from the print's own ink (the universal detector's):
-            alignment searches other turns of it, not other sizes.
+            alignment tries its other corner orders and starts from the print's ink, not other
+            turns or sizes of the outline.
         blind: the proposer does not know the drawing: it proposes every printed drawing (the
             universal detector). Each other drawing it proposes is one more chance at a CRC
             collision, so its readings always take the per-bit check, and one whose payload is
