@@ -152,18 +152,24 @@ class Aligner:
         if gray is None:
             return pyramid, alignment
         missed = not self.accepts(alignment)
-        if missed or alignment.correlation < WEAK_ALIGNMENT or alignment.searched or self.bent(alignment, gray.shape):
+        if (
+            missed
+            or alignment.correlation < WEAK_ALIGNMENT
+            or alignment.searched
+            or self.bent(alignment.homography, gray.shape)
+        ):
             flat = self.in_flat_light(gray, cand.corners)
             in_flat = search(flat, True)
             if missed or (self.accepts(in_flat) and in_flat.correlation > alignment.correlation):
                 return flat, in_flat
         return pyramid, alignment
 
-    def bent(self, alignment: Alignment, image_shape: tuple[int, ...]) -> bool:
-        """Whether ``alignment``'s outline is one no flat print makes in an uncropped photo of
-        ``image_shape`` (:data:`BENT_OUTLINE`): a cast shadow's edge bent it."""
+    def bent(self, homography: np.ndarray, image_shape: tuple[int, ...]) -> bool:
+        """Whether the outline ``homography`` (SVG units -> pixels) gives the drawing is one no flat
+        print makes in an uncropped photo of ``image_shape`` (:data:`BENT_OUTLINE`): a cast
+        shadow's edge bent it."""
         size = (int(image_shape[1]), int(image_shape[0]))
-        return rigid_misfit(alignment.homography, self.frame_corners, size) > BENT_OUTLINE
+        return rigid_misfit(homography, self.frame_corners, size) > BENT_OUTLINE
 
     def other_turn(self, pyramid: ImagePyramid, alignment: Alignment, margin: float = 0.0) -> Alignment | None:
         """The print aligned again from each of the drawing's other turns

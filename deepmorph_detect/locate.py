@@ -309,7 +309,7 @@ class Locator:
         slack = INK_OUTSIDE * measure_width(ink)
         height, width = image_size
         inside = bool((ink >= -slack).all() and (ink <= np.array([width, height]) + slack).all())
-        return inside and not self.aligner.bent(Alignment(homography, 0.0, 0), image_size)
+        return inside and not self.aligner.bent(homography, image_size)
 
     def decode_drawing(
         self,

@@ -462,7 +462,7 @@ def refine(
         return searched(best)
     # the outline itself is off: turned or scaled starts
     if not sized:  # an ink square is the print's own size and turned as its ink: no sweep
-        best = best_few(outline_sweep(homography, template, scales=SWEEP_SCALES), best)
+        best = best_few(outline_sweep(homography, template), best)
         if good(best):
             return searched(best)
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong

@@ -88,12 +88,12 @@ def test_a_close_up_a_shadow_bends_the_alignment_of_is_aligned_again_as_a_flat_s
     assert aligned.alignment.correlation > 0.8
     assert _corner_error(aligned.alignment.homography, template, truth) > 0.15
     # bent: no flat print makes that outline; the truth and the flat sheet are ones
-    assert aligner.bent(aligned.alignment, gray.shape)
+    assert aligner.bent(aligned.alignment.homography, gray.shape)
     sheet = aligner.as_flat_sheet(aligned.pyramid, aligned.alignment)
     assert sheet is not None
     assert _corner_error(sheet.homography, template, truth) < 0.03
     assert sheet.correlation > aligned.alignment.correlation
-    assert not aligner.bent(sheet, gray.shape)
+    assert not aligner.bent(sheet.homography, gray.shape)
     assert rigid_misfit(aligner.homography(truth), aligner.frame_corners, gray.shape[::-1]) < 0.002
     # aligned at the truth already: nothing moves far enough to be read again
     at_truth = refine_affine(aligned.pyramid, sheet.homography, template)
@@ -118,7 +118,7 @@ def test_an_alignment_no_flat_print_makes_is_aligned_again_in_flat_light(crystal
     assert aligned.pyramid is not pyramid  # kept from flat light
     assert aligned.alignment.correlation > in_photo.alignment.correlation
     assert _corner_error(aligned.alignment.homography, template, truth) < 0.04
-    assert not aligner.bent(aligned.alignment, gray.shape)
+    assert not aligner.bent(aligned.alignment.homography, gray.shape)
 
 
 @pytest.mark.parametrize("sheet_reads", [True, False])

@@ -6,16 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect import refine as refine_module
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.refine import ImagePyramid, refine
-
-
-@pytest.fixture(scope="module")
-def locator() -> Locator:
-    return Locator(DeepMorphModel.load(BUNDLED_MODEL))
 
 
 def test_only_an_outline_not_sized_by_ink_is_swept(locator: Locator, monkeypatch: pytest.MonkeyPatch) -> None:

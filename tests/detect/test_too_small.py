@@ -18,7 +18,6 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.refine import Alignment
 from deepmorph_detect.results import Located
 from deepmorph_detect.scenes import close_up_photo
 
@@ -127,7 +126,7 @@ def test_which_unread_drawings_are_reported(locator) -> None:
     assert not reports(located(400, 0.86, 100, 300), proposal(whole=True), photo)
     # inside, but an outline no flat print makes (0.12 of its width from the nearest): bent to fit clutter
     bent = located(0, 0.86, outline=[[100, 100], [500, 60], [540, 420], [80, 300]])
-    assert locator.aligner.bent(Alignment(bent.homography, 0.86), photo)
+    assert locator.aligner.bent(bent.homography, photo)
     assert not locator.shown_whole(bent.homography, photo) and not reports(bent, proposal(whole=True), photo)
 
 
