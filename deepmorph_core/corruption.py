@@ -56,13 +56,20 @@ class AugmentConfig(BaseModel):
 
     @classmethod
     def preset(
-        cls, severity: str, *, size: int | None = None, colour: bool = False, print_px: float | None = None
+        cls,
+        severity: str,
+        *,
+        size: int | None = None,
+        colour: bool = False,
+        print_px: float | None = None,
+        registered: bool = False,
     ) -> AugmentConfig:
         """The decoder-frame corruption of a severity (:data:`deepmorph_core.severity.SEVERITIES`)
-        at images ``size`` pixels wide showing a print ``print_px`` camera pixels wide
+        at images ``size`` pixels wide showing a print ``print_px`` camera pixels wide, of renders
+        ``registered`` onto the unmorphed drawing or not
         (:func:`~deepmorph_core.severity.residual_steps`), with its colour steps appended when
         ``colour``."""
-        steps = residual_steps(severity, size, colour=colour, print_px=print_px)
+        steps = residual_steps(severity, size, colour=colour, print_px=print_px, registered=registered)
         return cls(steps=[AugmentationSpec(name=n, p=p, params=params) for n, p, params in steps])
 
     @classmethod
@@ -353,13 +360,15 @@ def build_pipeline(
     colour: bool = False,
     print_px: float | None = None,
     channel: Channel = LUMA_WEIGHTS,
+    registered: bool = False,
 ) -> AugmentPipeline:
     """The corruption pipeline of a severity preset at an image width (showing a print
-    ``print_px`` camera pixels wide, :meth:`AugmentConfig.preset`), with its colour steps when
-    ``colour`` (or of a stored config), whose RGB images become the gray of ``channel``."""
+    ``print_px`` camera pixels wide, its renders ``registered`` or not: :meth:`AugmentConfig.preset`),
+    with its colour steps when ``colour`` (or of a stored config), whose RGB images become the
+    gray of ``channel``."""
     cfg = (
         AugmentConfig.parse(config)
         if config
-        else AugmentConfig.preset(severity, size=width, colour=colour, print_px=print_px)
+        else AugmentConfig.preset(severity, size=width, colour=colour, print_px=print_px, registered=registered)
     )
     return AugmentPipeline(cfg, channel=channel)

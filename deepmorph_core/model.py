@@ -23,13 +23,15 @@ from deepmorph_core.bundle import BundleMeta, TrainingRecord, check_weights, loa
 from deepmorph_core.code import Code
 from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning, SvgError
+from deepmorph_core.framing import frame_renders
 from deepmorph_core.graphs import GraphError, StoredGraph, make_graph, read_graphs, weights_fingerprint
-from deepmorph_core.luminance import Channel
+from deepmorph_core.luminance import Channel, stretch_ink
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.networks import Decoder, DecoderConfig, Encoder, decoder_parameters, fused_for_inference
 from deepmorph_core.payload import Payload, PayloadLike
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
 from deepmorph_core.reading_channel import channel_name
+from deepmorph_core.registration import UnmorphedRegistration
 from deepmorph_core.svg.reader import GEOMETRY_VERSION
 
 #: What a drawing to train on may have: the analysis before training renders every variable's
@@ -284,6 +286,13 @@ class DeepMorphModel:
         return None if value is None else int(value)
 
     @property
+    def registered(self) -> bool:
+        """Whether its training registered each render onto the unmorphed drawing, as the photo
+        chain aligns its photos (:mod:`deepmorph_core.registration`; ``train --pixels``). Models
+        trained before that was stored were not."""
+        return bool(self.meta.train.get("registered"))
+
+    @property
     def smallest_print_px(self) -> int:
         """The narrowest print in a photo the model reads: its :attr:`print_px`, or its decoder's
         frame (a print narrower than either loses the detail its bits are in)."""
@@ -330,6 +339,39 @@ class DeepMorphModel:
         """resvg renders ``(k, 1, H, W)`` (paper white; ``(k, 3, H, W)`` colour with ``rgb``) of
         ``(k, N_v)`` morph values at the decoder's width."""
         return self.drawing.render_real(values, self.width, rgb=rgb).to(values.device)
+
+    def framed(self, renders: Tensor) -> Tensor:
+        """Clean renders ``(B, C, h, w)`` (paper white) as the decoder meets them before the
+        capture's corruption, as training and validation frame theirs: ink stretched as photos
+        are, framed by their ink (:func:`~deepmorph_core.framing.frame_renders`), and for a
+        :attr:`registered` model registered onto the unmorphed drawing and framed again, as the
+        photo chain's view is. ``(B, C, H, W)``."""
+        channel = self.drawing.channel
+        framed = frame_renders(
+            stretch_ink(renders, self.drawing.ink_level), self.canonical_moments(), self.image_size, channel
+        )
+        if not self.registered:
+            return framed
+        return frame_renders(
+            self.registration(framed.device)(framed), self.canonical_moments(), self.image_size, channel
+        )
+
+    def registration(self, device: torch.device | str = "cpu") -> UnmorphedRegistration:
+        """The registration onto the unmorphed drawing's resvg render, framed as renders are
+        (built once per device)."""
+        device = torch.device(device)
+        cached = getattr(self, "_registration", None)
+        if cached is None or cached[0] != device:
+            neutral = self.real_renders(self.drawing.neutral_values(), rgb=self.drawing.colour)
+            template = frame_renders(
+                stretch_ink(neutral, self.drawing.ink_level),
+                self.canonical_moments(),
+                self.image_size,
+                self.drawing.channel,
+            )
+            cached = (device, UnmorphedRegistration(template, self.drawing.channel).to(device))
+            self._registration = cached
+        return cached[1]
 
     # -- decoding -------------------------------------------------------------------------
 

@@ -38,6 +38,13 @@ PHOTO_SIZE = 640
 #: photo simulator's 60-80 %): what a camera's pixel parameters are scaled from when the decoder's
 #: frame meets them (:func:`camera_shadow`).
 CLOSE_UP_PHOTO_PX, SHADOW_FRAME_SHARE = 240, 0.7
+#: The misalignment left for the corruption of a model whose renders are registered onto the
+#: unmorphed drawing (:mod:`deepmorph_core.registration`), as a share of its ``print_px``
+#: residual: what the photo chain's alignment itself gets wrong once the morph's own pull on it
+#: is in the training. Aligned to its true morph, a close-up's view is a median 0.05-0.07 px off
+#: in the decoder's frame (90th percentile 0.12-0.17); this share of a 200-px print's residual is
+#: about 0.18 px.
+REGISTERED_ALIGNMENT = 0.2
 #: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``, or by a photo's shrink).
 PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length"), ("shadow", "softness")}
 
@@ -217,7 +224,12 @@ def photo_ranges(name: str) -> PhotoRanges:
 
 
 def residual_steps(
-    name: str, size: int | None = None, *, colour: bool = False, print_px: float | None = None
+    name: str,
+    size: int | None = None,
+    *,
+    colour: bool = False,
+    print_px: float | None = None,
+    registered: bool = False,
 ) -> list[Step]:
     """The residual corruption steps of a severity at ``size``-pixel images (:data:`PRESET_SIZE`
     when ``None``); when ``colour`` (a colour drawing's training), with the camera's shadow after
@@ -229,7 +241,10 @@ def residual_steps(
     scaled by ``size / PRESET_SIZE``, and a wider frame is only a finer picture of the same
     blur. With ``print_px`` the frame shows a print ``print_px`` camera pixels wide: blur,
     motion and shadow are the camera's, in its pixels (scaled by ``size / print_px``), so a
-    larger print in the photo keeps more of its morph (``deepmorph train --pixels``)."""
+    larger print in the photo keeps more of its morph (``deepmorph train --pixels``).
+    ``registered`` (with ``print_px``): the renders are registered onto the unmorphed drawing
+    as the photo chain aligns its photos (:mod:`deepmorph_core.registration`), so only
+    :data:`REGISTERED_ALIGNMENT` of the misalignment is left."""
     level = severity(name)
     steps = level.residual
     if colour:
@@ -238,7 +253,9 @@ def residual_steps(
         shadow = camera_shadow(level, None if print_px is None else PRESET_SIZE)
         steps = steps[:after_light] + shadow + steps[after_light:] + level.colour
     scaled = scaled_steps(steps, (size or PRESET_SIZE) / (print_px or PRESET_SIZE))
-    return scaled if print_px is None else aligned_steps(scaled, PRESET_SIZE / print_px)
+    if print_px is None:
+        return scaled
+    return aligned_steps(scaled, PRESET_SIZE / print_px * (REGISTERED_ALIGNMENT if registered else 1.0))
 
 
 #: The residual's geometric parameters: how far the framed print is off, as shares of the frame

@@ -211,7 +211,12 @@ class Locator:
         """Whether the detector's proposals in ``image`` align to the drawing at all, read or
         not: a blind proposer's unread prints are never reported (:meth:`reports_unread`), so an
         empty :meth:`locate` alone does not say whether the print was found."""
-        return bool(self._proposed(image, None)[3])
+        return bool(self.alignments(image))
+
+    def alignments(self, image: np.ndarray) -> list[Aligned]:
+        """The detector's proposals in ``image`` aligned to the unmorphed drawing, before any
+        reading: the homographies the first looks rectify by."""
+        return self._proposed(image, None)[3]
 
     def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.

@@ -402,6 +402,18 @@ def close_up_photo(
     desk: float | None = None,
     extra: list[AugmentationSpec] | None = None,
 ) -> np.ndarray:
+    """:func:`close_up_placed`'s photo alone."""
+    return close_up_placed(art, severity, rng, size, desk, extra)[0]
+
+
+def close_up_placed(
+    art: np.ndarray,
+    severity: str,
+    rng: np.random.Generator,
+    size: int = 240,
+    desk: float | None = None,
+    extra: list[AugmentationSpec] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """A photo in which one print fills most of the frame: a scan or a close phone photo.
 
     ``art`` (``(H, W)`` float, 1 = white, or ``(H, W, 3)`` RGB; a render of a code, or anything else) is printed on a
@@ -412,7 +424,8 @@ def close_up_photo(
     join the severity's.
 
     Returns:
-        ``(size, size, 3)`` uint8 BGR photo.
+        ``(size, size, 3)`` uint8 BGR photo, and the ``(3, 3)`` homography from ``art``'s pixels
+        to the photo's (where the print truly lies, for measuring an alignment).
     """
     sv = photo_ranges(severity)
     frame = (size, size)
@@ -428,9 +441,10 @@ def close_up_photo(
     tone = rng.uniform(0.55, 0.8) if desk is None else desk  # a desk darker than the paper
     img = np.full((size, size, 3), tone, np.float32)
     art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
-    _print_and_place(img, np.asarray(art, np.float32), plane @ art_to_frame, margin, aw, rng)
+    art_to_image = plane @ art_to_frame
+    _print_and_place(img, np.asarray(art, np.float32), art_to_image, margin, aw, rng)
     capture = capture_pipeline(severity, 1.0, extra) if extra else _plain_capture(severity)
-    return _photograph(img, capture, rng)
+    return _photograph(img, capture, rng), art_to_image
 
 
 @functools.lru_cache(maxsize=8)
@@ -561,6 +575,7 @@ __all__ = [
     "Scene",
     "SceneMaker",
     "close_up_photo",
+    "close_up_placed",
     "distractor_svgs",
     "model_added_steps",
 ]

@@ -61,8 +61,7 @@ from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
-from deepmorph_core.framing import frame_renders
-from deepmorph_core.luminance import Channel, stretch_ink
+from deepmorph_core.luminance import Channel
 from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
 from deepmorph_core.networks import Decoder, DecoderConfig, spread_weights
@@ -189,15 +188,19 @@ class CodecRun:
         self.memory_format = torch.channels_last if self.device.type == "cpu" else torch.contiguous_format
         model.decoder.to(memory_format=self.memory_format)
         self.raster = model.rasterizer()
-        self.target = model.canonical_moments()
         self.colour = model.drawing.colour  # renders in colour, through the colour corruptions
-        self.ink_level = model.drawing.ink_level  # and contrast stretched as photos are
         self.print_px = model.print_px
+        self.registered = model.registered  # and registered onto the unmorphed drawing as photos are
         self.channel = model.drawing.channel  # and read in the model's channel
         self._augments = {
-            sev: build_pipeline(sev, model.width, colour=self.colour, print_px=self.print_px, channel=self.channel).to(
-                self.device
-            )
+            sev: build_pipeline(
+                sev,
+                model.width,
+                colour=self.colour,
+                print_px=self.print_px,
+                channel=self.channel,
+                registered=self.registered,
+            ).to(self.device)
             for sev in LADDER[: LADDER.index(config.severity)]
         }
         stored = model.meta.augment or None
@@ -308,7 +311,7 @@ class CodecRun:
                 images = self.raster.render_rgb(soft) if self.colour else 1.0 - self.raster(soft)
         if k:
             images = torch.cat([self.model.real_renders(values[:k], rgb=self.colour), images], 0)
-        images = frame_renders(stretch_ink(images, self.ink_level), self.target, self.model.image_size, self.channel)
+        images = self.model.framed(images)
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
             return self.augment_now()(images, generator=self.gen)
@@ -328,7 +331,7 @@ class CodecRun:
             # the same print, shrunk: a print_px-wide print seen at small_w of the frame's w pixels
             seen = None if self.print_px is None else self.print_px * small_w / w
             self._small_augments[key] = build_pipeline(
-                key[0], small_w, colour=self.colour, print_px=seen, channel=self.channel
+                key[0], small_w, colour=self.colour, print_px=seen, channel=self.channel, registered=self.registered
             ).to(self.device)
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
@@ -662,8 +665,16 @@ def open_model(
             if out.exists() and not overwrite:
                 raise DeepMorphError(f"{out}: already exists; pass --resume to continue it or choose another --out")
             config = _resolved(TrainConfig(**overrides), (world or World()).size)
+            if config.registered is None:
+                config = config.model_copy(update={"registered": config.print_px is not None})
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
-            augment = build_pipeline(config.severity, config.width, colour=md.colour, print_px=config.print_px)
+            augment = build_pipeline(
+                config.severity,
+                config.width,
+                colour=md.colour,
+                print_px=config.print_px,
+                registered=bool(config.registered),
+            )
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
             channel = md.read_in(channel_for(config.read_in)).channel  # chosen once, for capacity and model
@@ -840,7 +851,11 @@ def tune_decoder(
         raise DeepMorphError(f"{model_path}: its training has not finished; resume it before tuning")
     if out.exists() and not overwrite and out.resolve() != model_path.resolve():
         raise DeepMorphError(f"{out}: already exists; choose another --out")
-    kept = {k: model.meta.train[k] for k in ("batch", "hard_fraction", "severity", "print_px") if k in model.meta.train}
+    kept = {
+        k: model.meta.train[k]
+        for k in ("batch", "hard_fraction", "severity", "print_px", "registered")
+        if k in model.meta.train
+    }
     try:
         config = TrainConfig(
             **kept,

@@ -59,6 +59,11 @@ class TrainSettings:
             so a print seen larger carries more; ``decode`` calls narrower prints too small and
             reads no payload from them. ``None``: the default, a frame that stands for a print
             96 px wide.
+        registered: register every training render onto the unmorphed drawing as the photo
+            chain aligns its photos (:mod:`deepmorph_core.registration`), leaving only
+            :data:`~deepmorph_core.severity.REGISTERED_ALIGNMENT` of the ``print_px``
+            misalignment to the corruption. ``None`` (the default): with ``print_px``. Bundles
+            from before it was stored were not.
         lr, encoder_lr: Adam learning rates of the decoder and the encoder (decayed by a cosine
             to 10 % over stage 2).
         stage1_max_fraction: stage 1 ends at this share of ``steps`` at the latest.
@@ -120,6 +125,7 @@ class TrainSettings:
         "The smallest width in pixels the print will have in photos: blur, motion and misalignment in those "
         "pixels; narrower prints are too small.",
     )
+    registered: bool | None = None
     lr: Annotated[float, Gt(0), Le(1)] = 2e-3
     encoder_lr: Annotated[float, Gt(0), Le(10)] = 1e-2
     stage1_max_fraction: Annotated[float, Ge(0), Le(1)] = 0.35

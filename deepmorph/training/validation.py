@@ -25,8 +25,6 @@ import torch
 from deepmorph.training.settings import PHOTO_SAMPLES, RENDER_SAMPLES
 from deepmorph_core.bundle import PayloadTally, ValidationRecord
 from deepmorph_core.corruption import build_pipeline
-from deepmorph_core.framing import frame_renders
-from deepmorph_core.luminance import stretch_ink
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.severity import VALIDATION_SEVERITY
 
@@ -98,9 +96,10 @@ def read_renders(
     colour = model.drawing.colour
     on = torch.device(device)
     channel = model.drawing.channel
-    augment = build_pipeline(severity, model.width, colour=colour, print_px=model.print_px, channel=channel).to(on)
+    augment = build_pipeline(
+        severity, model.width, colour=colour, print_px=model.print_px, channel=channel, registered=model.registered
+    ).to(on)
     generator = torch.Generator().manual_seed(seed + 1)  # on the CPU, so that every device draws the same
-    target, size = model.canonical_moments(), model.image_size
     probs = []
     model.encoder.to(on)
     model.decoder.to(on)
@@ -109,10 +108,7 @@ def read_renders(
             values = model.morph_values(torch.from_numpy(codes[lo : lo + batch].astype(np.float32)).to(on))
             real = model.real_renders(values, rgb=colour)
             with torch.no_grad():
-                framed = augment(
-                    frame_renders(stretch_ink(real, model.drawing.ink_level), target, size, channel),
-                    generator=generator,
-                )
+                framed = augment(model.framed(real), generator=generator)
             probs.append(model.probabilities(framed).cpu().numpy().astype(np.float64))
     finally:
         model.encoder.cpu()

@@ -254,6 +254,7 @@ def test_early_stop_ends_where_the_full_corruption_batches_read_and_is_the_plann
     rec = model.meta.record
     assert rec.finished and rec.stopped_early and rec.step == rec.total_steps == 30
     assert model.meta.train["steps"] == 40
+    assert model.meta.train["registered"] is False and not model.registered  # no --pixels: framed by ink alone
     assert [line["step"] for line in map(json.loads, summary.log.read_text().splitlines())][-1] == 30
     shown = " ".join(runner.invoke(app, ["info", str(early)]).stdout.split())
     assert "30/30 steps" in shown and "finished early" in shown, shown
@@ -679,7 +680,9 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
 def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path: Path) -> None:
     """``--pixels``: the decoder keeps its frame, and the capture's blur and the misalignment it
     is trained for are the camera's, in pixels of a print that wide (the preset's blur and turn
-    scaled by 96/200 for a 200-px print); ``info`` gives the width as the smallest print."""
+    scaled by 96/200 for a 200-px print). Its renders are registered onto the unmorphed drawing
+    as the photo chain aligns photos, so only a fifth of that misalignment is left; ``info``
+    gives the width as the smallest print."""
     out = tmp_path / "p200.dmm"
     base = ["train", str(tiny_svg), "--steps", "2", "--batch", "2", "--threads", "1", "--payload-bits", "4"]
     res = runner.invoke(app, [*base, "--pixels", "200", "--out", str(out), "--validation", "0"])
@@ -688,7 +691,8 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     assert model.width == 96 and model.print_px == model.smallest_print_px == 200
     steps = {s["name"]: s["params"] for s in model.meta.augment["steps"]}
     assert steps["blur"]["sigma"] == pytest.approx([0.0, 0.48])  # medium's 0-1 px at 96 px
-    assert steps["rotation"]["degrees"] == pytest.approx(2.4)  # medium's 5 degrees
+    assert steps["rotation"]["degrees"] == pytest.approx(0.48)  # medium's 5 degrees, by 96/200, a fifth left
+    assert model.registered and model.meta.train["registered"] is True
     info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
     assert info["smallest_print_px"] == 200 and info["train"]["print_px"] == 200
     shown = " ".join(runner.invoke(app, ["info", str(out)], env={"COLUMNS": "200"}).stdout.split())
@@ -702,4 +706,4 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     blur = next(s for s in model.meta.augment["steps"] if s["name"] == "blur")
     assert blur["params"]["sigma"] == pytest.approx([0.0, 0.5])
     plain = DeepMorphModel.load(BUNDLED_MODEL)
-    assert plain.print_px is None and plain.smallest_print_px == plain.width == 96
+    assert plain.print_px is None and plain.smallest_print_px == plain.width == 96 and not plain.registered

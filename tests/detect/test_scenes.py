@@ -11,7 +11,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.render import render_svg
 from deepmorph_core.severity import PHOTO_SEVERITIES
-from deepmorph_detect.scenes import close_up_photo
+from deepmorph_detect.scenes import close_up_photo, close_up_placed
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +42,23 @@ def test_close_ups_are_seeded_and_every_photo_severity_makes_one(ghost_render) -
     assert all(10 < d < 245 for d in darkest)
     with pytest.raises(DeepMorphError, match="'none' has no photo settings"):
         close_up_photo(render, "none", np.random.default_rng(0))
+
+
+def test_a_close_up_says_where_its_print_lies() -> None:
+    """``close_up_placed``'s homography maps the art's pixels to where the photo shows them: a
+    black square in the art's middle is dark there and the paper around it is light."""
+    art = np.ones((400, 400), np.float32)
+    art[150:250, 150:250] = 0.0
+    photo, art_to_image = close_up_placed(art, "easy", np.random.default_rng(2), size=240)
+    assert np.array_equal(photo, close_up_photo(art, "easy", np.random.default_rng(2), size=240))
+    gray = photo.mean(axis=2)
+
+    def seen(x: float, y: float) -> float:
+        p = art_to_image @ np.array([x, y, 1.0])
+        return float(gray[int(round(p[1] / p[2])), int(round(p[0] / p[2]))])
+
+    assert seen(200, 200) < 0.5 * seen(100, 100)
+    assert seen(200, 200) < 0.5 * seen(300, 300)
 
 
 def test_a_print_finer_than_the_photo_is_averaged_by_the_camera_not_sampled() -> None:

@@ -1,0 +1,108 @@
+"""Framed renders registered onto the unmorphed drawing, as the photo chain's first look sees them.
+
+The photo chain aligns a photo to the *unmorphed* drawing (:mod:`deepmorph_detect.refine`) and
+reads the view that alignment rectifies. A morph moves the drawing's ink, and the homography
+that best fits the unmorphed drawing to it takes up part of that move: on close-ups of the
+ghost it leaves the view a median 1.3 px rms off in the decoder's 96-px frame (after the shift
+and scale that framing by ink removes), where the alignment to the print's own morph leaves
+0.05 px. That part is no random misalignment: it is a function of the code. A model trained for
+prints read at their own resolution (``train --pixels``) learns to read the view as the chain
+makes it: each training render is registered onto the unmorphed drawing the same way, and the
+random misalignment left for the corruption is only the alignment's own error
+(:data:`~deepmorph_core.severity.REGISTERED_ALIGNMENT`). ``docs/design-notes.md`` has the
+measurements.
+
+The registration is inverse-compositional Lucas-Kanade over the same eight homography
+parameters as the chain's ECC (:func:`deepmorph_detect.refine.motion_images`), on both images
+blurred by :data:`BLUR_SIGMA` px, batched: the template's Jacobian and Hessian are computed
+once, so a batch of 32 costs a few milliseconds. On resvg renders of ``battery-charging`` its
+views differ from the chain's ECC views by 0.018 mean absolute gray, where the chain's own view
+at the true homography differs by 0.017 (resampling alone) and the unregistered render by 0.032.
+kornia's :class:`~kornia.geometry.transform.ImageRegistrator` fits one homography per call by
+gradient descent (hundreds of steps per image); this is its closed-form batched counterpart,
+built from kornia's blur and warp.
+"""
+
+from __future__ import annotations
+
+import torch
+from kornia.filters import gaussian_blur2d
+from kornia.geometry.transform import homography_warp
+from torch import Tensor, nn
+
+from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, to_channel
+
+#: Blur (px of the decoder's frame) of both images before they are compared: the basin of a
+#: morph's few-pixel moves, as the chain's coarse 48-px level gives its ECC.
+BLUR_SIGMA = 1.0
+#: Gauss-Newton steps; the views settle within the resampling noise by about six.
+ITERATIONS = 8
+
+
+def _blurred(images: Tensor) -> Tensor:
+    radius = max(1, int(3 * BLUR_SIGMA + 0.5))
+    return gaussian_blur2d(images, (2 * radius + 1,) * 2, (BLUR_SIGMA, BLUR_SIGMA), border_type="replicate")
+
+
+def _unit_grid(h: int, w: int, like: Tensor) -> tuple[Tensor, Tensor]:
+    """``(h, w)`` x and y in [-1, 1], the coordinates the homographies act on."""
+    ys = torch.linspace(-1.0, 1.0, h, dtype=like.dtype, device=like.device)
+    xs = torch.linspace(-1.0, 1.0, w, dtype=like.dtype, device=like.device)
+    y, x = torch.meshgrid(ys, xs, indexing="ij")
+    return x, y
+
+
+def _homography(params: Tensor) -> Tensor:
+    """``(B, 8)`` parameters -> ``(B, 3, 3)``: the identity plus them, in the order of
+    :func:`deepmorph_detect.refine.motion_images`."""
+    one = torch.ones_like(params[:, :1])
+    flat = torch.cat([params[:, :3], params[:, 3:6], params[:, 6:8], one], 1)
+    return flat.view(-1, 3, 3) + torch.diag(params.new_tensor([1.0, 1.0, 0.0]))
+
+
+def warp(images: Tensor, homographies: Tensor) -> Tensor:
+    """``(B, C, H, W)`` images sampled at ``homographies`` ``(B, 3, 3)`` of each frame point (unit
+    coordinates): the view a rectification by that homography makes. Differentiable in
+    ``images``; the nearest edge pixel (paper, in a framed render) where it looks outside."""
+    h, w = images.shape[-2:]
+    return homography_warp(images, homographies.to(images.dtype), (h, w), align_corners=True, padding_mode="border")
+
+
+class UnmorphedRegistration(nn.Module):
+    """Registers framed renders onto the framed unmorphed drawing (``template``, ``(1, C, H, W)``
+    gray or RGB, paper white = 1), both compared in the gray of ``channel`` (the one the
+    photo chain aligns a model's colour photos in)."""
+
+    def __init__(self, template: Tensor, channel: Channel = LUMA_WEIGHTS) -> None:
+        super().__init__()
+        self.channel = channel
+        t = _blurred(to_channel(template[:1], channel).double())[0, 0]
+        h, w = t.shape
+        gy, gx = torch.gradient(t)
+        gx, gy = gx * (w - 1) / 2.0, gy * (h - 1) / 2.0
+        x, y = _unit_grid(h, w, t)
+        radial = gx * x + gy * y
+        steepest = torch.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y]).reshape(8, -1)
+        self.register_buffer("template", t.reshape(-1))
+        self.register_buffer("steepest", steepest)
+        self.register_buffer("inverse_hessian", torch.linalg.inv(steepest @ steepest.T))
+
+    def homographies(self, images: Tensor) -> Tensor:
+        """``(B, 3, 3)`` float64: where each frame point of the unmorphed drawing lies in each image
+        (unit coordinates). No gradient: the registration is the chain's, not something learnt."""
+        with torch.no_grad():
+            seen = _blurred(to_channel(images, self.channel).double())
+            H = torch.eye(3, dtype=torch.float64, device=images.device).repeat(images.shape[0], 1, 1)
+            for _ in range(ITERATIONS):
+                error = warp(seen, H).flatten(1) - self.template
+                step = (error @ self.steepest.T) @ self.inverse_hessian.T
+                H = H @ torch.linalg.inv(_homography(step))
+                H = H / H[:, 2:3, 2:3]
+            return H
+
+    def forward(self, images: Tensor) -> Tensor:
+        """``(B, C, H, W)`` -> the same images as the registration rectifies them."""
+        return warp(images, self.homographies(images))
+
+
+__all__ = ["BLUR_SIGMA", "ITERATIONS", "UnmorphedRegistration", "warp"]

@@ -1,0 +1,75 @@
+"""Registering framed renders onto the unmorphed drawing (:mod:`deepmorph_core.registration`), as
+the photo chain's alignment sees a print."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.registration import UnmorphedRegistration, warp
+
+
+@pytest.fixture(scope="module")
+def ghost() -> DeepMorphModel:
+    return DeepMorphModel.load(BUNDLED_MODEL)
+
+
+def _turned(degrees: float, shear: float, tilt: float) -> torch.Tensor:
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return torch.tensor([[c, -s + shear, 0.02], [s, c, -0.015], [tilt, -tilt / 2, 1.0]], dtype=torch.float64)
+
+
+def test_a_known_homography_is_undone(ghost: DeepMorphModel) -> None:
+    """The unmorphed drawing seen through a known turn, shear and tilt registers back onto
+    itself: the homography found is the known one's inverse, and the view is the drawing's."""
+    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
+    known = torch.stack([_turned(2.0, 0.01, 0.01), _turned(-3.0, -0.02, -0.015)])
+    seen = warp(template.repeat(2, 1, 1, 1), known)
+    registration = UnmorphedRegistration(template)
+    found = registration.homographies(seen)
+    product = known @ found
+    product = product / product[:, 2:3, 2:3]
+    assert torch.allclose(product, torch.eye(3, dtype=torch.float64).expand(2, 3, 3), atol=2e-3)
+    before = (seen - template).abs().mean()
+    after = (registration(seen) - template).abs().mean()
+    assert after < 0.4 * before  # the rest is resampling twice
+    # each image is registered on its own: one at a time gives the same homographies
+    one = torch.cat([registration.homographies(seen[i : i + 1]) for i in range(2)])
+    assert torch.allclose(one, found, atol=1e-9)
+
+
+def test_registration_is_the_identity_on_the_drawing_itself(ghost: DeepMorphModel) -> None:
+    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
+    found = UnmorphedRegistration(template).homographies(template)
+    assert torch.allclose(found[0], torch.eye(3, dtype=torch.float64), atol=1e-6)
+
+
+def test_gradients_reach_the_renders_not_the_registration(ghost: DeepMorphModel) -> None:
+    """Training's encoder learns through the registered view; the homography is the chain's
+    and carries no gradient."""
+    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
+    seen = warp(template, _turned(1.0, 0.0, 0.0)[None]).requires_grad_(True)
+    UnmorphedRegistration(template)(seen).sum().backward()
+    assert seen.grad is not None and float(seen.grad.abs().sum()) > 0
+    assert not UnmorphedRegistration(template).homographies(seen).requires_grad
+
+
+def test_models_from_before_are_not_registered(ghost: DeepMorphModel) -> None:
+    """A bundle without the setting (the bundled ghost, every model before it) frames its renders
+    as it was trained to: by their ink alone."""
+    assert not ghost.registered
+    values = ghost.morph_values(torch.from_numpy(np.ones((1, ghost.codec.spec.code_bits), np.float32)))
+    renders = ghost.real_renders(values)
+    framed = ghost.framed(renders)
+    ghost.meta.train["registered"] = True
+    try:
+        registered = ghost.framed(renders)
+    finally:
+        del ghost.meta.train["registered"]
+    assert framed.shape == registered.shape
+    assert float((framed - registered).abs().mean()) > 1e-3
