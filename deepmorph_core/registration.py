@@ -19,8 +19,9 @@ once; training takes about 9 % longer for it. On resvg renders of ``battery-char
 views differ from the chain's ECC views by 0.018 mean absolute gray, where the chain's own view
 at the true homography differs by 0.017 (resampling alone) and the unregistered render by 0.032.
 kornia's :class:`~kornia.geometry.transform.ImageRegistrator` fits one homography per call by
-gradient descent (hundreds of steps per image); this is its closed-form batched counterpart,
-built from kornia's blur and warp.
+gradient descent: on the ghost seen through a 2-degree turn, shear and tilt it took 3.1 s and
+left the view 0.043 mean gray from the drawing, this Gauss-Newton 13 ms and 0.024 (1 thread). So
+this is written here, from kornia's blur and warp.
 """
 
 from __future__ import annotations

@@ -41,9 +41,9 @@ CLOSE_UP_PHOTO_PX, SHADOW_FRAME_SHARE = 240, 0.7
 #: The misalignment left for the corruption of a model whose renders are registered onto the
 #: unmorphed drawing (:mod:`deepmorph_core.registration`), as a share of its ``print_px``
 #: residual: what the photo chain's alignment itself gets wrong once the morph's own pull on it
-#: is in the training. Aligned to its true morph, a close-up's view is a median 0.05-0.07 px off
-#: in the decoder's frame (90th percentile 0.12-0.17); this share of a 200-px print's residual is
-#: about 0.18 px.
+#: is in the training. Aligned to its true morph, a close-up's view is a median 0.04-0.08 px off
+#: in the decoder's frame (90th percentile 0.09-0.20, ``bench/first_look.py``); this share of a
+#: 200-px print's residual is about 0.18 px rms.
 REGISTERED_ALIGNMENT = 0.2
 #: Parameters measured in pixels (scaled by ``size / PRESET_SIZE``, or by a photo's shrink).
 PIXEL_PARAMS = {("blur", "sigma"), ("defocus", "radius"), ("motion_blur", "length"), ("shadow", "softness")}
