@@ -346,15 +346,10 @@ class DeepMorphModel:
         are, framed by their ink (:func:`~deepmorph_core.framing.frame_renders`), and for a
         :attr:`registered` model registered onto the unmorphed drawing and framed again, as the
         photo chain's view is. ``(B, C, H, W)``."""
-        channel = self.drawing.channel
-        framed = frame_renders(
-            stretch_ink(renders, self.drawing.ink_level), self.canonical_moments(), self.image_size, channel
-        )
+        framed = self._framed_by_ink(stretch_ink(renders, self.drawing.ink_level))
         if not self.registered:
             return framed
-        return frame_renders(
-            self.registration(framed.device)(framed), self.canonical_moments(), self.image_size, channel
-        )
+        return self._framed_by_ink(self.registration(framed.device)(framed))
 
     def registration(self, device: torch.device | str = "cpu") -> UnmorphedRegistration:
         """The registration onto the unmorphed drawing's resvg render, framed as renders are
@@ -363,15 +358,13 @@ class DeepMorphModel:
         cached = getattr(self, "_registration", None)
         if cached is None or cached[0] != device:
             neutral = self.real_renders(self.drawing.neutral_values(), rgb=self.drawing.colour)
-            template = frame_renders(
-                stretch_ink(neutral, self.drawing.ink_level),
-                self.canonical_moments(),
-                self.image_size,
-                self.drawing.channel,
-            )
+            template = self._framed_by_ink(stretch_ink(neutral, self.drawing.ink_level))
             cached = (device, UnmorphedRegistration(template, self.drawing.channel).to(device))
             self._registration = cached
         return cached[1]
+
+    def _framed_by_ink(self, images: Tensor) -> Tensor:
+        return frame_renders(images, self.canonical_moments(), self.image_size, self.drawing.channel)
 
     # -- decoding -------------------------------------------------------------------------
 

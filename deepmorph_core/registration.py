@@ -13,7 +13,7 @@ random misalignment left for the corruption is only the alignment's own error
 measurements.
 
 The registration is inverse-compositional Lucas-Kanade over the same eight homography
-parameters as the chain's ECC (:func:`deepmorph_detect.refine.motion_images`), on both images
+parameters as the chain's ECC (:func:`motion_images`), on both images
 blurred by :data:`BLUR_SIGMA` px, batched: the template's Jacobian and Hessian are computed
 once; training takes about 9 % longer for it. On resvg renders of ``battery-charging`` its
 views differ from the chain's ECC views by 0.018 mean absolute gray, where the chain's own view
@@ -26,6 +26,7 @@ this is written here, from kornia's blur and warp.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from kornia.filters import gaussian_blur2d
 from kornia.geometry.transform import homography_warp
@@ -45,17 +46,24 @@ def _blurred(images: Tensor) -> Tensor:
     return gaussian_blur2d(images, (2 * radius + 1,) * 2, (BLUR_SIGMA, BLUR_SIGMA), border_type="replicate")
 
 
-def _unit_grid(h: int, w: int, like: Tensor) -> tuple[Tensor, Tensor]:
-    """``(h, w)`` x and y in [-1, 1], the coordinates the homographies act on."""
-    ys = torch.linspace(-1.0, 1.0, h, dtype=like.dtype, device=like.device)
-    xs = torch.linspace(-1.0, 1.0, w, dtype=like.dtype, device=like.device)
-    y, x = torch.meshgrid(ys, xs, indexing="ij")
-    return x, y
+def motion_images(image: np.ndarray) -> np.ndarray:
+    """``(8, h, w)`` how ``image`` (``(h, w)``) changes with each of the eight parameters of a
+    small homography composed on the frame's side, in frame coordinates scaled to [-1, 1]:
+    the Jacobian of an alignment solve, and what the per-bit check projects out as motion."""
+    h, w = image.shape
+    gy, gx = np.gradient(np.asarray(image, dtype=np.float64))
+    gx = gx * max(w - 1, 1) / 2.0
+    gy = gy * max(h - 1, 1) / 2.0
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    x = 2.0 * x / max(w - 1, 1) - 1.0
+    y = 2.0 * y / max(h - 1, 1) - 1.0
+    radial = gx * x + gy * y
+    return np.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y])
 
 
 def _homography(params: Tensor) -> Tensor:
     """``(B, 8)`` parameters -> ``(B, 3, 3)``: the identity plus them, in the order of
-    :func:`deepmorph_detect.refine.motion_images`."""
+    :func:`motion_images`."""
     one = torch.ones_like(params[:, :1])
     flat = torch.cat([params[:, :3], params[:, 3:6], params[:, 6:8], one], 1)
     return flat.view(-1, 3, 3) + torch.diag(params.new_tensor([1.0, 1.0, 0.0]))
@@ -78,12 +86,7 @@ class UnmorphedRegistration(nn.Module):
         super().__init__()
         self.channel = channel
         t = _blurred(to_channel(template[:1], channel).double())[0, 0]
-        h, w = t.shape
-        gy, gx = torch.gradient(t)
-        gx, gy = gx * (w - 1) / 2.0, gy * (h - 1) / 2.0
-        x, y = _unit_grid(h, w, t)
-        radial = gx * x + gy * y
-        steepest = torch.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y]).reshape(8, -1)
+        steepest = torch.from_numpy(motion_images(t.cpu().numpy()).reshape(8, -1)).to(t.device)
         self.register_buffer("template", t.reshape(-1))
         self.register_buffer("steepest", steepest)
         self.register_buffer("inverse_hessian", torch.linalg.inv(steepest @ steepest.T))
@@ -106,4 +109,4 @@ class UnmorphedRegistration(nn.Module):
         return warp(images, self.homographies(images))
 
 
-__all__ = ["BLUR_SIGMA", "ITERATIONS", "UnmorphedRegistration", "warp"]
+__all__ = ["BLUR_SIGMA", "ITERATIONS", "UnmorphedRegistration", "motion_images", "warp"]

@@ -24,8 +24,9 @@ import functools
 import cv2
 import numpy as np
 
+from deepmorph_core.registration import motion_images
 from deepmorph_detect.icalign import inverse3
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, motion_images, warp_to_template
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, warp_to_template
 
 LIGHT_GRID = 8  # knots across the frame (each way) of the alignment's light fields
 ITERATIONS = 15  # Gauss-Newton updates at most

@@ -277,21 +277,6 @@ def refine_at(
     return None if step is None else Alignment(*step, width)
 
 
-def motion_images(image: np.ndarray) -> np.ndarray:
-    """``(8, h, w)`` how ``image`` (``(h, w)``) changes with each of the eight parameters of a
-    small homography composed on the frame's side, in frame coordinates scaled to [-1, 1]:
-    the Jacobian of an alignment solve, and what the per-bit check projects out as motion."""
-    h, w = image.shape
-    gy, gx = np.gradient(np.asarray(image, dtype=np.float64))
-    gx = gx * max(w - 1, 1) / 2.0
-    gy = gy * max(h - 1, 1) / 2.0
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    x = 2.0 * x / max(w - 1, 1) - 1.0
-    y = 2.0 * y / max(h - 1, 1) - 1.0
-    radial = gx * x + gy * y
-    return np.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y])
-
-
 def nearest_affine(homography: np.ndarray, template: Template) -> np.ndarray:
     """The affine map (SVG units -> image pixels) whose outline of the drawing's frame lies
     nearest, in least squares, to ``homography``'s: the parallelogram closest to its quad."""
@@ -515,7 +500,6 @@ __all__ = [
     "ImagePyramid",
     "Template",
     "corner_orders",
-    "motion_images",
     "nearest_affine",
     "refine_affine",
     "correlation",

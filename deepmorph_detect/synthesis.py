@@ -41,9 +41,10 @@ import torch
 
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.raster import RasterSettings, SoftRasterizer
+from deepmorph_core.registration import motion_images
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.light_field import grid_fields
-from deepmorph_detect.refine import ImagePyramid, Template, correlation, motion_images, refine_at, warp_to_template
+from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
 from deepmorph_detect.template_light import DARKEST_REFLECTANCE, far_from_edges, smoothed_light
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (wider reads fewer small prints, slower)

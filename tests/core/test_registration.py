@@ -19,15 +19,20 @@ def ghost() -> DeepMorphModel:
     return DeepMorphModel.load(BUNDLED_MODEL)
 
 
+@pytest.fixture(scope="module")
+def template(ghost: DeepMorphModel) -> torch.Tensor:
+    """The unmorphed ghost framed as a training render is."""
+    return ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
+
+
 def _turned(degrees: float, shear: float, tilt: float) -> torch.Tensor:
     c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
     return torch.tensor([[c, -s + shear, 0.02], [s, c, -0.015], [tilt, -tilt / 2, 1.0]], dtype=torch.float64)
 
 
-def test_a_known_homography_is_undone(ghost: DeepMorphModel) -> None:
+def test_a_known_homography_is_undone(template: torch.Tensor) -> None:
     """The unmorphed drawing seen through a known turn, shear and tilt registers back onto
     itself: the homography found is the known one's inverse, and the view is the drawing's."""
-    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
     known = torch.stack([_turned(2.0, 0.01, 0.01), _turned(-3.0, -0.02, -0.015)])
     seen = warp(template.repeat(2, 1, 1, 1), known)
     registration = UnmorphedRegistration(template)
@@ -43,16 +48,14 @@ def test_a_known_homography_is_undone(ghost: DeepMorphModel) -> None:
     assert torch.allclose(one, found, atol=1e-9)
 
 
-def test_registration_is_the_identity_on_the_drawing_itself(ghost: DeepMorphModel) -> None:
-    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
+def test_registration_is_the_identity_on_the_drawing_itself(template: torch.Tensor) -> None:
     found = UnmorphedRegistration(template).homographies(template)
     assert torch.allclose(found[0], torch.eye(3, dtype=torch.float64), atol=1e-6)
 
 
-def test_gradients_reach_the_renders_not_the_registration(ghost: DeepMorphModel) -> None:
+def test_gradients_reach_the_renders_not_the_registration(template: torch.Tensor) -> None:
     """Training's encoder learns through the registered view; the homography is the chain's
     and carries no gradient."""
-    template = ghost.framed(ghost.real_renders(ghost.drawing.neutral_values()))
     seen = warp(template, _turned(1.0, 0.0, 0.0)[None]).requires_grad_(True)
     UnmorphedRegistration(template)(seen).sum().backward()
     assert seen.grad is not None and float(seen.grad.abs().sum()) > 0
