@@ -19,6 +19,7 @@ training mid-run, which a ``DistributedDataParallel`` wrapper fixes at construct
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -92,6 +93,13 @@ def join(world: World, device: str) -> tuple[torch.device, bool]:
         target = torch.device("cpu")
     joined = world.distributed and not dist.is_initialized()
     if joined:
+        # torch._dynamo (imported by the optimisers on first use) keeps hold of a process group
+        # that exists when it is first imported, so that group would outlive leave(): its gloo
+        # threads then free their last collective's tensors while the interpreter exits, which
+        # aborts the process (SIGABRT, "terminate called without an active exception") after
+        # the work is done. Imported first, it holds none.
+        importlib.import_module("torch._dynamo")
+
         dist.init_process_group("nccl" if device == "cuda" else "gloo", rank=world.rank, world_size=world.size)
     return target, joined
 

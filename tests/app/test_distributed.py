@@ -176,10 +176,17 @@ def test_a_checkpoint_of_two_processes_resumes_on_one(drawing: Path) -> None:
 
 
 #: A torchrun of this script trains an auto-sized code that does not read at once at ``hard``:
-#: both processes must shrink it the same way, from both ranks' captures.
+#: both processes must shrink it the same way, from both ranks' captures. Each then checks that
+#: it left the process group whole: no gloo thread outlives training (one that did freed its
+#: last collective's tensors while the interpreter exited, and aborted the process now and then).
 AUTO_SHRINK = """
+import gc, os, sys
 from deepmorph.training.codec import train_model
 train_model("tiny.svg", "auto2.dmm", payload_bits="auto", train={train!r}, validation_samples=(0, 0))
+gc.collect()
+names = [open(f"/proc/self/task/{{t}}/comm").read().strip() for t in os.listdir("/proc/self/task")]
+if any("gloo" in name for name in names):
+    sys.exit(f"gloo threads outlived training: {{names}}")
 """
 
 
