@@ -19,12 +19,21 @@ come back from 99 % of captures, up to :data:`LARGEST_CODE_MEASURED` code bits: 
 panel (``bench/capacity.py``, ``bench/README.md``) is what both were fitted on. The largest
 payload is then the largest one whose code (CRC and a BCH code correcting one or two bit errors,
 :func:`~deepmorph_core.codec.choose_codec`) fits in that many code bits.
+
+A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo (``train
+--pixels``) sees each print sharper and is trained on the photo chain's own view of it
+(:mod:`deepmorph_core.registration`), and carries more: :data:`CODE_BITS_PER_GROUP_AT_PIXELS`
+code bits per readable group, up to :data:`LARGEST_CODE_AT_PIXELS`, in codes correcting two bit
+errors (:data:`ECC_AT_PIXELS`, the codes it was measured with). On the six drawings of
+``bench/pixels_panel.py``'s rule, codes of that size read 99.5-100 % of medium close-ups 240 and
+330 px wide on five (``cpu``'s at 50 code bits, above the cap) and 96.5-97.5 % on ``codepen``, 0
+wrong in 4800. Below that width nothing larger was measured, and the 96-px figure stands.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -37,6 +46,17 @@ from deepmorph_core.payload import MAX_PAYLOAD_BITS
 
 #: Code bits a decoder reads reliably per readable group (see the module docstring).
 CODE_BITS_PER_GROUP = 0.70
+#: Code bits per readable group of a model trained with ``--pixels`` of at least
+#: :data:`PIXELS_MEASURED` (see the module docstring).
+CODE_BITS_PER_GROUP_AT_PIXELS = 1.25
+#: The print width in photo pixels :data:`CODE_BITS_PER_GROUP_AT_PIXELS` was measured at.
+PIXELS_MEASURED = 200
+#: BCH codes the prediction at :data:`PIXELS_MEASURED` uses: correcting two bit errors.
+ECC_AT_PIXELS = (2,)
+#: The largest code the prediction at :data:`PIXELS_MEASURED` gives: the largest measured to read
+#: on ``codesandbox`` (48 readable groups: 44 code bits from 100 % of close-ups, 52 from 95 %);
+#: ``cpu`` read 50 from 99.5 %, ``battery-charging`` 44 from 98.5-99 %.
+LARGEST_CODE_AT_PIXELS = 44
 #: The largest code a model of a crowded drawing (many readable groups in a small space, which
 #: the count of groups does not see) was measured to read from 99 % of captures; the prediction
 #: does not reach beyond it (a drawing with many readable groups is not predicted to carry more).
@@ -93,6 +113,8 @@ class CapacityReport:
         elements: per element, what it contributes (in document order).
         static: lines of elements that do not morph at all (fixed, or no bounds).
         visible_mask: per variable, whether it is counted as visible (not in the JSON).
+        print_px: the print width the prediction is for (``train --pixels``); ``None``: the
+            default reading in the decoder's 96-px frame.
     """
 
     n_variables: int
@@ -104,6 +126,7 @@ class CapacityReport:
     elements: list[ElementCapacity] = field(default_factory=list)
     static: list[int | None] = field(default_factory=list)
     visible_mask: list[bool] = field(default_factory=list)
+    print_px: int | None = None
 
     def fits(self, spec: CodecSpec) -> bool:
         """Whether a code is within the prediction."""
@@ -112,10 +135,11 @@ class CapacityReport:
     def limits(self) -> list[str]:
         """What limits the capacity, and where loosening bounds would help, in lines."""
         lines = []
-        uncapped = _code_bits_of_groups(self.readable_groups)
-        if uncapped > LARGEST_CODE_MEASURED:
+        uncapped = _code_bits_of_groups(self.readable_groups, self.print_px)
+        largest = largest_code(self.print_px)
+        if uncapped > largest:
             lines.append(
-                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read on a "
+                f"the prediction stops at {largest} code bits, the largest code measured to read on a "
                 f"crowded drawing ({self.readable_groups} readable variables would give {uncapped}); above it only "
                 "a training's validation says what reads"
             )
@@ -160,15 +184,41 @@ class CapacityReport:
         return data
 
 
-def code_bits_for(readable_groups: int) -> int:
-    """Code bits a decoder reads reliably from ``readable_groups`` groups: :data:`CODE_BITS_PER_GROUP`
-    each, at most :data:`LARGEST_CODE_MEASURED`."""
-    return min(_code_bits_of_groups(readable_groups), LARGEST_CODE_MEASURED)
+def code_bits_for(readable_groups: int, print_px: int | None = None) -> int:
+    """Code bits a decoder reads reliably from ``readable_groups`` groups of a model trained for
+    prints ``print_px`` wide (``None``: the default 96-px reading): :func:`bits_per_group` each,
+    at most :func:`largest_code`."""
+    return min(_code_bits_of_groups(readable_groups, print_px), largest_code(print_px))
 
 
-def _code_bits_of_groups(readable_groups: int) -> int:
-    """:data:`CODE_BITS_PER_GROUP` per group, before the cap (rounded down)."""
-    return int(math.floor(CODE_BITS_PER_GROUP * readable_groups + 1e-9))
+def largest_code(print_px: int | None = None) -> int:
+    """The largest code a model trained for prints ``print_px`` wide is predicted to read:
+    :data:`LARGEST_CODE_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else
+    :data:`LARGEST_CODE_MEASURED`."""
+    return LARGEST_CODE_AT_PIXELS if at_pixels(print_px) else LARGEST_CODE_MEASURED
+
+
+def bits_per_group(print_px: int | None = None) -> float:
+    """Code bits per readable group of a model trained for prints ``print_px`` wide:
+    :data:`CODE_BITS_PER_GROUP_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else
+    :data:`CODE_BITS_PER_GROUP`."""
+    return CODE_BITS_PER_GROUP_AT_PIXELS if at_pixels(print_px) else CODE_BITS_PER_GROUP
+
+
+def at_pixels(print_px: int | None) -> bool:
+    """Whether a model trained for prints ``print_px`` wide is planned with the figures measured
+    at :data:`PIXELS_MEASURED` px."""
+    return print_px is not None and print_px >= PIXELS_MEASURED
+
+
+def ecc_for(print_px: int | None = None) -> tuple[int, ...]:
+    """The BCH strengths a plan for prints ``print_px`` wide chooses from."""
+    return ECC_AT_PIXELS if at_pixels(print_px) else ECC_CHOICES
+
+
+def _code_bits_of_groups(readable_groups: int, print_px: int | None = None) -> int:
+    """:func:`bits_per_group` per group, before the cap (rounded down)."""
+    return int(math.floor(bits_per_group(print_px) * readable_groups + 1e-9))
 
 
 def largest_payload(
@@ -200,15 +250,20 @@ def payload_codes(
 
 
 def predict(
-    drawing: MorphableDrawing, width: int = 96, crc_bits: int | None = None, ecc: tuple[int, ...] = ECC_CHOICES
+    drawing: MorphableDrawing,
+    width: int = 96,
+    crc_bits: int | None = None,
+    ecc: tuple[int, ...] | None = None,
+    print_px: int | None = None,
 ) -> CapacityReport:
     """Predict what ``drawing`` carries, from renders of each variable at both ends of its
     range (real renderer for visibility, soft rasterizer for look-alikes) at ``width`` pixels,
     with codes of ``crc_bits`` (default: the codec's choice) and BCH codes correcting ``ecc``
-    bit errors."""
+    bit errors (default: :func:`ecc_for` ``print_px``), for a model trained for prints
+    ``print_px`` wide in the photo (``train --pixels``; ``None``: the default reading)."""
     n = drawing.n_variables
     if n == 0:
-        return CapacityReport(0, 0, 0, 0, 0, None, [], [p.line for p in drawing.drawing.primitives])
+        return CapacityReport(0, 0, 0, 0, 0, None, [], [p.line for p in drawing.drawing.primitives], print_px=print_px)
     visibility = drawing.visibility(width)
     contrast = drawing.contrast(width)
     # a faint shape's moves are as faint as its edges: its variables are not counted as readable
@@ -216,8 +271,7 @@ def predict(
     shown = (visibility > INVISIBLE) & ~faint
     groups = twin_groups(drawing.effects(drawing.rasterizer(width)))
     readable = sum(1 for members, _ in groups if shown[members].any())
-    code_bits = code_bits_for(readable)
-    spec = largest_payload(code_bits, crc_bits, ecc)
+    code_bits, spec = _planned_code(readable, print_px, crc_bits, ecc)
     per_prim: dict[int, list[int]] = {}
     for k, var in enumerate(drawing.variables):
         if var.owner == "primitive":
@@ -250,7 +304,49 @@ def predict(
         elements,
         static,
         [bool(v) for v in shown],
+        print_px,
     )
+
+
+def for_print(
+    report: CapacityReport, print_px: int | None, crc_bits: int | None = None, ecc: tuple[int, ...] | None = None
+) -> CapacityReport:
+    """``report``'s prediction for a model trained for prints ``print_px`` wide instead (the
+    same readable groups; no new renders), with codes of ``crc_bits`` and ``ecc``."""
+    code_bits, spec = _planned_code(report.readable_groups, print_px, crc_bits, ecc)
+    payload = 0 if spec is None else spec.payload_bits
+    return replace(report, code_bits=code_bits, payload_bits=payload, codec=spec, print_px=print_px)
+
+
+def payload_for_width(
+    report: CapacityReport, pixels: float, needs_px: float, crc_bits: int | None = None
+) -> tuple[int | None, int | None]:
+    """The payload bits a print ``pixels`` wide in the photo carries, and the ``--pixels`` to
+    train its model with (``None``: the default training): ``(None, None)`` below ``needs_px``,
+    the narrowest print a default model reads; from :data:`PIXELS_MEASURED` up, a model trained
+    for that width (it reads wider prints too); between, the default prediction (nothing else
+    was measured there)."""
+    if pixels < needs_px:
+        return None, None
+    if at_pixels(int(pixels)):
+        return for_print(report, PIXELS_MEASURED, crc_bits).payload_bits, PIXELS_MEASURED
+    return for_print(report, None, crc_bits).payload_bits, None
+
+
+def _planned_code(
+    readable_groups: int, print_px: int | None, crc_bits: int | None, ecc: tuple[int, ...] | None
+) -> tuple[int, CodecSpec | None]:
+    """The code bits ``readable_groups`` carry for prints ``print_px`` wide, and the largest
+    payload's code in them (BCH strengths ``ecc``, default :func:`ecc_for`). Never less than the
+    default reading's plan: a ``--pixels`` model reads prints at least as well (a crowded
+    drawing's 96-px plan, in a BCH t = 1 code, can carry more than the capped t = 2 one)."""
+    code_bits = code_bits_for(readable_groups, print_px)
+    spec = largest_payload(code_bits, crc_bits, ecc_for(print_px) if ecc is None else ecc)
+    if at_pixels(print_px):
+        default_bits, default = _planned_code(readable_groups, None, crc_bits, ecc)
+        if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
+            return default_bits, default
+    return code_bits, spec
 
 
 def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | None:
@@ -272,10 +368,20 @@ def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | N
 
 __all__ = [
     "CODE_BITS_PER_GROUP",
+    "CODE_BITS_PER_GROUP_AT_PIXELS",
+    "ECC_AT_PIXELS",
+    "LARGEST_CODE_AT_PIXELS",
     "LARGEST_CODE_MEASURED",
+    "PIXELS_MEASURED",
     "CapacityReport",
     "ElementCapacity",
+    "at_pixels",
+    "bits_per_group",
     "code_bits_for",
+    "ecc_for",
+    "for_print",
+    "largest_code",
+    "payload_for_width",
     "largest_payload",
     "payload_codes",
     "predict",

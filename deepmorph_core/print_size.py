@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from deepmorph_core.capacity import CapacityReport, payload_for_width
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 
@@ -32,9 +33,9 @@ PLAN_PIXELS = (96, 150, 200, 300)
 SUB_PIXEL = 1.0
 #: What a plan's predicted payload means for prints of other sizes (``capacity`` and the studio).
 READING_NOTE = (
-    "a model trained the default way reads every print in its decoder's 96-px frame, so the payload above is "
-    "the same for every print at least that wide; `train --pixels N` reads prints N px wide or more at their "
-    "own resolution"
+    "a model trained the default way reads every print at least 96 px wide in its decoder's 96-px frame; one "
+    "trained with `train --pixels 200` reads prints 200 px wide or more at their own resolution and carries "
+    "the payload the table gives there"
 )
 
 
@@ -153,27 +154,54 @@ class SizeRow:
         median_move: the median visible variable's travel across its range, in those pixels.
         smallest_move: the least-moving visible variable's travel.
         sub_pixel: visible variables that travel less than :data:`SUB_PIXEL` pixel.
+        payload_bits: the payload predicted to read at this width
+            (:func:`~deepmorph_core.capacity.payload_for_width`); ``None``: too small to read,
+            or no prediction asked for.
+        train_pixels: the ``train --pixels`` of the model that carries it (``None``: the
+            default training).
     """
 
     pixels: float
     median_move: float
     smallest_move: float
     sub_pixel: int
+    payload_bits: int | None = None
+    train_pixels: int | None = None
+
+    @property
+    def payload_text(self) -> str:
+        """The payload cell of ``capacity``'s table (and the studio's)."""
+        if self.payload_bits is None:
+            return "too small"
+        how = "" if self.train_pixels is None else f" (--pixels {self.train_pixels})"
+        return f"{self.payload_bits}{how}"
 
 
-def plan(drawing: MorphableDrawing, visible: np.ndarray, sizes: list[float]) -> list[SizeRow]:
+def plan(
+    drawing: MorphableDrawing,
+    visible: np.ndarray | list[bool],
+    sizes: list[float],
+    report: CapacityReport | None = None,
+    needs_px: float = 96,
+    crc_bits: int | None = None,
+) -> list[SizeRow]:
     """Each print width of ``sizes`` (photo pixels) with the travel of the ``visible``
-    variables (a ``(N_v,)`` bool) there."""
+    variables (a ``(N_v,)`` bool) there; with ``report`` (the drawing's
+    :func:`~deepmorph_core.capacity.predict`), also the payload each width carries, for a model
+    whose default frame is ``needs_px`` wide and codes with ``crc_bits``."""
     share = movement(drawing)[np.asarray(visible, dtype=bool)]
     rows = []
     for px in sizes:
         moves = share * px
+        payload, train_px = (None, None) if report is None else payload_for_width(report, px, needs_px, crc_bits)
         rows.append(
             SizeRow(
                 float(px),
                 round(float(np.median(moves)), 2) if moves.size else 0.0,
                 round(float(moves.min()), 2) if moves.size else 0.0,
                 int((moves < SUB_PIXEL).sum()),
+                payload,
+                train_px,
             )
         )
     return rows
@@ -189,4 +217,4 @@ def plan_sizes(pixels: float | None) -> list[float]:
 
 def rows_to_json(rows: list[SizeRow]) -> list[dict[str, Any]]:
     """The rows as ``capacity --json`` gives them (``print_size.sizes``)."""
-    return [asdict(row) for row in rows]
+    return [{**asdict(row), "payload_text": row.payload_text} for row in rows]

@@ -206,7 +206,7 @@ def capacity(
     largest payload that reads from 99 % of captures, and what limits it; with how far its
     variables move in a photo at 96, 150, 200 and 300 px across (and at --pixels, or at the
     width a --print-mm print has at --distance-cm)."""
-    from deepmorph_core.capacity import predict
+    from deepmorph_core.capacity import at_pixels, for_print, predict
     from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
     from deepmorph_core.reading_channel import channel_for, channel_name
 
@@ -221,7 +221,9 @@ def capacity(
     drawing = _load(svg, move, shift, scale, rotate, drop).read_in(channel_for(read_in))
     report = predict(drawing, crc_bits=crc)
     read_in = channel_name(drawing.channel)
-    sizes = plan(drawing, report.visible_mask, plan_sizes(pixels))
+    sizes = plan(drawing, report.visible_mask, plan_sizes(pixels), report, DEFAULTS.width, crc)
+    train_px = int(pixels) if pixels is not None and at_pixels(int(pixels)) else None
+    report = for_print(report, train_px, crc)  # the model to train for a print that wide
     camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
     # a model reads prints at least as wide as its decoder's frame (the default one before training)
     legible = None if pixels is None else legibility(pixels, DEFAULTS.width, print_mm, frame_px, fov_deg)
@@ -249,7 +251,9 @@ def capacity(
             "none predicted to read from 99 % of captures"
             if spec is None
             else f"{report.payload_bits} bits at 99 % (CRC {spec.crc_bits}, BCH t={spec.bch_t}: "
-            f"{spec.code_bits} code bits); train with --payload-bits auto",
+            f"{spec.code_bits} code bits); train with "
+            + (f"--pixels {train_px} " if train_px is not None else "")
+            + "--payload-bits auto",
         ),
     ]
     table = Table(title=safe(svg), show_header=False)
@@ -275,13 +279,13 @@ def _print_sizes(
         out.print(
             f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {frame_px}-px, {fov:g}° frame"
         )
-    table = Table(title="moves in the photo (control points across each variable's range)")
-    for column in ("print width", "median move", "smallest move", "under 1 px"):
+    table = Table(title="moves in the photo (control points across each variable's range), and the payload")
+    for column in ("print width", "median move", "smallest move", "under 1 px", "payload bits"):
         table.add_column(column, justify="right")
     for row in sizes:
         mark = " ←" if pixels is not None and abs(row.pixels - pixels) < 0.5 else ""
         table.add_row(f"{row.pixels:.0f} px{mark}", f"{row.median_move:.1f} px", f"{row.smallest_move:.1f} px",
-                      str(row.sub_pixel))  # fmt: skip
+                      str(row.sub_pixel), row.payload_text)  # fmt: skip
     out.print(table)
     out.print(f"note: {READING_NOTE}")
 

@@ -41,10 +41,9 @@ from deepmorph.training.settings import DEFAULTS, PHOTO_SAMPLES, RENDER_SAMPLES,
 from deepmorph_core.errors import DeepMorphError
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from deepmorph.registry import PayloadRegistry
     from deepmorph.sheet import Sheet
+    from deepmorph_core.capacity import CapacityReport
     from deepmorph_core.code import FileFormat
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.morphable import MorphableDrawing
@@ -331,7 +330,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
                 "reading_channel": channel_name(md.channel),
                 **report.to_json(),
                 "limits": report.limits(),
-                "print_size": print_size(md, report.visible_mask, print_mm, distance_cm),
+                "print_size": print_size(md, report, print_mm, distance_cm),
             }
 
         return JSONResponse(await run_in_threadpool(work))
@@ -551,11 +550,11 @@ def typed_payload(text: str, payload_bits: int, form: object) -> Payload:
     return Payload.parse(text, payload_bits, payload_form(form))
 
 
-def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, distance_cm: float) -> dict[str, Any]:
-    """What ``deepmorph capacity --print-mm --distance-cm`` adds to the prediction: the print's
-    width in a 1080p phone's photo (:func:`~deepmorph_core.print_size.pixels_across`) and how
-    far the visible variables move there and at 96, 150, 200 and 300 px
-    (:func:`~deepmorph_core.print_size.plan`), and whether a print that wide reads
+def print_size(md: MorphableDrawing, report: CapacityReport, print_mm: float, distance_cm: float) -> dict[str, Any]:
+    """What ``deepmorph capacity --print-mm --distance-cm`` adds to the prediction ``report``:
+    the print's width in a 1080p phone's photo (:func:`~deepmorph_core.print_size.pixels_across`),
+    how far the visible variables move there and at 96, 150, 200 and 300 px and the payload each
+    width carries (:func:`~deepmorph_core.print_size.plan`), and whether a print that wide reads
     (:func:`~deepmorph_core.print_size.legibility`), in the command's words."""
     from deepmorph.training.settings import DEFAULTS
     from deepmorph_core.print_size import (
@@ -578,7 +577,7 @@ def print_size(md: MorphableDrawing, visible: np.ndarray, print_mm: float, dista
         "frame_px": PHONE_FRAME_PX,
         "fov_deg": PHONE_FOV_DEG,
         "pixels": pixels,
-        "sizes": rows_to_json(plan(md, visible, plan_sizes(pixels))),
+        "sizes": rows_to_json(plan(md, report.visible_mask, plan_sizes(pixels), report, DEFAULTS.width)),
         "span": f"a {print_mm:g} mm print at {distance_cm:g} cm spans {pixels:.0f} px of a {PHONE_FRAME_PX}-px, "
         f"{PHONE_FOV_DEG:g}° frame",
         "legibility": legible.to_json(),

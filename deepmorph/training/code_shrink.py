@@ -37,6 +37,18 @@ from deepmorph_core.model import DeepMorphModel
 #: A code that reads fewer of its words than this over a window at full corruption is shrunk.
 #: Codes that go on to read 99 % of photos read 98-99.6 % there (the time-to-print panel).
 SHRINK_BELOW = 0.9
+#: The same for a model trained with ``--pixels``: its corruption is the camera's at the
+#: narrowest print it reads, with a share of hard captures, so its batches read fewer words than
+#: its close-ups do. Codes that read 98.5-100 % of medium close-ups at 240 and 330 px read 0.64-1.00
+#: of their words over their last batches; codes that read 64-95 %, 0.13-0.58 (one at 97.5 %,
+#: 0.78; ``bench/pixels_panel.py``, ``bench/README.md``).
+SHRINK_BELOW_AT_PIXELS = 0.6
+
+
+def shrink_below(print_px: int | None) -> float:
+    """The read share below which a code of a model trained for prints ``print_px`` wide
+    (``None``: the default training) is shrunk."""
+    return SHRINK_BELOW if print_px is None else SHRINK_BELOW_AT_PIXELS
 
 
 def read_share(errors: Tensor, bits: Tensor, correctable: int) -> float:
@@ -123,4 +135,13 @@ def describe(shrink: CodeShrink) -> str:
     )
 
 
-__all__ = ["SHRINK_BELOW", "describe", "information", "read_share", "shrink_networks", "smaller_code"]
+__all__ = [
+    "SHRINK_BELOW",
+    "SHRINK_BELOW_AT_PIXELS",
+    "describe",
+    "information",
+    "read_share",
+    "shrink_below",
+    "shrink_networks",
+    "smaller_code",
+]

@@ -35,7 +35,7 @@ import torch.nn.functional as F
 from pydantic import BaseModel, ConfigDict, ValidationError
 from torch import Tensor, nn
 
-from deepmorph.training.code_shrink import SHRINK_BELOW, describe, read_share, shrink_networks, smaller_code
+from deepmorph.training.code_shrink import describe, read_share, shrink_below, shrink_networks, smaller_code
 from deepmorph.training.distributed import (
     BatchNormShards,
     World,
@@ -55,7 +55,7 @@ from deepmorph.training.settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TUNE_DE
 from deepmorph.training.validation import default_samples, validate, validation_warning
 from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, ValidationRecord
-from deepmorph_core.capacity import ECC_CHOICES, predict, size_warning
+from deepmorph_core.capacity import predict, size_warning
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.device import resolve_device
@@ -441,7 +441,7 @@ class CodecRun:
     def _update_code(self, wrong: Tensor, full_corruption: bool) -> None:
         """Shrink an auto-sized code that does not read (:mod:`deepmorph.training.code_shrink`):
         after a settling window at full corruption, when a window's captures (every rank's)
-        read fewer than :data:`~deepmorph.training.code_shrink.SHRINK_BELOW` of their code words,
+        read fewer than :func:`~deepmorph.training.code_shrink.shrink_below` of their code words,
         with a window's steps still to train; judged at the end of each window. ``wrong``: this
         step's ``(rows, N_b)`` code bits read wrong."""
         cfg, rec = self.cfg, self.record
@@ -463,7 +463,7 @@ class CodecRun:
         errors = torch.cat([torch.cat(part) for part in gather_objects(self._errors, self.world)])
         spec = self.model.codec.spec
         read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
-        if read >= SHRINK_BELOW:
+        if read >= shrink_below(cfg.print_px):
             return
         smaller = smaller_code(errors, spec, rec.payload_auto)
         if smaller is None:
@@ -678,9 +678,7 @@ def open_model(
             settings = RasterSettings(width=config.width)
             given_bounds = {k: v for k, v in (bounds or {}).items() if v is not None}
             channel = md.read_in(channel_for(config.read_in)).channel  # chosen once, for capacity and model
-            spec = _payload_code(
-                payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config.width, label, warn, channel
-            )
+            spec = _payload_code(payload_bits, crc_bits, ecc_t, svg_text, given_bounds, config, label, warn, channel)
             torch.manual_seed(config.seed)  # the networks' initial weights are part of the seeded run
             model = DeepMorphModel.create(
                 svg_text,
@@ -713,17 +711,18 @@ def _payload_code(
     ecc_t: int | None,
     svg_text: str,
     bounds: dict[str, Any],
-    width: int,
+    config: TrainConfig,
     label: str,
     warn: Callable[[str], None],
     channel: Channel,
 ) -> CodecSpec:
     """The code of a new model: the requested payload's (with a warning when the drawing is
     predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry,
-    read in ``channel``."""
+    read in ``channel``, by a model of ``config`` (its frame width, and the print width it is
+    trained for)."""
     drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds).read_in(channel)
     check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
-    report = predict(drawing, width, crc_bits, (ecc_t,) if ecc_t is not None else ECC_CHOICES)
+    report = predict(drawing, config.width, crc_bits, (ecc_t,) if ecc_t is not None else None, config.print_px)
     if payload_bits == "auto":
         if report.codec is None:
             raise DeepMorphError(

@@ -9,12 +9,18 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph.training.code_shrink import SHRINK_BELOW, SHRINK_BELOW_AT_PIXELS, shrink_below
 from deepmorph.training.codec import train_model
 from deepmorph_core.capacity import (
     CODE_BITS_PER_GROUP,
+    CODE_BITS_PER_GROUP_AT_PIXELS,
+    ECC_CHOICES,
     LARGEST_CODE_MEASURED,
+    PIXELS_MEASURED,
     code_bits_for,
+    for_print,
     largest_payload,
+    payload_for_width,
     predict,
     size_warning,
 )
@@ -64,6 +70,33 @@ def test_the_prediction_grows_with_readable_groups_up_to_the_largest_code_measur
     assert bits[40] == int(CODE_BITS_PER_GROUP * 40) and max(bits) == LARGEST_CODE_MEASURED
 
 
+def test_a_model_trained_for_wide_prints_is_planned_with_what_was_measured_there() -> None:
+    """``--pixels`` of at least :data:`PIXELS_MEASURED`: more code bits per readable group, in
+    codes correcting two errors (those measured); narrower, the 96-px figure stands."""
+    md = MorphableDrawing.load(DRAWING)
+    plain = predict(md)
+    wide = predict(md, print_px=250)
+    assert wide.readable_groups == plain.readable_groups and wide.print_px == 250 and plain.print_px is None
+    assert wide.code_bits == int(CODE_BITS_PER_GROUP_AT_PIXELS * wide.readable_groups) > plain.code_bits
+    assert wide.codec is not None and wide.codec.bch_t == 2 and wide.payload_bits > plain.payload_bits
+    assert predict(md, print_px=PIXELS_MEASURED - 1).code_bits == plain.code_bits  # not measured below
+    # the same plan from the readable groups alone, with no new renders
+    assert for_print(plain, 250) == wide and for_print(wide, None) == plain
+    assert for_print(plain, 250, ecc=(1,)).codec.bch_t == 1  # a user's own BCH strength is kept
+    # per print width: too small, the default training, or a model trained for 200 px
+    assert payload_for_width(plain, 80, 96) == (None, None)
+    assert payload_for_width(plain, 150, 96) == (plain.payload_bits, None)
+    assert payload_for_width(plain, 300, 96) == (for_print(plain, 200).payload_bits, 200)
+    assert ECC_CHOICES == (2, 1)
+
+
+def test_a_code_is_shrunk_by_the_share_its_own_kind_of_training_reads() -> None:
+    """A ``--pixels`` model's batches are the camera at its narrowest print, with hard captures:
+    far harsher than its close-ups, so its code is judged by a lower share."""
+    assert shrink_below(None) == SHRINK_BELOW == 0.9
+    assert shrink_below(200) == SHRINK_BELOW_AT_PIXELS < SHRINK_BELOW
+
+
 def test_a_drawing_with_more_readable_variables_than_measured_is_told_where_the_prediction_stops() -> None:
     strokes = "".join(f'<polyline points="{2 + x} 2 {3 + x} 12 {2 + x} 22"/>' for x in range(20))
     crowded = make_svg(f'<g stroke="black" stroke-width="0.5" fill="none" dm:move="0.8">{strokes}</g>')
@@ -71,6 +104,9 @@ def test_a_drawing_with_more_readable_variables_than_measured_is_told_where_the_
     assert report.readable_groups * CODE_BITS_PER_GROUP > LARGEST_CODE_MEASURED
     assert report.code_bits == LARGEST_CODE_MEASURED
     assert any(f"stops at {LARGEST_CODE_MEASURED} code bits" in line for line in report.limits())
+    # a --pixels model's plan is capped lower, in t = 2 codes: it falls back to the default plan
+    wide = for_print(report, PIXELS_MEASURED)
+    assert wide.codec == report.codec and wide.print_px == PIXELS_MEASURED
 
 
 def test_every_payload_size_that_fits_is_the_largest() -> None:

@@ -104,6 +104,7 @@ def test_capacity_plans_a_print_from_its_size_and_distance(tmp_path) -> None:
     assert "a 50 mm print at 30 cm spans 251 px of a 1920-px, 65° frame" in shown.output
     assert "251 px ←" in shown.output
     assert "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away" in shown.output
+    assert "--pixels 251 --payload-bits auto" in " ".join(shown.output.replace("│", " ").split())
     distant = CliRunner().invoke(app, ["capacity", str(svg), "--print-mm", "20", "--distance-cm", "100"])
     assert "too small to read: 30 px across, needs 96; hold the camera within 31 cm, or print it wider" in " ".join(
         distant.output.split()
@@ -115,6 +116,12 @@ def test_capacity_plans_a_print_from_its_size_and_distance(tmp_path) -> None:
     assert plan_json["pixels"] == 200 and plan_json["camera"] is None
     assert plan_json["legibility"] == {"pixels": 200.0, "needs_px": 96.0, "farthest_cm": None, "reads": True}
     assert [row["pixels"] for row in plan_json["sizes"]] == [96.0, 150.0, 200.0, 300.0]
+    # the payload at each width: the default training's below 200 px, a --pixels model's above
+    default, wide = plan_json["sizes"][1], plan_json["sizes"][3]
+    assert default["train_pixels"] is None and wide["train_pixels"] == 200
+    assert wide["payload_bits"] > default["payload_bits"] > 0
+    assert wide["payload_text"] == f"{wide['payload_bits']} (--pixels 200)"
+    assert data["print_px"] == 200 and data["payload_bits"] == wide["payload_bits"]  # planned for --pixels 200
     assert "visible_mask" not in data
     for args, message in (
         (["--print-mm", "50"], "give both --print-mm and --distance-cm"),

@@ -669,7 +669,8 @@ def _capacity_rows(page) -> list[list[str]]:  # noqa: ANN001
 
 
 def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple[float, list[list[str]]]:
-    """The travel table the CLI prints for the studio's drawing as it is now, from the library."""
+    """The travel and payload table the CLI prints for the studio's drawing as it is now, from
+    the library."""
     from deepmorph.studio import drawing as drawings
     from deepmorph_core.capacity import predict
     from deepmorph_core.print_size import pixels_across, plan, plan_sizes
@@ -678,10 +679,11 @@ def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple
     assert status == 200
     md = drawings.load(svg, "drawing.svg")
     pixels = pixels_across(print_mm, distance_cm)
-    rows = plan(md, predict(md).visible_mask, plan_sizes(pixels))
+    report = predict(md)
+    rows = plan(md, report.visible_mask, plan_sizes(pixels), report)
     return pixels, [
         [f"{r.pixels:.0f} px" + (" ←" if abs(r.pixels - pixels) < 0.5 else ""), f"{r.median_move:.1f} px",
-         f"{r.smallest_move:.1f} px", str(r.sub_pixel)]
+         f"{r.smallest_move:.1f} px", str(r.sub_pixel), r.payload_text]
         for r in rows
     ]  # fmt: skip
 
@@ -700,8 +702,8 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
         == "wide enough to read: 251 px across, 96 needed; it reads up to 78 cm away"
     )
     assert "bits read from 99 % of captures" in page.text_content("#capacity-bits")
-    assert "reads every print in its decoder's 96-px frame" in page.text_content("#capacity-note")
-    assert "the payload above is the same for every print at least that wide" in page.text_content("#capacity-note")
+    assert "reads every print at least 96 px wide in its decoder's 96-px frame" in page.text_content("#capacity-note")
+    assert "carries the payload the table gives there" in page.text_content("#capacity-note")
 
     # another size and distance: the table follows
     page.fill("#capacity-form input[name=print_mm]", "80")

@@ -301,9 +301,9 @@ function showPrintSize(p) {
   $("#capacity-reads").className = p.legibility.reads ? "" : "warn";
   const table = $("#capacity-sizes");
   table.appendChild(Object.assign(document.createElement("caption"),
-    { textContent: "moves in the photo (control points across each variable's range)" }));
+    { textContent: "moves in the photo (control points across each variable's range), and the payload" }));
   const head = document.createElement("tr");
-  for (const h of ["print width", "median move", "smallest move", "under 1 px"]) {
+  for (const h of ["print width", "median move", "smallest move", "under 1 px", "payload bits"]) {
     head.appendChild(Object.assign(document.createElement("th"), { textContent: h }));
   }
   table.appendChild(head);
@@ -312,7 +312,7 @@ function showPrintSize(p) {
     const yours = Math.abs(row.pixels - p.pixels) < 0.5;
     if (yours) tr.className = "yours";
     const cells = [`${row.pixels.toFixed(0)} px${yours ? " ←" : ""}`, `${row.median_move.toFixed(1)} px`,
-      `${row.smallest_move.toFixed(1)} px`, String(row.sub_pixel)];
+      `${row.smallest_move.toFixed(1)} px`, String(row.sub_pixel), row.payload_text];
     for (const v of cells) tr.appendChild(Object.assign(document.createElement("td"), { textContent: v }));
     table.appendChild(tr);
   }
