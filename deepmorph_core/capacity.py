@@ -26,8 +26,9 @@ A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo
 code bits per readable group, up to :data:`LARGEST_CODE_AT_PIXELS`, in codes correcting two bit
 errors (:data:`ECC_AT_PIXELS`, the codes it was measured with). On the six drawings of
 ``bench/pixels_panel.py``'s rule, codes of that size read 99.5-100 % of medium close-ups 240 and
-330 px wide on five (``cpu``'s at 50 code bits, above the cap) and 96.5-97.5 % on ``codepen``, 0
-wrong in 4800. Below that width nothing larger was measured, and the 96-px figure stands.
+330 px wide on four, 96.5-97.5 % on ``codepen``, and ``cpu``'s 91.7 % of renders (where its 50
+code bits had read 99.5 % of close-ups in another training); 0 wrong in 5600. Below that width
+nothing larger was measured, and the 96-px figure stands.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ PIXELS_MEASURED = 200
 ECC_AT_PIXELS = (2,)
 #: The largest code the prediction at :data:`PIXELS_MEASURED` gives: the largest measured to read
 #: on ``codesandbox`` (48 readable groups: 44 code bits from 100 % of close-ups, 52 from 95 %);
-#: ``cpu`` read 50 from 99.5 %, ``battery-charging`` 44 from 98.5-99 %.
+#: ``battery-charging`` read 44 from 98.5-99 %.
 LARGEST_CODE_AT_PIXELS = 44
 #: The largest code a model of a crowded drawing (many readable groups in a small space, which
 #: the count of groups does not see) was measured to read from 99 % of captures; the prediction
