@@ -26,7 +26,7 @@ A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo
 code bits per readable group, up to :data:`LARGEST_CODE_AT_PIXELS`, in codes correcting two bit
 errors (:data:`ECC_AT_PIXELS`, the codes it was measured with). On the six drawings of
 ``bench/pixels_panel.py``'s rule, codes of that size read 99.5-100 % of medium close-ups 240 and
-330 px wide on four, 96.5-97.5 % on ``codepen``, and ``cpu``'s 91.7 % of renders (where its 50
+330 px wide on four, 96.5-97.5 % on ``codepen``, and ``cpu``'s 56 % at 240 px (where its 50
 code bits had read 99.5 % of close-ups in another training); 0 wrong in 5600. Below that width
 nothing larger was measured, and the 96-px figure stands.
 """

@@ -40,8 +40,8 @@ SHRINK_BELOW = 0.9
 #: The same for a model trained with ``--pixels``: its corruption is the camera's at the
 #: narrowest print it reads, with a share of hard captures, so its batches read fewer words than
 #: its close-ups do. Codes that read 98.5-100 % of medium close-ups at 240 and 330 px read
-#: 0.64-1.00 of their words over their last batches; codes that read 64-95 % of close-ups (or 92 %
-#: of renders), 0.13-0.58; one at 97.5 %, 0.78 (``bench/pixels_panel.py``, ``bench/README.md``).
+#: 0.64-1.00 of their words over their last batches; codes that read 56-95 % of close-ups,
+#: 0.13-0.58; one at 97.5 %, 0.78 (``bench/pixels_panel.py``, ``bench/README.md``).
 SHRINK_BELOW_AT_PIXELS = 0.6
 
 
