@@ -28,7 +28,6 @@ over their last ten logs (what an ``auto`` code's shrink watches).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import statistics
 import sys
@@ -48,23 +47,23 @@ LAST_LOGS = 10
 def batch_read(log: Path) -> float | None:
     """The mean share of code words the training batches read over the last :data:`LAST_LOGS`
     lines of a training log (``None`` without one)."""
-    if not log.is_file():
-        return None
-    lines = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
-    reads = [line["read"] for line in lines if "read" in line][-LAST_LOGS:]
+    from deepmorph.training.loop import read_log
+
+    reads = [line["read"] for line in read_log(log) if "read" in line][-LAST_LOGS:]
     return statistics.fmean(reads) if reads else None
 
 
 def planned_code(report: Any, args: argparse.Namespace) -> Any:
     """The code of the largest payload the plan gives the drawing of ``report`` (its
     :func:`~deepmorph_core.capacity.predict`)."""
-    from deepmorph_core.capacity import ECC_AT_PIXELS, for_print, largest_code, largest_payload
+    from deepmorph_core.capacity import figures_for, for_print, largest_payload
 
     if args.bits_per_group is None:
         return for_print(report, args.pixels).codec
-    largest = largest_code(args.pixels) if args.largest_code is None else args.largest_code
+    figures = figures_for(args.pixels)
+    largest = figures.largest_code if args.largest_code is None else args.largest_code
     code_bits = min(math.floor(args.bits_per_group * report.readable_groups + 1e-9), largest)
-    return largest_payload(code_bits, None, (ECC_AT_PIXELS[0] if args.ecc_t is None else args.ecc_t,))
+    return largest_payload(code_bits, None, figures.ecc if args.ecc_t is None else (args.ecc_t,))
 
 
 def train(svg: Path, move: float, out: Path, spec: Any, pixels: int, threads: int) -> float:

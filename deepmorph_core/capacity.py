@@ -137,7 +137,7 @@ class CapacityReport:
         """What limits the capacity, and where loosening bounds would help, in lines."""
         lines = []
         uncapped = _code_bits_of_groups(self.readable_groups, self.print_px)
-        largest = largest_code(self.print_px)
+        largest = figures_for(self.print_px).largest_code
         if uncapped > largest:
             lines.append(
                 f"the prediction stops at {largest} code bits, the largest code measured to read on a "
@@ -185,25 +185,25 @@ class CapacityReport:
         return data
 
 
-def code_bits_for(readable_groups: int, print_px: int | None = None) -> int:
-    """Code bits a decoder reads reliably from ``readable_groups`` groups of a model trained for
-    prints ``print_px`` wide (``None``: the default 96-px reading): :func:`bits_per_group` each,
-    at most :func:`largest_code`."""
-    return min(_code_bits_of_groups(readable_groups, print_px), largest_code(print_px))
+@dataclass(frozen=True)
+class ReadingFigures:
+    """The measured figures a plan uses for one kind of model.
+
+    Attributes:
+        bits_per_group: code bits read reliably per readable group.
+        largest_code: the largest code the plan gives.
+        ecc: the BCH strengths the plan chooses from.
+    """
+
+    bits_per_group: float
+    largest_code: int
+    ecc: tuple[int, ...]
 
 
-def largest_code(print_px: int | None = None) -> int:
-    """The largest code a model trained for prints ``print_px`` wide is predicted to read:
-    :data:`LARGEST_CODE_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else
-    :data:`LARGEST_CODE_MEASURED`."""
-    return LARGEST_CODE_AT_PIXELS if at_pixels(print_px) else LARGEST_CODE_MEASURED
-
-
-def bits_per_group(print_px: int | None = None) -> float:
-    """Code bits per readable group of a model trained for prints ``print_px`` wide:
-    :data:`CODE_BITS_PER_GROUP_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else
-    :data:`CODE_BITS_PER_GROUP`."""
-    return CODE_BITS_PER_GROUP_AT_PIXELS if at_pixels(print_px) else CODE_BITS_PER_GROUP
+#: The default training: every print read in the decoder's 96-px frame.
+FIGURES_96 = ReadingFigures(CODE_BITS_PER_GROUP, LARGEST_CODE_MEASURED, ECC_CHOICES)
+#: A model trained with ``--pixels`` of at least :data:`PIXELS_MEASURED`.
+FIGURES_AT_PIXELS = ReadingFigures(CODE_BITS_PER_GROUP_AT_PIXELS, LARGEST_CODE_AT_PIXELS, ECC_AT_PIXELS)
 
 
 def at_pixels(print_px: int | None) -> bool:
@@ -212,14 +212,21 @@ def at_pixels(print_px: int | None) -> bool:
     return print_px is not None and print_px >= PIXELS_MEASURED
 
 
-def ecc_for(print_px: int | None = None) -> tuple[int, ...]:
-    """The BCH strengths a plan for prints ``print_px`` wide chooses from."""
-    return ECC_AT_PIXELS if at_pixels(print_px) else ECC_CHOICES
+def figures_for(print_px: int | None = None) -> ReadingFigures:
+    """The figures of a model trained for prints ``print_px`` wide (``None``: the default
+    training): :data:`FIGURES_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else :data:`FIGURES_96`."""
+    return FIGURES_AT_PIXELS if at_pixels(print_px) else FIGURES_96
+
+
+def code_bits_for(readable_groups: int, print_px: int | None = None) -> int:
+    """Code bits a decoder reads reliably from ``readable_groups`` groups of a model trained for
+    prints ``print_px`` wide (:func:`figures_for`), at most its largest code."""
+    return min(_code_bits_of_groups(readable_groups, print_px), figures_for(print_px).largest_code)
 
 
 def _code_bits_of_groups(readable_groups: int, print_px: int | None = None) -> int:
-    """:func:`bits_per_group` per group, before the cap (rounded down)."""
-    return int(math.floor(bits_per_group(print_px) * readable_groups + 1e-9))
+    """:func:`figures_for`'s code bits per group, before the cap (rounded down)."""
+    return int(math.floor(figures_for(print_px).bits_per_group * readable_groups + 1e-9))
 
 
 def largest_payload(
@@ -260,7 +267,7 @@ def predict(
     """Predict what ``drawing`` carries, from renders of each variable at both ends of its
     range (real renderer for visibility, soft rasterizer for look-alikes) at ``width`` pixels,
     with codes of ``crc_bits`` (default: the codec's choice) and BCH codes correcting ``ecc``
-    bit errors (default: :func:`ecc_for` ``print_px``), for a model trained for prints
+    bit errors (default: :func:`figures_for` ``print_px``), for a model trained for prints
     ``print_px`` wide in the photo (``train --pixels``; ``None``: the default reading)."""
     n = drawing.n_variables
     if n == 0:
@@ -338,11 +345,11 @@ def _planned_code(
     readable_groups: int, print_px: int | None, crc_bits: int | None, ecc: tuple[int, ...] | None
 ) -> tuple[int, CodecSpec | None]:
     """The code bits ``readable_groups`` carry for prints ``print_px`` wide, and the largest
-    payload's code in them (BCH strengths ``ecc``, default :func:`ecc_for`). Never less than the
+    payload's code in them (BCH strengths ``ecc``, default :func:`figures_for`'s). Never less than the
     default reading's plan: a ``--pixels`` model reads prints at least as well (a crowded
     drawing's 96-px plan, in a BCH t = 1 code, can carry more than the capped t = 2 one)."""
     code_bits = code_bits_for(readable_groups, print_px)
-    spec = largest_payload(code_bits, crc_bits, ecc_for(print_px) if ecc is None else ecc)
+    spec = largest_payload(code_bits, crc_bits, figures_for(print_px).ecc if ecc is None else ecc)
     if at_pixels(print_px):
         default_bits, default = _planned_code(readable_groups, None, crc_bits, ecc)
         if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
@@ -371,17 +378,18 @@ __all__ = [
     "CODE_BITS_PER_GROUP",
     "CODE_BITS_PER_GROUP_AT_PIXELS",
     "ECC_AT_PIXELS",
+    "FIGURES_96",
+    "FIGURES_AT_PIXELS",
     "LARGEST_CODE_AT_PIXELS",
     "LARGEST_CODE_MEASURED",
     "PIXELS_MEASURED",
     "CapacityReport",
     "ElementCapacity",
+    "ReadingFigures",
     "at_pixels",
-    "bits_per_group",
     "code_bits_for",
-    "ecc_for",
+    "figures_for",
     "for_print",
-    "largest_code",
     "payload_for_width",
     "largest_payload",
     "payload_codes",
