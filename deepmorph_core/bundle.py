@@ -61,8 +61,10 @@ class CodeShrink(BaseModel):
     Attributes:
         step: the step it happened after.
         payload_bits, code_bits: ``(before, after)``.
-        read: the share of code words read over the last window at full corruption, before.
-        information: the bits of information the code's bits carried over that window.
+        read: the share of code words read before: over the last window of batches at full
+            corruption, or of fresh renders (``measured_on``).
+        information: the bits of information the code's bits carried there.
+        measured_on: ``batches`` (during training) or ``renders`` (when training ended).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -72,6 +74,7 @@ class CodeShrink(BaseModel):
     code_bits: tuple[int, int]
     read: float
     information: float
+    measured_on: Literal["batches", "renders"] = "batches"
 
 
 class TrainingRecord(BaseModel):

@@ -388,6 +388,7 @@ def train(
     spatial_transformer: Annotated[bool, setting_option("spatial_transformer")] = DEFAULTS.spatial_transformer,
     readout: Annotated[bool, setting_option("readout")] = DEFAULTS.readout,
     early_stop: Annotated[bool, setting_option("early_stop")] = DEFAULTS.early_stop,
+    renders_tune: Annotated[int, setting_option("renders_tune")] = DEFAULTS.renders_tune,
     read_in: Annotated[ReadIn, setting_option("read_in")] = DEFAULTS.read_in,
     device: DeviceOpt = DEFAULTS.device,
     shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
@@ -587,8 +588,13 @@ def _payload_sizing(record: dict[str, Any]) -> str:
     if not shrunk:
         return " (auto)"
     steps = "; then ".join(
-        f"{s['payload_bits'][0]} -> {s['payload_bits'][1]} at step {s['step']} (its batches read {s['read']:.0%} "
-        f"of code words; its code bits carried about {s['information']:.0f} bits)"
+        f"{s['payload_bits'][0]} -> {s['payload_bits'][1]} at step {s['step']} ("
+        + (
+            f"it read {s['read']:.1%} of fresh renders"
+            if s.get("measured_on") == "renders"
+            else f"its batches read {s['read']:.0%} of code words"
+        )
+        + f"; its code bits carried about {s['information']:.0f} bits)"
         for s in shrunk
     )
     return f" (auto, sized by training: {steps})"

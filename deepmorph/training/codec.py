@@ -35,7 +35,16 @@ import torch.nn.functional as F
 from pydantic import BaseModel, ConfigDict, ValidationError
 from torch import Tensor, nn
 
-from deepmorph.training.code_shrink import describe, read_share, shrink_below, shrink_networks, smaller_code
+from deepmorph.training.code_shrink import (
+    RENDER_ROUNDS,
+    RENDER_SEED_OFFSET,
+    code_for_renders,
+    describe,
+    read_share,
+    shrink_below,
+    shrink_networks,
+    smaller_code,
+)
 from deepmorph.training.distributed import (
     BatchNormShards,
     World,
@@ -221,7 +230,9 @@ class CodecRun:
         self.opt_dec = torch.optim.Adam(model.decoder.parameters(), lr=config.lr)
         self.opt_enc = torch.optim.Adam(model.encoder.parameters(), lr=config.encoder_lr)
         self.record = model.meta.record
-        self.record.total_steps = config.steps
+        # a code shrunk by its renders when training ended is trained on past the run's steps
+        by_renders = [s for s in self.record.shrunk if s.measured_on == "renders"]
+        self.record.total_steps = by_renders[-1].step + config.renders_tune if by_renders else config.steps
         self.record.device = self.device.type
         self.record.threads = torch.get_num_threads()
         self.record.world_size = self.world.size
@@ -400,6 +411,8 @@ class CodecRun:
         self._update_early_stop(read, full_corruption)
         if wrong_bits is not None:
             self._update_code(torch.cat(wrong_bits), full_corruption)
+        if self._sizing() and cfg.renders_tune and rec.step + 1 >= rec.total_steps:
+            self._check_renders()
         return {"loss": loss_sum / cfg.batch, "bit_acc": bit_acc, "word_acc": word_acc, "read": read}
 
     def _set_learning_rates(self) -> None:
@@ -469,6 +482,30 @@ class CodecRun:
         if smaller is None:
             return
         new, keep, carried = smaller
+        self._shrink(new, keep, read, carried, "batches")
+
+    def _check_renders(self) -> None:
+        """When training ends, judge an auto-sized code on fresh renders as validation will
+        (:func:`~deepmorph.training.code_shrink.code_for_renders`, rank 0's finding given to
+        every rank); one that reads too few is shrunk and trained on for ``renders_tune`` steps."""
+        cfg, rec = self.cfg, self.record
+        if sum(s.measured_on == "renders" for s in rec.shrunk) >= RENDER_ROUNDS:
+            return
+        found = None
+        if self.world.main:
+            seed = cfg.seed + RENDER_SEED_OFFSET + len(rec.shrunk)
+            found = code_for_renders(self.model, rec.payload_auto, seed, self.device.type)
+            self.model.encoder.to(self.device)  # the renders were read with the networks on the CPU after
+            self.model.decoder.to(self.device)
+        found = gather_objects(found, self.world)[0]
+        if found is None:
+            return
+        self._shrink(found.spec, found.keep, found.read, found.information, "renders")
+        rec.total_steps = rec.step + 1 + cfg.renders_tune
+
+    def _shrink(self, new: CodecSpec, keep: list[int], read: float, carried: float, measured_on: str) -> None:
+        """Go on with the code ``new`` on the current code bits ``keep``, and record why."""
+        cfg, rec, spec = self.cfg, self.record, self.model.codec.spec
         shrink_networks(self.model, keep, new)
         # fresh optimisers for the smaller networks (the step's learning rates are set each step)
         self.opt_dec = torch.optim.Adam(self.model.decoder.parameters(), lr=cfg.lr)
@@ -481,6 +518,7 @@ class CodecRun:
                 code_bits=(spec.code_bits, new.code_bits),
                 read=round(read, 4),
                 information=round(carried, 2),
+                measured_on=measured_on,
             ),
         ]
         self._errors, self._settled, self._reads = [], 0, []

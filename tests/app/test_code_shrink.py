@@ -12,7 +12,16 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
-from deepmorph.training.code_shrink import information, read_share, shrink_networks, smaller_code
+from deepmorph.training.code_shrink import (
+    RENDER_FIT,
+    RENDER_ROUNDS,
+    code_fitting,
+    information,
+    read_share,
+    shrink_networks,
+    simulated_read,
+    smaller_code,
+)
 from deepmorph.training.codec import train_model
 from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundle import AutoPayload
@@ -24,7 +33,7 @@ from tests.app.test_training import FAST, TINY, _interrupt_at
 #: Full corruption from the first step at ``hard``, a short window: an untrained decoder reads
 #: almost no code word of the first windows, so an auto-sized code is shrunk at step 20.
 HARD_AT_ONCE = {**FAST, "steps": 60, "severity": "hard", "curriculum": 0.0, "early_stop_window": 10,
-                "checkpoint_every": 5, "log_every": 5, "seed": 2}  # fmt: skip
+                "checkpoint_every": 5, "log_every": 5, "seed": 2, "renders_tune": 0}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -125,3 +134,78 @@ def test_an_auto_code_that_does_not_read_is_shrunk_and_a_given_one_is_not(tiny_s
     kept = DeepMorphModel.load(given)
     assert kept.codec.spec.payload_bits == first.payload_bits[0] and not kept.meta.record.shrunk
     assert kept.meta.record.payload_auto is None
+
+
+def _reliabilities(error_rates: np.ndarray, rows: int, rng: np.random.Generator) -> np.ndarray:
+    """``(rows, N)`` probabilities of each bit's right value, as a decoder gives them: 0.9 where
+    a capture read the bit right, 0.1 where it read it wrong (bit ``i`` with ``error_rates[i]``)."""
+    return np.where(rng.random((rows, len(error_rates))) < error_rates, 0.1, 0.9)
+
+
+def test_the_code_fitted_to_measured_reliabilities_keeps_the_reliable_bits() -> None:
+    """Of a 20-bit payload's code, 26 bits are read wrong in 1 capture of 2000 and the rest in
+    1 of 4: the code kept is the largest payload's whose best bits read :data:`RENDER_FIT` of
+    the captures, on the most reliable bits; one payload bit more does not fit; the user's CRC
+    and BCH stay; below the smallest code, nothing."""
+    spec = choose_codec(20, 8, 2)
+    rng = np.random.default_rng(0)
+    rates = np.full(spec.code_bits, 0.25)
+    reliable = rng.permutation(spec.code_bits)[:26]
+    rates[reliable] = 0.0005
+    right = _reliabilities(rates, 1000, rng)
+    assert simulated_read(_reliabilities(np.zeros(spec.code_bits), 300, rng), spec, rng) == 1.0
+    assert simulated_read(_reliabilities(np.full(spec.code_bits, 0.25), 300, rng), spec, rng) < 0.05
+    new, keep = code_fitting(right, spec, AutoPayload(), rng)
+    assert new.payload_bits < spec.payload_bits and len(keep) == new.code_bits
+    assert set(keep) <= set(reliable.tolist()) or set(reliable.tolist()) <= set(keep)  # the best bits
+    assert simulated_read(right[:, keep], new, rng) >= RENDER_FIT
+    order = np.argsort(-right.mean(0), kind="stable")
+    for bigger in (choose_codec(new.payload_bits + 1, None, t) for t in (2, 1)):
+        assert simulated_read(right[:, order[: bigger.code_bits]], bigger, rng) < RENDER_FIT
+    fixed, _ = code_fitting(right, spec, AutoPayload(crc_bits=16, ecc_t=1), rng)
+    assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
+    smallest = min((choose_codec(1, None, t) for t in (1, 2)), key=lambda c: c.code_bits)
+    noise = _reliabilities(np.full(smallest.code_bits, 0.5), 100, rng)
+    assert code_fitting(noise, smallest, AutoPayload(), rng) is None
+
+
+#: A few steps with no corruption: the batches read, and the renders, read at ``medium``, do not.
+EASY_THEN_RENDERS = {**FAST, "steps": 30, "renders_tune": 20, "checkpoint_every": 10, "seed": 2}
+
+
+def test_an_auto_code_that_reads_too_few_renders_is_shrunk_when_training_ends(tiny_svg: Path, tmp_path: Path) -> None:
+    """When training ends, an auto code is read from fresh renders; one that reads too few is
+    shrunk on its most reliable bits and trained on for ``renders_tune`` steps, at most
+    :data:`RENDER_ROUNDS` times; the user is told and ``info`` shows it; a run resumed in the
+    extra steps is the same run; a size the user gave is not checked."""
+    warnings: list[str] = []
+    auto = tmp_path / "auto.dmm"
+    train_model(tiny_svg, auto, payload_bits="auto", train=EASY_THEN_RENDERS, validation_samples=(0, 0),
+                on_warning=warnings.append)  # fmt: skip
+    model = DeepMorphModel.load(auto)
+    rec = model.meta.record
+    by_renders = [s for s in rec.shrunk if s.measured_on == "renders"]
+    assert by_renders and len(by_renders) <= RENDER_ROUNDS and rec.finished
+    first, last = by_renders[0], by_renders[-1]
+    assert first.step == 30 and first.read < 0.99 and first.payload_bits[1] < first.payload_bits[0]
+    assert rec.step == last.step + 20 and model.codec.spec.code_bits == last.code_bits[1]
+    assert model.encoder.linear.weight.shape[1] == model.decoder.head[-1].out_features == last.code_bits[1]
+    assert any("of fresh renders when training ended at step 30" in w for w in warnings), warnings
+    shown = " ".join(CliRunner().invoke(application(), ["info", str(auto)]).stdout.split())
+    assert f"{first.payload_bits[0]} -> {first.payload_bits[1]} at step 30 (it read" in shown, shown
+
+    resumed = tmp_path / "resumed.dmm"  # interrupted in the steps after the first check
+    with pytest.raises(Interrupted, match="interrupted at step 40/50"):
+        train_model(tiny_svg, resumed, payload_bits="auto", train=EASY_THEN_RENDERS, validation_samples=(0, 0),
+                    on_start=_interrupt_at(40))  # fmt: skip
+    train_model(tiny_svg, resumed, resume=True, validation_samples=(0, 0))
+    again = DeepMorphModel.load(resumed)
+    assert again.meta.record.shrunk == rec.shrunk and again.meta.record.step == rec.step
+    for key, value in model.decoder.state_dict().items():
+        torch.testing.assert_close(value, again.decoder.state_dict()[key], msg=key)
+
+    given = tmp_path / "given.dmm"
+    train_model(tiny_svg, given, payload_bits=first.payload_bits[0], train=EASY_THEN_RENDERS, validation_samples=(0, 0))
+    kept = DeepMorphModel.load(given)
+    assert kept.codec.spec.payload_bits == first.payload_bits[0] and not kept.meta.record.shrunk
+    assert kept.meta.record.step == 30

@@ -182,7 +182,7 @@ def test_a_checkpoint_of_two_processes_resumes_on_one(drawing: Path) -> None:
 AUTO_SHRINK = """
 import gc, os, sys
 from deepmorph.training.codec import train_model
-train_model("tiny.svg", "auto2.dmm", payload_bits="auto", train={train!r}, validation_samples=(0, 0))
+train_model("tiny.svg", {out!r}, payload_bits="auto", train={train!r}, validation_samples=(0, 0))
 gc.collect()
 names = [open(f"/proc/self/task/{{t}}/comm").read().strip() for t in os.listdir("/proc/self/task")]
 if any("gloo" in name for name in names):
@@ -190,24 +190,30 @@ if any("gloo" in name for name in names):
 """
 
 
-def test_two_processes_shrink_an_auto_code_as_one_process_does(drawing: Path) -> None:
+@pytest.mark.parametrize(("severity", "window", "measured_on"), [("hard", 10, "batches"), ("none", 250, "renders")])
+def test_two_processes_shrink_an_auto_code_as_one_process_does(
+    drawing: Path, severity: str, window: int, measured_on: str
+) -> None:
     """An ``auto`` code shrunk under torchrun (:mod:`deepmorph.training.code_shrink`) is shrunk at
     the same step to the same bits as by one process drawing the same two shards: the decision
-    is made on every rank from every rank's captures."""
-    train = {**CFG, "steps": 32, "shards": 2, "severity": "hard", "curriculum": 0.0, "early_stop_window": 10,
-             "checkpoint_every": 32}  # fmt: skip
-    one = drawing.parent / "auto1.dmm"
+    is made on every rank from every rank's captures (``hard``: its batches do not read), or on
+    rank 0's renders and given to every rank (``none``, with no batch check in 32 steps: its
+    renders do not read)."""
+    train = {**CFG, "steps": 32, "shards": 2, "severity": severity, "curriculum": 0.0, "early_stop_window": window,
+             "checkpoint_every": 32, "renders_tune": 8}  # fmt: skip
+    one, two = drawing.parent / f"auto1-{severity}.dmm", drawing.parent / f"auto2-{severity}.dmm"
     train_model(drawing, one, payload_bits="auto", train=train, validation_samples=(0, 0))
     script = drawing.parent / "auto.py"
-    script.write_text(AUTO_SHRINK.format(train=train))
+    script.write_text(AUTO_SHRINK.format(train=train, out=two.name))
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
     done = subprocess.run(command, cwd=drawing.parent, env=env, capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr[-3000:]
-    a, b = DeepMorphModel.load(one), DeepMorphModel.load(drawing.parent / "auto2.dmm")
+    a, b = DeepMorphModel.load(one), DeepMorphModel.load(two)
     assert a.meta.record.shrunk and a.meta.record.shrunk == b.meta.record.shrunk
+    assert measured_on in {s.measured_on for s in a.meta.record.shrunk}
     assert a.codec.spec == b.codec.spec
-    assert_same_networks(one, drawing.parent / "auto2.dmm")
+    assert_same_networks(one, two)
 
 
 def test_shards_split_the_batch_and_the_ranks_share_them() -> None:

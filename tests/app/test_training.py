@@ -709,7 +709,8 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     assert plain.print_px is None and plain.smallest_print_px == plain.width == 96 and not plain.registered
     # --payload-bits auto plans the code a model read at the print's own resolution carries
     planned = tmp_path / "auto.dmm"
-    auto = [*base[:-2], "--payload-bits", "auto", "--pixels", "200", "--out", str(planned), "--validation", "0"]
+    auto = [*base[:-2], "--payload-bits", "auto", "--pixels", "200", "--renders-tune", "0", "--out", str(planned)]
+    auto += ["--validation", "0"]
     res = runner.invoke(app, auto)
     assert res.exit_code == 0, res.output
     wide = predict(MorphableDrawing.load(tiny_svg), print_px=200)

@@ -149,7 +149,7 @@ def test_auto_trains_the_predicted_size_and_a_short_training_reads_it(drawing_sv
         drawing_svg,
         out,
         payload_bits="auto",
-        train={"steps": 500, "width": 40, "batch": 16, "threads": 1, "log_every": 50},
+        train={"steps": 500, "width": 40, "batch": 16, "threads": 1, "log_every": 50, "renders_tune": 0},
         validation_samples=(300, 0),
     )
     model = DeepMorphModel.load(out)
