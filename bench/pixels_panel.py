@@ -7,17 +7,18 @@ never saw). The plan was chosen on two of them (``battery-charging`` reads 44 co
 ``codepen`` 40 at 96.5-99 % of close-ups, ``bench/README.md``); the rest check it.
 
 **The plan**: :func:`deepmorph_core.capacity.for_print` at ``--pixels`` (1.25 code bits per
-readable group, at most 44, BCH codes correcting two errors), or, to try another,
-``--bits-per-group`` code bits per readable group up to ``--largest-code``, in BCH codes
-correcting ``--ecc-t`` errors: the largest payload whose code fits. For each drawing: a model
-trained with that code for
+readable group, at most 44, BCH codes correcting two errors), trained as a user does with
+``--payload-bits auto``: training may make the code smaller, by its batches or by fresh renders
+when it ends (:mod:`deepmorph.training.code_shrink`), and the table says where it did. Or, to try
+another plan, ``--bits-per-group`` code bits per readable group up to ``--largest-code``, in BCH
+codes correcting ``--ecc-t`` errors, trained at that size. For each drawing: a model trained for
 prints ``--pixels`` wide and otherwise the default settings (kept in ``--models`` as
-``<icon>.dmm`` and reused when there); read back with fresh payloads from ``--samples`` close-ups
-at ``medium`` and at ``hard`` whose print spans each of ``--widths`` camera pixels
-(``deepmorph_detect.photo_validation.validate_close_ups``). A drawing *passes* when every width
-reads >= 99 % medium and >= 95 % hard with no wrong payload. Also reported: the payload over the
-visible variables (the issue's 0.8 target), and the share of code words the training batches read
-over their last ten logs (what an ``auto`` code's shrink watches).
+``<icon>.dmm`` and reused when there, if it started from the planned code); read back with fresh
+payloads from ``--samples`` close-ups at ``medium`` and at ``hard`` whose print spans each of
+``--widths`` camera pixels (``deepmorph_detect.photo_validation.validate_close_ups``). A drawing
+*passes* when every width reads >= 99 % medium and >= 95 % hard with no wrong payload. Also
+reported: the payload over the visible variables (the issue's 0.8 target), and the share of code
+words the training batches read over their last ten logs.
 
     .venv/bin/python bench/pixels_panel.py /work/shared/data/drawings/feather --models /tmp/panel
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --only coffee,cpu --out half.json
@@ -66,18 +67,18 @@ def planned_code(report: Any, args: argparse.Namespace) -> Any:
     return largest_payload(code_bits, None, figures.ecc if args.ecc_t is None else (args.ecc_t,))
 
 
-def train(svg: Path, move: float, out: Path, spec: Any, pixels: int, threads: int) -> float:
-    """Train ``svg`` with the code ``spec`` for prints ``pixels`` wide on ``threads`` threads;
-    the seconds it took."""
+def train(svg: Path, move: float, out: Path, spec: Any, pixels: int, threads: int, auto: bool) -> float:
+    """Train ``svg`` for prints ``pixels`` wide on ``threads`` threads, with ``--payload-bits
+    auto`` (whose plan is ``spec``) or with the code ``spec``; the seconds it took."""
     from deepmorph.training.codec import train_model
 
     t0 = time.perf_counter()
     train_model(
         svg,
         out,
-        payload_bits=spec.payload_bits,
-        crc_bits=spec.crc_bits,
-        ecc_t=spec.bch_t,
+        payload_bits="auto" if auto else spec.payload_bits,
+        crc_bits=None if auto else spec.crc_bits,
+        ecc_t=None if auto else spec.bch_t,
         bounds={"move": move},
         train={"print_px": pixels, "threads": threads},
         overwrite=True,
@@ -85,6 +86,19 @@ def train(svg: Path, move: float, out: Path, spec: Any, pixels: int, threads: in
         on_warning=lambda text: print(f"  warning: {text}", file=sys.stderr, flush=True),
     )
     return time.perf_counter() - t0
+
+
+def started_from(model: Any) -> tuple[int, int]:
+    """``(payload bits, code bits)`` a bundle's training started from (before any shrink)."""
+    shrunk = model.meta.record.shrunk
+    spec = model.codec.spec
+    return (shrunk[0].payload_bits[0], shrunk[0].code_bits[0]) if shrunk else (spec.payload_bits, spec.code_bits)
+
+
+def sizing(model: Any) -> str:
+    """How training sized the code: ``-`` (kept) or each shrink, ``40->36 renders``."""
+    shrunk = model.meta.record.shrunk
+    return ", ".join(f"{s.code_bits[0]}->{s.code_bits[1]} {s.measured_on}" for s in shrunk) or "-"
 
 
 def main() -> None:
@@ -124,10 +138,11 @@ def main() -> None:
         train_s = None
         if not bundle.is_file():
             print(f"training {svg.stem} ({code.payload_bits} bits) ...", file=sys.stderr, flush=True)
-            train_s = train(svg, move, bundle, code, args.pixels, threads)
+            train_s = train(svg, move, bundle, code, args.pixels, threads, auto=args.bits_per_group is None)
         model = DeepMorphModel.load(bundle)
-        if model.codec.spec != code or model.print_px != args.pixels:
-            raise SystemExit(f"{bundle}: not trained with the planned code ({code}) for {args.pixels}-px prints")
+        if started_from(model) != (code.payload_bits, code.code_bits) or model.print_px != args.pixels:
+            raise SystemExit(f"{bundle}: not trained from the planned code ({code}) for {args.pixels}-px prints")
+        trained = model.codec.spec
         reads: dict[str, dict[int, Any]] = {s: {} for s in BARS}
         passed = True
         for severity, bar in BARS.items():
@@ -137,26 +152,30 @@ def main() -> None:
                 passed &= rec.read / rec.samples >= bar and rec.wrong == 0
                 print(f"{svg.stem} {severity} {width} px: {rec.read}/{rec.samples}", file=sys.stderr, flush=True)
         batches = batch_read(bundle.with_suffix(".log.jsonl"))
-        ratio = code.payload_bits / report.visible
+        ratio = trained.payload_bits / report.visible
         role = "fitted" if svg.stem in FITTED_ON else "checked"
         if role == "checked":
             ratios.append(ratio)
         wrong = sum(r["wrong"] for by_width in reads.values() for r in by_width.values())
         rows.append(
-            [svg.stem, role, n, report.visible, report.readable_groups, code.payload_bits, code.code_bits,
-             f"{ratio:.2f}",
+            [svg.stem, role, n, report.visible, report.readable_groups, f"{code.payload_bits} ({code.code_bits})",
+             sizing(model), f"{trained.payload_bits} ({trained.code_bits})", f"{ratio:.2f}",
              " / ".join(f"{100 * reads['medium'][w]['read'] / args.samples:.1f}" for w in args.widths),
              " / ".join(f"{100 * reads['hard'][w]['read'] / args.samples:.1f}" for w in args.widths),
              wrong, "-" if batches is None else f"{batches:.2f}", "yes" if passed else "no"]
         )  # fmt: skip
         results.append(
             {"drawing": svg.stem, "role": role, "move": move, "variables": n, "visible": report.visible,
-             "readable": report.readable_groups, "payload_bits": code.payload_bits, "code_bits": code.code_bits,
+             "readable": report.readable_groups, "planned_payload_bits": code.payload_bits,
+             "planned_code_bits": code.code_bits, "payload_bits": trained.payload_bits,
+             "code_bits": trained.code_bits, "auto": model.meta.record.payload_auto is not None,
+             "shrunk": [s.model_dump() for s in model.meta.record.shrunk],
              "predicted_96px": report.payload_bits, "payload_per_visible": ratio, "close_ups": reads,
              "batch_read": batches, "passed": passed, "train_s": train_s}
         )  # fmt: skip
     px = "/".join(map(str, args.widths))
-    headers = ["drawing", "role", "variables", "visible", "readable", "payload", "code bits", "payload / visible",
+    headers = ["drawing", "role", "variables", "visible", "readable", "plan: payload (code bits)", "training cut",
+               "payload (code bits)", "payload / visible",
                f"medium % ({px} px)", f"hard % ({px} px)", "wrong", "batch read", "passes"]  # fmt: skip
     print(table(headers, rows))
     if ratios:

@@ -30,7 +30,8 @@ RENDER_SAMPLES, PHOTO_SAMPLES = 1000, 200
 #: The early stop's window (steps at full corruption) and the share of code words they must read.
 EARLY_STOP_WINDOW, EARLY_STOP_RATE = 250, 0.995
 #: Steps an auto code shrunk by its renders at the end of training is trained on for (``renders_tune``):
-#: ``codepen``'s 20-bit code, which read 97.6 % of renders, cut to 16 bits read 99.3 % 400 steps later.
+#: ``codepen``'s 20-bit code at ``--pixels 200``, which read 97.6 % of renders, cut to 16 bits, read
+#: 99.3-99.6 % 400 steps later.
 RENDERS_TUNE = 400
 #: Small prints are shrunk to this share of the decoder's width (``small_prints``).
 SMALL_PRINT_SCALE = (0.55, 0.95)

@@ -143,18 +143,18 @@ def _reliabilities(error_rates: np.ndarray, rows: int, rng: np.random.Generator)
 
 
 def test_the_code_fitted_to_measured_reliabilities_keeps_the_reliable_bits() -> None:
-    """Of a 20-bit payload's code, 26 bits are read wrong in 1 capture of 2000 and the rest in
-    1 of 4: the code kept is the largest payload's whose best bits read :data:`RENDER_FIT` of
+    """Of a 20-bit payload's code, 26 bits are read wrong in 1 capture of 2000 and the rest at
+    chance: the code kept is the largest payload's whose best bits read :data:`RENDER_FIT` of
     the captures, on the most reliable bits; one payload bit more does not fit; the user's CRC
     and BCH stay; below the smallest code, nothing."""
     spec = choose_codec(20, 8, 2)
     rng = np.random.default_rng(0)
-    rates = np.full(spec.code_bits, 0.25)
+    rates = np.full(spec.code_bits, 0.5)
     reliable = rng.permutation(spec.code_bits)[:26]
     rates[reliable] = 0.0005
     right = _reliabilities(rates, 1000, rng)
     assert simulated_read(_reliabilities(np.zeros(spec.code_bits), 300, rng), spec, rng) == 1.0
-    assert simulated_read(_reliabilities(np.full(spec.code_bits, 0.25), 300, rng), spec, rng) < 0.05
+    assert simulated_read(_reliabilities(np.full(spec.code_bits, 0.5), 300, rng), spec, rng) < 0.05
     new, keep = code_fitting(right, spec, AutoPayload(), rng)
     assert new.payload_bits < spec.payload_bits and len(keep) == new.code_bits
     assert set(keep) <= set(reliable.tolist()) or set(reliable.tolist()) <= set(keep)  # the best bits
