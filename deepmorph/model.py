@@ -201,6 +201,7 @@ def train(
     spatial_transformer: bool = DEFAULTS.spatial_transformer,
     readout: bool = DEFAULTS.readout,
     early_stop: bool = DEFAULTS.early_stop,
+    renders_tune: int = DEFAULTS.renders_tune,
     read_in: ReadIn = DEFAULTS.read_in,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
@@ -238,6 +239,8 @@ def train(
             (``device="auto"``: CUDA where present).
         early_stop: end before ``steps`` once the batches at full corruption read their
             payloads well enough (:class:`~deepmorph.training.settings.TrainSettings`).
+        renders_tune: with ``payload_bits="auto"``, steps trained on after a code that reads
+            fewer than 99 % of fresh renders when training ends is made smaller (0: no check).
         read_in: the gray a colour drawing's prints are read in (``auto``: red, green or blue
             where its colours differ at least twice as much there, else luminance); a model not
             read in luminance needs its prints in colour.
