@@ -495,7 +495,7 @@ class CodecRun:
         if self.world.main:
             seed = cfg.seed + RENDER_SEED_OFFSET + len(rec.shrunk)
             found = code_for_renders(self.model, rec.payload_auto, seed, self.device.type)
-            self.model.encoder.to(self.device)  # the renders were read with the networks on the CPU after
+            self.model.encoder.to(self.device)  # reading the renders leaves the networks on the CPU
             self.model.decoder.to(self.device)
         found = gather_objects(found, self.world)[0]
         if found is None:

@@ -111,6 +111,22 @@ def test_prints_the_chain_did_not_find_call_for_a_detector_not_fewer_bits() -> N
     assert text is not None and "deepmorph capacity" in text and "train-detector" not in text
 
 
+def test_photos_missed_where_the_renders_read_are_not_blamed_on_the_code() -> None:
+    """Renders that read say the code carries: close-ups read a little less are their captures'
+    (a smaller code reads as many), so the advice is not fewer bits; a wrong payload still is."""
+    renders = ValidationRecord(name="renders", description="", severity="medium", samples=1000, read=999, wrong=0,
+                               bit_accuracy=0.99, seconds=1.0)  # fmt: skip
+    base = {"name": "close-ups", "description": "", "severity": "medium", "samples": 200, "seconds": 1.0}
+    photos = ValidationRecord(**base, read=196, wrong=0, missed=0, bit_accuracy=0.98)
+    text = validation_warning([renders, photos], "m.dmm")
+    assert text is not None and "close-ups 196/200 read" in text and "not the code's" in text
+    assert "--payload-bits" not in text and "renders 999" not in text
+    wrong = photos.model_copy(update={"read": 195, "wrong": 1})
+    assert "fewer --payload-bits" in validation_warning([renders, wrong], "m.dmm")
+    weak_renders = renders.model_copy(update={"read": 970})
+    assert "fewer --payload-bits" in validation_warning([weak_renders, photos], "m.dmm")
+
+
 class _BadValidation:
     @hookimpl
     def deepmorph_validate_model(self, model, samples, seed):  # noqa: ANN001, ANN201 - a broken plugin
