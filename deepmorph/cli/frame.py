@@ -204,10 +204,14 @@ class StepProgress:
     def __call__(self, total: int, done: int) -> Callable[[Any], None]:
         self.progress.start()
         task = self.progress.add_task(self.label, total=total, completed=done)
+        bar_total = total
 
         def on_log(m: dict[str, Any]) -> None:
+            nonlocal bar_total
             self.last = dict(m)
-            self.progress.update(task, completed=m["step"], description=self.describe(m))
+            # an auto code cut when training ended trains on past the steps the bar started with
+            bar_total = max(bar_total, m["step"])
+            self.progress.update(task, completed=m["step"], total=bar_total, description=self.describe(m))
 
         return on_log
 

@@ -252,6 +252,7 @@ class JobQueue:
         elif kind == "log":
             line = event["line"]
             job.step = int(line.get("step", job.step))
+            job.total = max(job.total, job.step)  # an auto code cut when training ended trains on past it
             job.elapsed_s = float(line.get("elapsed_s", job.elapsed_s))
             job.metrics = {k: v for k, v in line.items() if k not in ("step", "stage", "elapsed_s")}
             job.metrics["stage"] = line.get("stage", 0)

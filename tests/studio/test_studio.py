@@ -142,6 +142,20 @@ def test_a_training_run_is_refused_when_the_disk_is_full(tmp_path: Path) -> None
     assert queue.list() == []
 
 
+def test_a_runs_steps_grow_when_training_goes_on_past_them(tmp_path: Path) -> None:
+    """An ``auto`` code cut when training ends trains on past the run's steps: the job's total
+    follows, so its progress never passes its end."""
+    from deepmorph.studio.jobs import Job, JobQueue
+
+    queue = JobQueue(tmp_path / "jobs", tmp_path / "models")
+    job = Job(id="j", drawing="tiny.svg", svg="", out="tiny.dmm", settings={})
+    queue._apply(job, {"event": "start", "total": 40, "done": 0})
+    queue._apply(job, {"event": "log", "line": {"step": 30, "stage": 2, "elapsed_s": 1.0}})
+    assert (job.step, job.total) == (30, 40)
+    queue._apply(job, {"event": "log", "line": {"step": 55, "stage": 2, "elapsed_s": 2.0}})
+    assert (job.step, job.total) == (55, 55)
+
+
 def test_listening_beyond_this_machine_warns(tmp_path: Path) -> None:
     import subprocess
     import sys
