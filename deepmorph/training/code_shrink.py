@@ -13,7 +13,7 @@ A code that reads fewer than :data:`SHRINK_BELOW` of that window's code words is
   read far better than they did in the crowded code (a colour drawing's 46 code bits read 1 %
   of words at step 2000; the 19 best of them, alone, 99 % 400 steps later);
 * the new payload is the largest whose code fits that size (:func:`smaller_code`), with the CRC
-  and BCH the user fixed, if any;
+  and BCH the user fixed, if any, else a BCH strength the plan chooses from (:func:`shrink_ecc`);
 * the code bits the decoder read best over the window are kept, with their encoder columns and
   decoder outputs; the others are dropped (:func:`shrink_networks`).
 
@@ -41,7 +41,7 @@ from torch import Tensor, nn
 
 from deepmorph.training.validation import TARGET_RATE, read_renders
 from deepmorph_core.bundle import AutoPayload, CodeShrink
-from deepmorph_core.capacity import ECC_CHOICES, payload_codes
+from deepmorph_core.capacity import figures_for, payload_codes
 from deepmorph_core.codec import CodecSpec, PayloadCodec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -94,7 +94,17 @@ def information(errors: Tensor) -> float:
     return total
 
 
-def smaller_code(errors: Tensor, spec: CodecSpec, auto: AutoPayload) -> tuple[CodecSpec, list[int], float] | None:
+def shrink_ecc(auto: AutoPayload, print_px: int | None) -> tuple[int, ...]:
+    """The BCH strengths a cut code may have: the user's, or those the plan for a model trained
+    for prints ``print_px`` wide chooses from (:func:`~deepmorph_core.capacity.figures_for`: t = 2
+    alone under ``--pixels 200``, where a t = 1 code cut from a t = 2 one passed a wrong payload
+    in 10,008 close-ups)."""
+    return (auto.ecc_t,) if auto.ecc_t is not None else figures_for(print_px).ecc
+
+
+def smaller_code(
+    errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None
+) -> tuple[CodecSpec, list[int], float] | None:
     """The code to go on with, the current code bits it keeps (the best read, ascending) and
     the information the window's bits carried: the largest payload below ``spec``'s whose
     code fits halfway between ``spec``'s code bits (less one) and that information; where none
@@ -109,7 +119,7 @@ def smaller_code(errors: Tensor, spec: CodecSpec, auto: AutoPayload) -> tuple[Co
     size = math.ceil((carried + spec.code_bits - 1) / 2)
     new: CodecSpec | None = None
     for payload in range(spec.payload_bits - 1, 0, -1):
-        codes = payload_codes(payload, auto.crc_bits, ECC_CHOICES if auto.ecc_t is None else (auto.ecc_t,))
+        codes = payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
         fitting = [c for c in codes if c.code_bits <= size]
         if fitting or payload == 1:
             new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
@@ -145,16 +155,17 @@ def simulated_read(right: np.ndarray, spec: CodecSpec, rng: np.random.Generator)
 
 
 def code_fitting(
-    right: np.ndarray, spec: CodecSpec, auto: AutoPayload, rng: np.random.Generator
+    right: np.ndarray, spec: CodecSpec, auto: AutoPayload, rng: np.random.Generator, print_px: int | None = None
 ) -> tuple[CodecSpec, list[int]] | None:
     """The code to go on with and the current code bits it keeps (ascending), for a code whose
     bits were read with the reliabilities ``right`` (``(R, spec.code_bits)``, each capture's
     probability of each bit's right value): the largest payload below ``spec``'s (with the CRC and
-    BCH the user fixed in ``auto``) whose code, on the most reliable bits, reads at least
+    BCH the user fixed in ``auto``, else :func:`shrink_ecc`'s for prints ``print_px`` wide) whose
+    code, on the most reliable bits, reads at least
     :data:`RENDER_FIT` of the captures (:func:`simulated_read`); where none does, the smallest
     payload's smallest code. ``None`` where no code is smaller than ``spec``'s."""
     order = np.argsort(-right.mean(0), kind="stable")  # most reliable first
-    ecc = ECC_CHOICES if auto.ecc_t is None else (auto.ecc_t,)
+    ecc = shrink_ecc(auto, print_px)
     for payload in range(spec.payload_bits - 1, 0, -1):
         codes = [c for c in payload_codes(payload, auto.crc_bits, ecc) if c.code_bits < spec.code_bits]
         fitting = [c for c in codes if simulated_read(right[:, order[: c.code_bits]], c, rng) >= RENDER_FIT]
@@ -181,7 +192,7 @@ def code_for_renders(
     if read >= RENDER_SHRINK_BELOW:
         return None
     right = np.where(words == 1, probs, 1.0 - probs)
-    found = code_fitting(right, spec, auto, rng)
+    found = code_fitting(right, spec, auto, rng, model.print_px)
     if found is None:
         return None
     return RenderShrink(found[0], found[1], read, information(torch.from_numpy(right < 0.5)))
@@ -247,6 +258,7 @@ __all__ = [
     "information",
     "read_share",
     "shrink_below",
+    "shrink_ecc",
     "shrink_networks",
     "simulated_read",
     "smaller_code",

@@ -478,7 +478,7 @@ class CodecRun:
         read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
         if read >= shrink_below(cfg.print_px):
             return
-        smaller = smaller_code(errors, spec, rec.payload_auto)
+        smaller = smaller_code(errors, spec, rec.payload_auto, cfg.print_px)
         if smaller is None:
             return
         new, keep, carried = smaller

@@ -63,6 +63,8 @@ def test_the_smaller_code_is_halfway_to_the_information_its_bits_carried() -> No
     assert read_share(errors, good, 0) == 1.0 > read_share(errors, torch.tensor(keep), new.bch_t)
     fixed, _, _ = smaller_code(errors, spec, AutoPayload(crc_bits=16, ecc_t=1))
     assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
+    at_pixels, _, _ = smaller_code(errors, spec, AutoPayload(), print_px=200)
+    assert at_pixels.bch_t == 2  # the --pixels plan's strength
     # nothing carried: halfway is below the smallest code, which is taken; below it, nothing
     noise = torch.rand(4000, 24, generator=gen) < 0.5
     small = choose_codec(4, None, 1)
@@ -164,6 +166,9 @@ def test_the_code_fitted_to_measured_reliabilities_keeps_the_reliable_bits() -> 
         assert simulated_read(right[:, order[: bigger.code_bits]], bigger, rng) < RENDER_FIT
     fixed, _ = code_fitting(right, spec, AutoPayload(crc_bits=16, ecc_t=1), rng)
     assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
+    assert new.bch_t == 1  # the 96-px plan's strengths: a t = 1 code fits more here
+    at_pixels, _ = code_fitting(right, spec, AutoPayload(), rng, print_px=200)
+    assert at_pixels.bch_t == 2 and at_pixels.payload_bits < new.payload_bits  # --pixels plans t = 2 alone
     smallest = min((choose_codec(1, None, t) for t in (1, 2)), key=lambda c: c.code_bits)
     noise = _reliabilities(np.full(smallest.code_bits, 0.5), 100, rng)
     assert code_fitting(noise, smallest, AutoPayload(), rng) is None
