@@ -33,13 +33,14 @@ changed: its model reads what it reads, and validation says so.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
-from deepmorph.training.validation import TARGET_RATE, read_renders
+from deepmorph.training.validation import RENDER_SAMPLES, TARGET_RATE, read_renders, tally_decoded
 from deepmorph_core.bundle import AutoPayload, CodeShrink
 from deepmorph_core.capacity import figures_for, payload_codes
 from deepmorph_core.codec import CodecSpec, PayloadCodec
@@ -65,8 +66,9 @@ RENDER_SHRINK_BELOW = TARGET_RATE
 #: bits reads 99.6-100 % of 1000 renders, 17 bits 99.4 %, 18 bits 99.3 %, 20 bits 98.0-98.4 %, and
 #: adjacent sizes differ by less than the sampling's 0.2 points. A bar at 99.5 % cut it to 12 bits.
 RENDER_FIT = 0.993
-#: Fresh renders the end-of-training check reads, and how many times it may shrink one training.
-RENDER_SAMPLES, RENDER_ROUNDS = 1000, 2
+#: How many times the end-of-training check may shrink one training (it reads as many fresh
+#: renders as validation, :data:`~deepmorph.training.validation.RENDER_SAMPLES`).
+RENDER_ROUNDS = 2
 #: The check's payloads and corruption draw from the training's seed plus this, apart from validation's.
 RENDER_SEED_OFFSET = 7919
 
@@ -102,6 +104,21 @@ def shrink_ecc(auto: AutoPayload, print_px: int | None) -> tuple[int, ...]:
     return (auto.ecc_t,) if auto.ecc_t is not None else figures_for(print_px).ecc
 
 
+def largest_smaller(
+    spec: CodecSpec, auto: AutoPayload, print_px: int | None, fits: Callable[[CodecSpec], bool]
+) -> CodecSpec | None:
+    """The code a cut goes on with: the largest payload below ``spec``'s with a code that ``fits``
+    (the user's CRC, :func:`shrink_ecc`'s strengths, the first in their order); where none does,
+    the smallest payload's smallest code. ``None`` where that code is not smaller than ``spec``'s."""
+    for payload in range(spec.payload_bits - 1, 0, -1):
+        codes = payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
+        fitting = [c for c in codes if fits(c)]
+        if fitting or payload == 1:
+            new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
+            return new if new is not None and new.code_bits < spec.code_bits else None
+    return None
+
+
 def smaller_code(
     errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None
 ) -> tuple[CodecSpec, list[int], float] | None:
@@ -117,14 +134,8 @@ def smaller_code(
     """
     carried = information(errors)
     size = math.ceil((carried + spec.code_bits - 1) / 2)
-    new: CodecSpec | None = None
-    for payload in range(spec.payload_bits - 1, 0, -1):
-        codes = payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
-        fitting = [c for c in codes if c.code_bits <= size]
-        if fitting or payload == 1:
-            new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
-            break
-    if new is None or new.code_bits >= spec.code_bits:
+    new = largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size)
+    if new is None:
         return None
     order = torch.argsort(errors.sum(0), stable=True)  # best read first
     return new, sorted(int(k) for k in order[: new.code_bits]), carried
@@ -151,7 +162,7 @@ def simulated_read(right: np.ndarray, spec: CodecSpec, rng: np.random.Generator)
     payloads = random_payloads(len(right), spec.payload_bits, rng)
     words = codec.encode(payloads)
     probs = np.where(words == 1, right, 1.0 - right)
-    return sum(r.ok and np.array_equal(r.payload, p) for r, p in zip(codec.decode_batch(probs), payloads)) / len(right)
+    return tally_decoded(codec, probs, payloads).read / len(right)
 
 
 def code_fitting(
@@ -161,18 +172,16 @@ def code_fitting(
     bits were read with the reliabilities ``right`` (``(R, spec.code_bits)``, each capture's
     probability of each bit's right value): the largest payload below ``spec``'s (with the CRC and
     BCH the user fixed in ``auto``, else :func:`shrink_ecc`'s for prints ``print_px`` wide) whose
-    code, on the most reliable bits, reads at least
-    :data:`RENDER_FIT` of the captures (:func:`simulated_read`); where none does, the smallest
-    payload's smallest code. ``None`` where no code is smaller than ``spec``'s."""
+    code, on the most reliable bits, reads at least :data:`RENDER_FIT` of the captures
+    (:func:`simulated_read`); otherwise as :func:`largest_smaller` says."""
     order = np.argsort(-right.mean(0), kind="stable")  # most reliable first
-    ecc = shrink_ecc(auto, print_px)
-    for payload in range(spec.payload_bits - 1, 0, -1):
-        codes = [c for c in payload_codes(payload, auto.crc_bits, ecc) if c.code_bits < spec.code_bits]
-        fitting = [c for c in codes if simulated_read(right[:, order[: c.code_bits]], c, rng) >= RENDER_FIT]
-        if fitting or (payload == 1 and codes):
-            new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits)
-            return new, sorted(int(k) for k in order[: new.code_bits])
-    return None
+
+    def fits(code: CodecSpec) -> bool:  # read on its best bits (a code no smaller is not tried)
+        best = right[:, order[: code.code_bits]]
+        return code.code_bits < spec.code_bits and simulated_read(best, code, rng) >= RENDER_FIT
+
+    new = largest_smaller(spec, auto, print_px, fits)
+    return None if new is None else (new, sorted(int(k) for k in order[: new.code_bits]))
 
 
 def code_for_renders(
@@ -188,7 +197,7 @@ def code_for_renders(
     payloads = random_payloads(samples, spec.payload_bits, rng)
     words = codec.encode(payloads)
     probs = read_renders(model, words, seed=seed, device=device)
-    read = sum(r.ok and np.array_equal(r.payload, p) for r, p in zip(codec.decode_batch(probs), payloads)) / samples
+    read = tally_decoded(codec, probs, payloads).read / samples
     if read >= RENDER_SHRINK_BELOW:
         return None
     right = np.where(words == 1, probs, 1.0 - probs)
@@ -247,7 +256,6 @@ def describe(shrink: CodeShrink) -> str:
 __all__ = [
     "RENDER_FIT",
     "RENDER_ROUNDS",
-    "RENDER_SAMPLES",
     "RENDER_SHRINK_BELOW",
     "SHRINK_BELOW",
     "SHRINK_BELOW_AT_PIXELS",
@@ -256,6 +264,7 @@ __all__ = [
     "code_for_renders",
     "describe",
     "information",
+    "largest_smaller",
     "read_share",
     "shrink_below",
     "shrink_ecc",

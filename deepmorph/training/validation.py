@@ -29,6 +29,7 @@ from deepmorph_core.payload import random_payloads
 from deepmorph_core.severity import VALIDATION_SEVERITY
 
 if TYPE_CHECKING:
+    from deepmorph_core.codec import PayloadCodec
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import Registry
 
@@ -65,9 +66,7 @@ def validate_renders(
     codes = codec.encode(payloads)
     probs = read_renders(model, codes, severity, seed, batch, device)
     right_bits = int(((probs > 0.5) == (codes == 1)).sum())
-    tally = PayloadTally()
-    for result, payload in zip(codec.decode_batch(probs), payloads):
-        tally.add([result.payload] if result.ok else [], payload)
+    tally = tally_decoded(codec, probs, payloads)
     return ValidationRecord(
         name="renders",
         description=f"resvg renders at {model.width} px under the training corruption",
@@ -78,6 +77,16 @@ def validate_renders(
         bit_accuracy=right_bits / (samples * codec.spec.code_bits),
         seconds=round(time.perf_counter() - start, 2),
     )
+
+
+def tally_decoded(codec: PayloadCodec, probs: np.ndarray, payloads: np.ndarray) -> PayloadTally:
+    """The payloads ``codec`` reads from ``probs`` (``(B, N_b)``, each capture's ``P(bit = 1)``),
+    counted against the ``payloads`` sent (``(B, payload_bits)``): read where the codec vouches for
+    the one sent, wrong where it vouches for another."""
+    tally = PayloadTally()
+    for result, payload in zip(codec.decode_batch(probs), payloads):
+        tally.add([result.payload] if result.ok else [], payload)
+    return tally
 
 
 def read_renders(
@@ -169,6 +178,7 @@ __all__ = [
     "RENDER_SAMPLES",
     "TARGET_RATE",
     "default_samples",
+    "tally_decoded",
     "validate",
     "validate_renders",
     "validation_warning",
