@@ -20,10 +20,20 @@ payloads from ``--samples`` close-ups at ``medium`` and at ``hard`` whose print 
 reported: the payload over the visible variables (the issue's 0.8 target), and the share of code
 words the training batches read over their last ten logs.
 
+**False accepts**: with ``--unrelated N``, each model also locates and reads ``N`` images that show
+none of the panel's drawings (``bench/capacity.py``'s set: other Feather icons rendered and
+photographed, noise, near-blank paper, clutter; the same images for every model, made
+``UNRELATED_CHUNK`` at a time), each enlarged where needed so that its shorter side is
+``UNRELATED_SCALE`` times the model's smallest print (a smaller image could only be refused as
+too small), and every payload it accepts from them is counted, and the detections refused as too
+small.
+``--samples 0`` reads no close-ups (false accepts only).
+
     .venv/bin/python bench/pixels_panel.py /work/shared/data/drawings/feather --models /tmp/panel
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --only coffee,cpu --out half.json
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/p58 --only codesandbox --largest-code 58 \
         --bits-per-group 1.25
+    .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --samples 0 --unrelated 5000
 """
 
 from __future__ import annotations
@@ -43,6 +53,8 @@ from time_to_print import pick_drawings  # noqa: E402
 BARS = {"medium": 0.99, "hard": 0.95}
 FITTED_ON = ("battery-charging", "codepen")  # the plan was chosen on these two (the rule's first and third)
 LAST_LOGS = 10
+UNRELATED_CHUNK = 500  # unrelated images made (and held in memory) at a time
+UNRELATED_SCALE = 1.5  # an unrelated image's shorter side at least this many times the smallest print
 
 
 def batch_read(log: Path) -> float | None:
@@ -65,6 +77,34 @@ def planned_code(report: Any, args: argparse.Namespace) -> Any:
     largest = figures.largest_code if args.largest_code is None else args.largest_code
     code_bits = min(math.floor(args.bits_per_group * report.readable_groups + 1e-9), largest)
     return largest_payload(code_bits, None, figures.ecc if args.ecc_t is None else (args.ecc_t,))
+
+
+def false_accepts(model: Any, n: int, feather: Path, panel: set[str], seed: int) -> dict[str, Any]:
+    """Payloads ``model`` accepts from ``n`` images that show none of the ``panel`` drawings (as
+    :func:`capacity.unrelated_images` makes them, :data:`UNRELATED_CHUNK` at a time, chunk ``k``
+    from ``seed + k``; enlarged to :data:`UNRELATED_SCALE` times ``model.print_px``), by kind of
+    image; the detections refused as too small, and the seconds it took."""
+    import cv2
+    from capacity import unrelated_images
+
+    from deepmorph_detect.locate import Locator
+
+    locator = Locator(model)
+    shortest = UNRELATED_SCALE * (model.print_px or 0)
+    accepts: dict[str, int] = {}
+    read = too_small = 0
+    t0 = time.perf_counter()
+    for k, start in enumerate(range(0, n, UNRELATED_CHUNK)):
+        for kind, img in unrelated_images(min(UNRELATED_CHUNK, n - start), feather, panel, seed + k):
+            if min(img.shape[:2]) < shortest:
+                scale = shortest / min(img.shape[:2])
+                img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR)
+            found = locator.locate(img)
+            accepts[kind] = accepts.get(kind, 0) + sum(bool(d.result.ok) for d in found)
+            too_small += sum(d.too_small for d in found)
+            read += 1
+    return {"n": read, "false_accepts": sum(accepts.values()), "by_kind": accepts, "too_small": too_small,
+            "seconds": round(time.perf_counter() - t0, 1)}  # fmt: skip
 
 
 def train(svg: Path, move: float, out: Path, spec: Any, pixels: int, threads: int, auto: bool) -> float:
@@ -111,7 +151,8 @@ def main() -> None:
     ap.add_argument("--ecc-t", type=int, help="with --bits-per-group: bit errors the BCH code corrects (2)")
     ap.add_argument("--models", type=Path, required=True, help="where the trained bundles are kept")
     ap.add_argument("--widths", type=parse_ints, default=[240, 330])
-    ap.add_argument("--samples", type=int, default=200, help="close-ups per width and severity")
+    ap.add_argument("--samples", type=int, default=200, help="close-ups per width and severity (0: none)")
+    ap.add_argument("--unrelated", type=int, default=0, help="unrelated images each model reads (false accepts)")
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--only", default="", help="comma-separated icons of the panel to run (default: all)")
@@ -127,7 +168,8 @@ def main() -> None:
     args.models.mkdir(parents=True, exist_ok=True)
     rows, results, ratios = [], [], []
     only = {name for name in args.only.split(",") if name}
-    for svg, move, n in pick_drawings(args.feather, args.drawings):
+    panel = pick_drawings(args.feather, args.drawings)
+    for svg, move, n in panel:
         if only and svg.stem not in only:
             continue
         report = predict(MorphableDrawing.load(svg, move=move))
@@ -144,13 +186,18 @@ def main() -> None:
             raise SystemExit(f"{bundle}: not trained from the planned code ({code}) for {args.pixels}-px prints")
         trained = model.codec.spec
         reads: dict[str, dict[int, Any]] = {s: {} for s in BARS}
-        passed = True
+        passed = True if args.samples else None
         for severity, bar in BARS.items():
-            for width in args.widths:
+            for width in args.widths if args.samples else ():
                 rec = validate_close_ups(model, args.samples, args.seed, severity, print_px=width)
                 reads[severity][width] = rec.model_dump()
                 passed &= rec.read / rec.samples >= bar and rec.wrong == 0
                 print(f"{svg.stem} {severity} {width} px: {rec.read}/{rec.samples}", file=sys.stderr, flush=True)
+        unrelated = None
+        if args.unrelated:
+            names = {p.stem for p, _, _ in panel}
+            unrelated = false_accepts(model, args.unrelated, args.feather, names, args.seed + 99)
+            print(f"{svg.stem} unrelated: {unrelated}", file=sys.stderr, flush=True)
         batches = batch_read(bundle.with_suffix(".log.jsonl"))
         ratio = trained.payload_bits / report.visible
         role = "fitted" if svg.stem in FITTED_ON else "checked"
@@ -160,9 +207,9 @@ def main() -> None:
         rows.append(
             [svg.stem, role, n, report.visible, report.readable_groups, f"{code.payload_bits} ({code.code_bits})",
              sizing(model), f"{trained.payload_bits} ({trained.code_bits})", f"{ratio:.2f}",
-             " / ".join(f"{100 * reads['medium'][w]['read'] / args.samples:.1f}" for w in args.widths),
-             " / ".join(f"{100 * reads['hard'][w]['read'] / args.samples:.1f}" for w in args.widths),
-             wrong, "-" if batches is None else f"{batches:.2f}", "yes" if passed else "no"]
+             *(" / ".join(f"{100 * reads[s][w]['read'] / args.samples:.1f}" for w in reads[s]) or "-" for s in BARS),
+             wrong, "-" if unrelated is None else f"{unrelated['false_accepts']} / {unrelated['n']}",
+             "-" if batches is None else f"{batches:.2f}", {True: "yes", False: "no", None: "-"}[passed]]
         )  # fmt: skip
         results.append(
             {"drawing": svg.stem, "role": role, "move": move, "variables": n, "visible": report.visible,
@@ -171,20 +218,26 @@ def main() -> None:
              "code_bits": trained.code_bits, "auto": model.meta.record.payload_auto is not None,
              "shrunk": [s.model_dump() for s in model.meta.record.shrunk],
              "predicted_96px": report.payload_bits, "payload_per_visible": ratio, "close_ups": reads,
-             "batch_read": batches, "passed": passed, "train_s": train_s}
+             "unrelated": unrelated, "batch_read": batches, "passed": passed, "train_s": train_s}
         )  # fmt: skip
     px = "/".join(map(str, args.widths))
     headers = ["drawing", "role", "variables", "visible", "readable", "plan: payload (code bits)", "training cut",
                "payload (code bits)", "payload / visible",
-               f"medium % ({px} px)", f"hard % ({px} px)", "wrong", "batch read", "passes"]  # fmt: skip
+               f"medium % ({px} px)", f"hard % ({px} px)", "wrong", "false accepts", "batch read",
+               "passes"]  # fmt: skip
     print(table(headers, rows))
+    tried = [r["unrelated"] for r in results if r["unrelated"]]
+    if tried:
+        fa, fa_n = sum(u["false_accepts"] for u in tried), sum(u["n"] for u in tried)
+        print(f"false accepts: {fa} in {fa_n} reads of unrelated images ({len(tried)} models)")
     if ratios:
         print(f"checked drawings: payload / visible median {statistics.median(ratios):.2f}, worst {min(ratios):.2f}")
     write_json(
         args.out,
         {"environment": {**environment(), "threads": threads}, "pixels": args.pixels, "samples": args.samples,
          "seed": args.seed, "widths": args.widths, "bits_per_group": args.bits_per_group,
-         "largest_code": args.largest_code, "ecc_t": args.ecc_t, "results": results},
+         "largest_code": args.largest_code, "ecc_t": args.ecc_t, "unrelated": args.unrelated,
+         "results": results},
     )  # fmt: skip
     print(f"wrote {args.out}")
 
