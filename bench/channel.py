@@ -25,12 +25,16 @@ anywhere in its range (``--continuous``; a regression of one-bit positions measu
 reader tells two apart, not how finely it places them). A print wider than 96 px is area-averaged
 into the decoder's 96-px frame, as the photo chain frames it.
 
-Beside each ceiling, the project's own figure as a share of it: the payload ``deepmorph capacity``
-plans for the drawing (``planned``; a model reads every print at least 96 px wide in its 96-px
-frame, so it plans the same payload at every width), and with ``--measured`` the largest payload
-bench/capacity.py's trained models read at 99 % (``read``; measured on close-ups whose prints
-span 144-192 px, so shown at 96 px). ``--tabulate RUN.json`` prints a saved run's tables again
-with these columns, measuring nothing.
+Beside each ceiling, the project's own figure as a share of it: the payload ``deepmorph capacity
+--pixels`` plans for prints that wide (``planned``: from 200 px a model trained with ``--pixels``,
+below it the default one), and what trained models read (``read``): with ``--measured``, the
+largest payload bench/capacity.py's default models read at 99 % (close-ups whose prints span
+144-192 px, shown at 96 px); with ``--measured-pixels``, bench/pixels_panel.py's ``--pixels``
+models, each close-up width they passed at (>= 99 % medium, >= 95 % hard, no wrong payload)
+shown on the widest row at or below it (240 px on the 200-px row, 330 on the 300-px row).
+``--panel pixels`` measures bench/pixels_panel.py's drawings instead of bench/capacity.py's
+(``held-out``: capacity's held-out icons). ``--tabulate RUN.json`` prints a saved run's tables
+again with these columns, measuring nothing.
 
 ``--undone-warp`` reads each drawing a second time through ``medium``'s residual warp, its
 photometric steps and the warp's exact inverse: alignment still perfect, but the picture
@@ -42,6 +46,8 @@ instead: what their alignment leaves on top of the photometric noise.
     .venv/bin/python bench/channel.py --feather ... --only airplay,flag --undone-warp --bundles m1.dmm m2.dmm
     .venv/bin/python bench/channel.py --feather ... --pixels 96,200,300 --standardise --measured capacity.json
     .venv/bin/python bench/channel.py --feather ... --tabulate channel.json --measured capacity.json
+    .venv/bin/python bench/channel.py --feather ... --panel pixels --pixels 96,200,300 --standardise \
+        --measured-pixels pixels_panel.json
 
 A linear reading is not the best one, so ``sigma`` is what a linear decoder meets, and the
 payload a ceiling for decoders that read no better; a trained model's bit errors sit at that
@@ -455,25 +461,63 @@ def measured_reads(paths: list[Path]) -> dict[str, int]:
     return out
 
 
+def measured_pixels_reads(paths: list[Path]) -> dict[tuple[str, int], int]:
+    """``(drawing, close-up width) -> payload read`` from bench/pixels_panel.py's JSON: each width
+    a model passed at (>= its bars on medium and hard close-ups, no wrong payload), else 0;
+    later files win, a broken one is named."""
+    from pixels_panel import BARS
+
+    out: dict[tuple[str, int], int] = {}
+    for path in paths:
+        try:
+            results = json.loads(path.read_text())["results"]
+            for r in results:
+                reads = r["close_ups"]
+                for width in reads["medium"]:
+                    ok = all(
+                        reads[s][width]["read"] >= bar * reads[s][width]["samples"] and not reads[s][width]["wrong"]
+                        for s, bar in BARS.items()
+                    )
+                    out[(r["drawing"], int(width))] = r["payload_bits"] if ok else 0
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise SystemExit(f"--measured-pixels {path}: not a bench/pixels_panel.py result ({exc})") from None
+    return out
+
+
 @functools.cache
-def planned_payload(svg: Path, move: float | None) -> int:
-    """The payload ``deepmorph capacity`` plans for a panel drawing."""
-    from deepmorph_core.capacity import predict
+def planned_payload(svg: Path, move: float | None, print_px: int) -> int:
+    """The payload ``deepmorph capacity --pixels print_px`` plans for a panel drawing (from
+    200 px a ``--pixels`` model's plan, below it the default one)."""
+    from deepmorph_core.capacity import payload_for_width, predict
     from deepmorph_core.morphable import MorphableDrawing
 
-    return predict(MorphableDrawing.load(svg, **({} if move is None else {"move": move}))).payload_bits
+    report = predict(MorphableDrawing.load(svg, **({} if move is None else {"move": move})))
+    return payload_for_width(report, print_px, needs_px=0)[0] or 0
 
 
-def with_figures(results: list[dict], reads: dict[str, int], drawings: dict[str, tuple[Path, float | None]]) -> None:
-    """Each row of a panel drawing given the project's figures: ``planned_payload``
-    (:func:`planned_payload`, where a row lacks it) and, on the 96-px rows, ``read_payload``."""
+def with_figures(
+    results: list[dict],
+    reads: dict[str, int],
+    drawings: dict[str, tuple[Path, float | None]],
+    pixels_reads: dict[tuple[str, int], int] | None = None,
+    widths: list[int] | None = None,
+) -> None:
+    """Each row of a panel drawing given the project's figures: ``planned_payload`` at its print
+    width (:func:`planned_payload`, where a row lacks it), ``read_payload`` on the 96-px rows from
+    ``reads`` and on wider rows from ``pixels_reads`` (each measured width on the widest row at or
+    below it, among ``widths``, by default the rows')."""
+    widths = widths or sorted({r.get("print_px", WIDTH) for r in results})
     for r in results:
         if r["name"] not in drawings:
             continue  # a bundle's row
+        px = r.get("print_px", WIDTH)
         if r.get("planned_payload") is None:
-            r["planned_payload"] = planned_payload(*drawings[r["name"]])
-        if r.get("print_px", WIDTH) == WIDTH and r["name"] in reads:
+            r["planned_payload"] = planned_payload(*drawings[r["name"]], px)
+        if px == WIDTH and r["name"] in reads:
             r["read_payload"] = reads[r["name"]]
+        for (name, measured_px), payload in (pixels_reads or {}).items():
+            if name == r["name"] and px > WIDTH and max(w for w in widths if w <= measured_px) == px:
+                r["read_payload"] = payload
 
 
 def summary(done: list[dict]) -> list[str]:
@@ -500,7 +544,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--feather", type=Path, required=True, help="the Feather icon folder")
     ap.add_argument("--only", help="comma-separated drawing names of the panel to run")
-    ap.add_argument("--held-out", action="store_true", help="the held-out icons instead of the panel")
+    ap.add_argument(
+        "--panel",
+        choices=("capacity", "held-out", "pixels"),
+        default="capacity",
+        help="bench/capacity.py's panel, its held-out icons, or bench/pixels_panel.py's drawings",
+    )
     ap.add_argument("--bundles", type=Path, nargs="*", default=[], help="trained models measured on their own view")
     ap.add_argument("--samples", type=int, default=6000, help="renders the ridge map is fitted on")
     ap.add_argument(
@@ -521,26 +570,40 @@ def main() -> None:
     ap.add_argument(
         "--measured", type=Path, nargs="*", default=[], help="bench/capacity.py results: what trained models read"
     )
+    ap.add_argument(
+        "--measured-pixels",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="bench/pixels_panel.py results: what --pixels models read",
+    )
     ap.add_argument("--tabulate", type=Path, help="print a saved run's tables again (measures nothing)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS / "channel.json")
     args = ap.parse_args()
     threads = set_threads(args.threads)
-    from capacity import panel
+    if args.panel == "pixels":
+        from pixels_panel import DRAWINGS
+        from time_to_print import pick_drawings
 
-    drawings = panel(args.feather, args.held_out)
+        drawings = [(svg.stem, svg, move) for svg, move, _ in pick_drawings(args.feather, DRAWINGS)]
+    else:
+        from capacity import panel
+
+        drawings = panel(args.feather, args.panel == "held-out")
     if args.only:
         keep = set(args.only.split(","))
         drawings = [d for d in drawings if d[0] in keep]
     reads = measured_reads(args.measured)
+    pixels_reads = measured_pixels_reads(args.measured_pixels)
     by_name = {name: (svg, move) for name, svg, move in drawings}
     if args.tabulate is not None:
         try:
             done = json.loads(args.tabulate.read_text())["drawings"]
         except (OSError, ValueError, KeyError) as exc:
             raise SystemExit(f"--tabulate {args.tabulate}: not a channel benchmark result ({exc})") from None
-        with_figures(done, reads, by_name)
+        with_figures(done, reads, by_name, pixels_reads)
         print(table(HEADERS, rows(done)))
         print("\n".join(summary(done)))
         return
@@ -549,7 +612,7 @@ def main() -> None:
 
     def record(result: dict) -> None:
         done.append(result)
-        with_figures([result], reads, by_name)
+        with_figures([result], reads, by_name, pixels_reads, args.pixels or [WIDTH])
         print(table(HEADERS, rows([result])).splitlines()[-1], flush=True)
         write_json(args.out, {"environment": {**environment(), "threads": threads}, "drawings": done})
 

@@ -53,6 +53,7 @@ from time_to_print import pick_drawings  # noqa: E402
 BARS = {"medium": 0.99, "hard": 0.95}
 FITTED_ON = ("battery-charging", "codepen")  # the plan was chosen on these two (the rule's first and third)
 LAST_LOGS = 10
+DRAWINGS = 6  # the panel's size (--drawings)
 UNRELATED_CHUNK = 500  # unrelated images made (and held in memory) at a time
 UNRELATED_SCALE = 1.5  # an unrelated image's shorter side at least this many times the smallest print
 
@@ -144,7 +145,7 @@ def sizing(model: Any) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("feather", type=Path, help="the Feather icons folder")
-    ap.add_argument("--drawings", type=int, default=6)
+    ap.add_argument("--drawings", type=int, default=DRAWINGS)
     ap.add_argument("--pixels", type=int, default=200)
     ap.add_argument("--bits-per-group", type=float, help="another plan: code bits per readable group")
     ap.add_argument("--largest-code", type=int, help="with --bits-per-group: at most this many code bits")
