@@ -1,8 +1,10 @@
 """Frame time of a freshly trained model beside the bundled ghost's, QR's and ArUco's, and where it goes.
 
-For each bundle (the bundled ghost and ``--fresh``), ``--n`` scenes at ``--severity`` (640x480,
-one print, one other drawing, an ArUco marker of the same printed size) are made from the same
-seed. Each frame is located twice per bundle, alternating the order: with the networks run by
+For each bundle (the bundled ghost and ``--fresh``), ``--n`` scenes at ``--severity`` (``--frame``
+pixels, 640x480 by default, one print, one other drawing, an ArUco marker of the same printed
+size) are made from the same seed. A model trained for prints at least ``--pixels`` wide is timed
+on frames where its prints are that wide: ``--frame 1280x720`` puts ``medium``'s prints at 192-896
+px. Each frame is located twice per bundle, alternating the order: with the networks run by
 ONNX Runtime from the bundle's graphs (what ``decode`` does) and with both networks in PyTorch
 (what a bundle without usable graphs got before graphs were stored). ArUco's ``detectMarkers``
 runs on the same frame, and OpenCV's QR ``detectAndDecode`` once per frame on a same-size frame
@@ -15,6 +17,7 @@ looks or the last look by synthesis: the slow paths a weaker first reading takes
 of the frames without them say what each costs.
 
     .venv/bin/python bench/export_speed.py --fresh /work/onnx-fresh/codesandbox.dmm --n 60
+    .venv/bin/python bench/export_speed.py --fresh panel/cpu.dmm --frame 1280x720 --n 60
 """
 
 from __future__ import annotations
@@ -74,14 +77,16 @@ def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
     from deepmorph_core.networks import fused_for_inference
     from deepmorph_detect.centrenet import TorchDetector, stored_net
     from deepmorph_detect.locate import Locator
+    from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 
     locator = Locator(model)
     reader = locator.reader
     if mode == "torch":
         reader.decoder = fused_for_inference(model.decoder)
-        if locator.detector is not None:
-            net = fused_for_inference(stored_net(model)).to(memory_format=torch.channels_last)
-            locator.detector.net = TorchDetector(net)
+        if locator.detector is not None:  # the bundle's own network, else the shipped universal one
+            own = stored_net(model)
+            net = own if own is not None else load_universal(UNIVERSAL_PATH)[0]
+            locator.detector.net = TorchDetector(fused_for_inference(net).to(memory_format=torch.channels_last))
     else:
         assert isinstance(reader.decoder, OnnxNetwork), "the decoder does not run from an ONNX graph"
     clocks = {
@@ -99,11 +104,21 @@ def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
     return locator, clocks
 
 
+def frame_size(text: str) -> tuple[int, int]:
+    """``"1280x720"`` -> ``(1280, 720)``."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT (e.g. 1280x720)") from None
+    return w, h
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--fresh", type=Path, required=True, help="a freshly trained bundle (with a detector)")
+    ap.add_argument("--fresh", type=Path, required=True, help="a freshly trained bundle")
     ap.add_argument("--n", type=int, default=60, help="scenes per bundle")
     ap.add_argument("--severity", default="medium")
+    ap.add_argument("--frame", type=frame_size, default=(640, 480), help="the photos' size, WxH (640x480)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=RESULTS / "export_speed.json")
@@ -123,11 +138,11 @@ def main() -> None:
     models = {k: DeepMorphModel.load(p) for k, p in paths.items()}
     scenes: dict[str, list[Any]] = {}
     for k, m in models.items():  # one maker per bundle: its frames follow the same random draws
-        maker = SceneMaker(m, (640, 480), args.severity, seed=args.seed)
+        maker = SceneMaker(m, args.frame, args.severity, seed=args.seed)
         scenes[k] = [maker.make(drawings=1, distractors=1, aruco=True) for _ in range(args.n)]
     chains = {(k, mode): instrumented(m, mode) for k, m in models.items() for mode in MODES}
     aruco = aruco_detector()
-    qr = QrClock(models["ghost"], (640, 480), frames=20)
+    qr = QrClock(models["ghost"], args.frame, frames=20)
     qr.warm()
     for (k, _), (locator, clocks) in chains.items():  # first calls allocate: keep them out
         locator.locate(scenes[k][0].image, scenes[k][0].camera)
@@ -170,6 +185,8 @@ def main() -> None:
         "environment": environment(),
         "scenes": args.n,
         "severity": args.severity,
+        "frame": list(args.frame),
+        "threads": args.threads,
         "bundles": {k: str(p) for k, p in paths.items()},
         "qr_ms_median": qr_ms,
         "chains": {},
@@ -208,7 +225,8 @@ def main() -> None:
     print(table(["bundle", "networks", "read", "ms median", "ms mean", "x QR", "ArUco ms", "detector ms",
                  "decoder calls", "decoder ms", "checked bit by bit", "check ms", "second looks", "last look",
                  "ms median w/o 2nd/last looks", "ms median w/o bit check"], lines))  # fmt: skip
-    print(f"QR detectAndDecode median {qr_ms:.2f} ms; {args.threads} thread(s), {args.severity}, {args.n} scenes")
+    print(f"QR detectAndDecode median {qr_ms:.2f} ms; {args.threads} thread(s), {args.severity}, {args.n} scenes "
+          f"of {args.frame[0]}x{args.frame[1]}")  # fmt: skip
     print(f"wrote {write_json(args.out, report)}")
 
 
