@@ -115,6 +115,14 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
     }
 
 
+def trained_code(bundle: Path) -> tuple[int, int]:
+    """``(payload bits, code bits)`` of a trained bundle (after any cut its training made)."""
+    from deepmorph_core.model import DeepMorphModel
+
+    spec = DeepMorphModel.load(bundle).codec.spec
+    return spec.payload_bits, spec.code_bits
+
+
 def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
     """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector, each
     scored as ``bench/universal_detector.py`` scores its scenes; also among the prints at least
@@ -188,13 +196,15 @@ def main() -> None:
         else:
             run = train(svg, move, work / f"{name}.dmm", settings, args.curve)
         run["variables"] = variables
+        run["payload_bits"], run["code_bits"] = trained_code(work / f"{name}.dmm")
         run["reading"] = read_scenes(work / f"{name}.dmm", args.n, args.seed)
         run["curve"] = {Path(p).stem.rsplit(".step", 1)[1]: read_scenes(Path(p), args.n, args.seed)
                         for p in run.pop("curve_files")}  # fmt: skip
         results[name] = run
         med, hard = run["reading"]["medium"], run["reading"]["hard"]
         rows.append([
-            name, variables, run["steps"], f"{run['step_ms']:.0f}", f"{run['steps_s'] / 60:.1f}",
+            name, variables, f"{run['payload_bits']} ({run['code_bits']})", run["steps"], f"{run['step_ms']:.0f}",
+            f"{run['steps_s'] / 60:.1f}",
             f"{run['validation_s'] / 60:.1f}", f"{run['total_s'] / 60:.1f}",
             f"{med['read_share']:.1%}", f"{hard['read_share']:.1%}",
             f"{med['wide_read_share']:.1%}", f"{hard['wide_read_share']:.1%}", med["wrong"] + hard["wrong"],
@@ -206,8 +216,8 @@ def main() -> None:
         write_json(out, {"environment": environment(),
                    "settings": settings, "n": args.n, "drawings": results})  # fmt: skip
     print(f"\nTime to print-ready ({settings['threads']} threads; {args.n} scenes per severity, universal detector):")
-    print(table(["drawing", "variables", "steps", "ms/step", "steps min", "validation min", "total min",
-                 "medium read", "hard read", "medium, prints it reads", "hard, prints it reads", "wrong"],
+    print(table(["drawing", "variables", "payload (code) bits", "steps", "ms/step", "steps min", "validation min",
+                 "total min", "medium read", "hard read", "medium, prints it reads", "hard, prints it reads", "wrong"],
                 rows))  # fmt: skip
     totals = [r["total_s"] / 60 for r in results.values()]
     print(f"total minutes: median {statistics.median(totals):.1f}, worst {max(totals):.1f}")
