@@ -24,11 +24,12 @@ A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo
 --pixels``) sees each print sharper and is trained on the photo chain's own view of it
 (:mod:`deepmorph_core.registration`), and carries more: :data:`CODE_BITS_PER_GROUP_AT_PIXELS`
 code bits per readable group, up to :data:`LARGEST_CODE_AT_PIXELS`, in codes correcting two bit
-errors (:data:`ECC_AT_PIXELS`, the codes it was measured with). On the six drawings of
-``bench/pixels_panel.py``'s rule, codes of that size read 99.5-100 % of medium close-ups 240 and
-330 px wide on four, 96.5-97.5 % on ``codepen``, and ``cpu``'s 56 % at 240 px (where its 50
-code bits had read 99.5 % of close-ups in another training); 0 wrong in 5600. Below that width
-nothing larger was measured, and the 96-px figure stands.
+errors (:data:`ECC_AT_PIXELS`, the codes it was measured with), fitted on two drawings of
+``bench/pixels_panel.py``'s rule and checked on four more (``bench/README.md``). The plan can
+overshoot a drawing whose outline aligns poorly (``codepen``: 20 payload bits planned, 14 read);
+``train --payload-bits auto`` then cuts the code on fresh renders when training ends
+(``deepmorph.training.code_shrink``). Below that width nothing larger was measured, and the 96-px
+figure stands.
 """
 
 from __future__ import annotations
