@@ -169,8 +169,11 @@ def test_to_gray_takes_every_usual_pixel_type_and_refuses_the_rest() -> None:
             to_gray(image)
 
 
-def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:
-    _drawing, render = ghost
+@pytest.mark.parametrize("width", [96, 480])  # 480: a closing wider than PAPER_CLOSING_PX, run shrunk
+def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost, width: int) -> None:
+    drawing, render = ghost
+    if width != render.shape[1]:
+        render = render_svg(drawing.to_svg(drawing.neutral_values()[0]), width)
     render = render.astype(np.float32)
     shadowed = render.copy()
     shadowed[:, int(0.6 * shadowed.shape[1]) :] *= 0.45  # a hard shadow edge across the print
@@ -181,6 +184,28 @@ def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost) -> None:
     assert np.abs(flatten_illumination(render, stroke_px) - render).mean() < 0.01  # clean paper: unchanged
     ink = render < 0.5
     assert flat[ink].mean() < 0.35 and flat[~ink].mean() > 0.95
+
+
+def test_paper_light_of_a_wide_closing_matches_the_full_size_one(ghost) -> None:
+    """The shrunk closing (:data:`PAPER_CLOSING_PX`) finds the same light as the full-size one
+    on a print under a smooth gradient and sensor noise."""
+    import cv2
+
+    from deepmorph_core.photo import PAPER_CLOSING_PX, paper_light
+
+    drawing, _ = ghost
+    render = render_svg(drawing.to_svg(drawing.neutral_values()[0]), 400).astype(np.float32)
+    light = np.linspace(0.55, 1.0, render.shape[1], dtype=np.float32)[None, :] * np.ones_like(render)
+    photo = render * light + np.random.default_rng(0).normal(0, 0.02, render.shape).astype(np.float32)
+    feature_px = 2.6 / 64 * 400
+    k = int(1.5 * feature_px) | 1
+    assert k > PAPER_CLOSING_PX
+    ellipse = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))
+    full = cv2.GaussianBlur(cv2.morphologyEx(photo, cv2.MORPH_CLOSE, ellipse), (0, 0), k / 4)
+    shrunk = paper_light(photo, feature_px)
+    paper = render > 0.9
+    assert np.abs(shrunk - light)[paper].mean() < 0.03
+    assert np.abs(shrunk - light)[paper].mean() <= np.abs(full - light)[paper].mean()
 
 
 def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(tmp_path) -> None:
