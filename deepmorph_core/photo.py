@@ -109,9 +109,11 @@ def paper_light(gray: np.ndarray, feature_px: float) -> np.ndarray:
     wider than any ink feature, so that strokes vanish from it, then smoothed.
 
     Its cost grows with the square of the closing's width (49 px over a 640-px crop: 50 ms, 9 px:
-    2 ms), so a closing wider than :data:`PAPER_CLOSING_PX` is done on the image shrunk until it is
-    that wide, and the light enlarged back (``cv2.resize``): the light is smooth at that scale, and
-    a shrunk pixel is still a sixth of the ink feature, so gaps of paper stay paper.
+    2 ms), so a closing wider than :data:`PAPER_CLOSING_PX` is done on the image shrunk by whole
+    blocks until it is that wide, each block its brightest pixel, and the light enlarged back
+    (``cv2.resize``): the light is smooth at that scale, and taking the blocks' maxima is the
+    closing's own first step, where averaging them would mix the ink into the paper (a close-up's
+    alignment in flat light then landed 5.7 % of the print off instead of 3.7 %; with maxima 3.0 %).
 
     Args:
         gray: ``(H, W)`` float image, 1 = white.
@@ -121,9 +123,13 @@ def paper_light(gray: np.ndarray, feature_px: float) -> np.ndarray:
     k = max(5, min(k, (min(gray.shape) // 2) | 1))
     if k > PAPER_CLOSING_PX:
         h, w = gray.shape
-        shrink = k / PAPER_CLOSING_PX
-        small = cv2.resize(gray, (max(1, round(w / shrink)), max(1, round(h / shrink))), interpolation=cv2.INTER_AREA)
-        return cv2.resize(paper_light(small, feature_px / shrink), (w, h), interpolation=cv2.INTER_LINEAR)
+        step = -(-k // PAPER_CLOSING_PX)
+        # each step x step block's brightest pixel: the closing's own first move (a max filter),
+        # so the paper between strokes is not averaged with their ink
+        padded = np.pad(gray, ((0, -h % step), (0, -w % step)), mode="edge")
+        small = padded.reshape(padded.shape[0] // step, step, padded.shape[1] // step, step).max(axis=(1, 3))
+        light = paper_light(np.ascontiguousarray(small), feature_px / step)
+        return cv2.resize(light, (padded.shape[1], padded.shape[0]), interpolation=cv2.INTER_LINEAR)[:h, :w]
     closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
     return cv2.GaussianBlur(closed, (0, 0), k / 4)
 

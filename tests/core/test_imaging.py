@@ -187,8 +187,8 @@ def test_flatten_illumination_removes_a_shadow_and_keeps_the_ink(ghost, width: i
 
 
 def test_paper_light_of_a_wide_closing_matches_the_full_size_one(ghost) -> None:
-    """The shrunk closing (:data:`PAPER_CLOSING_PX`) finds the same light as the full-size one
-    on a print under a smooth gradient and sensor noise."""
+    """The shrunk closing (:data:`PAPER_CLOSING_PX`) finds the light the full-size one finds, on a
+    print under a smooth gradient and sensor noise."""
     import cv2
 
     from deepmorph_core.photo import PAPER_CLOSING_PX, paper_light
@@ -204,8 +204,8 @@ def test_paper_light_of_a_wide_closing_matches_the_full_size_one(ghost) -> None:
     full = cv2.GaussianBlur(cv2.morphologyEx(photo, cv2.MORPH_CLOSE, ellipse), (0, 0), k / 4)
     shrunk = paper_light(photo, feature_px)
     paper = render > 0.9
-    assert np.abs(shrunk - light)[paper].mean() < 0.03
-    assert np.abs(shrunk - light)[paper].mean() <= np.abs(full - light)[paper].mean()
+    assert np.abs(shrunk - full)[paper].mean() < 0.01
+    assert np.corrcoef(shrunk[paper], light[paper])[0, 1] > 0.99
 
 
 def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(tmp_path) -> None:
