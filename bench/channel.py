@@ -465,20 +465,14 @@ def measured_pixels_reads(paths: list[Path]) -> dict[tuple[str, int], int]:
     """``(drawing, close-up width) -> payload read`` from bench/pixels_panel.py's JSON: each width
     a model passed at (>= its bars on medium and hard close-ups, no wrong payload), else 0;
     later files win, a broken one is named."""
-    from pixels_panel import BARS
+    from pixels_panel import width_passes
 
     out: dict[tuple[str, int], int] = {}
     for path in paths:
         try:
-            results = json.loads(path.read_text())["results"]
-            for r in results:
-                reads = r["close_ups"]
-                for width in reads["medium"]:
-                    ok = all(
-                        reads[s][width]["read"] >= bar * reads[s][width]["samples"] and not reads[s][width]["wrong"]
-                        for s, bar in BARS.items()
-                    )
-                    out[(r["drawing"], int(width))] = r["payload_bits"] if ok else 0
+            for r in json.loads(path.read_text())["results"]:
+                for width in r["close_ups"]["medium"]:
+                    out[(r["drawing"], int(width))] = r["payload_bits"] if width_passes(r["close_ups"], width) else 0
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise SystemExit(f"--measured-pixels {path}: not a bench/pixels_panel.py result ({exc})") from None
     return out

@@ -2,13 +2,14 @@
 
 For each bundle (the bundled ghost and ``--fresh``), ``--n`` scenes at ``--severity`` (``--frame``
 pixels, 640x480 by default, one print, one other drawing, an ArUco marker of the same printed
-size) are made from the same seed. A model trained for prints at least ``--pixels`` wide is timed
-on frames where its prints are that wide: ``--frame 1280x720`` puts ``medium``'s prints at 192-896
-px. Each frame is located twice per bundle, alternating the order: with the networks run by
-ONNX Runtime from the bundle's graphs (what ``decode`` does) and with both networks in PyTorch
-(what a bundle without usable graphs got before graphs were stored). ArUco's ``detectMarkers``
-runs on the same frame, and OpenCV's QR ``detectAndDecode`` once per frame on a same-size frame
-holding a QR code, so that every median is taken over the same minutes.
+size) are made from the same seed. A model trained with ``--pixels 200`` is timed on frames where
+most of its prints are that wide: on ``--frame 1280x720`` ``medium``'s prints measured 110-400 px
+(a fifth under 200, refused as too small). Each frame is located twice per bundle, alternating
+the order: with the networks run by ONNX Runtime from the bundle's graphs (what ``decode``
+does) and with both networks in PyTorch (what a bundle without usable graphs got before graphs
+were stored). ArUco's ``detectMarkers`` runs on the same frame, and OpenCV's QR
+``detectAndDecode`` once per frame on a same-size frame holding a QR code, so that every median
+is taken over the same minutes.
 
 Where the time goes, per frame: the detector, the decoder (calls and milliseconds), the payload
 check and how many frames it checked bit by bit (a reading that needed corrections or is less

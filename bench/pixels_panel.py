@@ -58,6 +58,15 @@ UNRELATED_CHUNK = 500  # unrelated images made (and held in memory) at a time
 UNRELATED_SCALE = 1.5  # an unrelated image's shorter side at least this many times the smallest print
 
 
+def width_passes(close_ups: dict[str, dict[Any, Any]], width: Any) -> bool:
+    """Whether the close-ups of one width (``close_ups[severity][width]``, validation records as
+    dicts) read at least each severity's bar in :data:`BARS` with no wrong payload."""
+    return all(
+        close_ups[s][width]["read"] >= bar * close_ups[s][width]["samples"] and not close_ups[s][width]["wrong"]
+        for s, bar in BARS.items()
+    )
+
+
 def batch_read(log: Path) -> float | None:
     """The mean share of code words the training batches read over the last :data:`LAST_LOGS`
     lines of a training log (``None`` without one)."""
@@ -187,13 +196,12 @@ def main() -> None:
             raise SystemExit(f"{bundle}: not trained from the planned code ({code}) for {args.pixels}-px prints")
         trained = model.codec.spec
         reads: dict[str, dict[int, Any]] = {s: {} for s in BARS}
-        passed = True if args.samples else None
-        for severity, bar in BARS.items():
+        for severity in BARS:
             for width in args.widths if args.samples else ():
                 rec = validate_close_ups(model, args.samples, args.seed, severity, print_px=width)
                 reads[severity][width] = rec.model_dump()
-                passed &= rec.read / rec.samples >= bar and rec.wrong == 0
                 print(f"{svg.stem} {severity} {width} px: {rec.read}/{rec.samples}", file=sys.stderr, flush=True)
+        passed = all(width_passes(reads, w) for w in args.widths) if args.samples else None
         unrelated = None
         if args.unrelated:
             names = {p.stem for p, _, _ in panel}
