@@ -88,6 +88,13 @@ INK_OUTSIDE = 0.1
 BLIND_READ_CORRELATION = 0.7
 
 
+#: A print trained for a smallest width (``print_px``) that aligns narrower than this share of it
+#: is read by the first looks only (:meth:`Locator.aligned_too_narrow`): it is refused as too
+#: small whatever it reads, and the later looks took 50-400 ms of a 1280x720 frame. The share
+#: leaves room for the alignment's width to differ from the payload's morph fit's.
+NARROW_SHARE = 0.97
+
+
 #: The detector of a bundle that stores none of its own (``universal``: shipped, for any drawing).
 DEFAULT_DETECTOR = "universal"
 #: The name that asks for no detector: only whole images framed by their ink are tried.
@@ -230,9 +237,10 @@ class Locator:
         """
         gray, cam, pyramid, found = self._proposed(image, camera)
         results = self.decode_each(gray, found, cam, soft)
-        if any(located.result.ok for located in results):
+        if any(located.result.ok or _read_too_small(located) for located in results):
             return results
-        # Nothing read: the whole image framed by its ink, a scan or a print filling the frame.
+        # Nothing read (nor read and refused as too small): the whole image framed by its ink, a
+        # scan or a print filling the frame.
         # Also where the detector's outline aligned but did not read: on a close-up of a drawing
         # whose every point may move, the alignment from that outline can absorb part of the
         # morph into the homography, and the morph check then cannot confirm a right payload.
@@ -305,6 +313,15 @@ class Locator:
                 bar = UNREAD_BLIND_CORRELATION
         return located.correlation >= bar
 
+    def aligned_too_narrow(self, alignment: Alignment) -> bool:
+        """Whether ``alignment`` puts a print trained for a smallest width (``print_px``) in the
+        photo at under :data:`NARROW_SHARE` of that width: it is too small whatever it reads, so
+        only its first looks are tried, enough to tell that it is the drawing."""
+        needs = self.model.print_px
+        if needs is None:
+            return False
+        return measure_width(project(alignment.homography, self.frame_corners)) < NARROW_SHARE * needs
+
     def shown_whole(self, homography: np.ndarray, image_size: tuple[int, int]) -> bool:
         """Whether ``homography`` puts the drawing in the photo of ``image_size`` ``(height,
         width)`` as a print the photo shows whole: its ink inside the photo, at most
@@ -335,9 +352,12 @@ class Locator:
         no other drawing does (:meth:`PayloadChecker.check
         <deepmorph_detect.check.PayloadChecker.check>`).
 
+        A print aligned too narrow to read (:meth:`aligned_too_narrow`) is read by the first looks
+        alone, at each symmetric turn, and nothing below is tried.
         A drawing that looks the same turned (``Template.symmetric_turns``: a print aligns as
         well at each of those turns, and which one the alignment ended at is chance) is read
-        again at each such turn until a reading passes; the turn that reads also gives the pose.
+        again at each such turn until a reading passes, the first looks at every turn before the
+        later looks at any; the turn that reads also gives the pose.
         A weak reading there (:func:`~deepmorph_detect.check.is_weak`) is compared with those
         at the other turns: read at the wrong turn, such a drawing shows its true morph turned,
         which can land on another code word with corrections; the reading with the fewest
@@ -369,6 +389,8 @@ class Locator:
         ECC's morph fit, started there, slides back to the bent pose, where a wrong word can
         pass the smooth light's rules.
         """
+        if self.aligned_too_narrow(alignment):
+            return self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind, first_looks_only=True)
         located = self._decode_at(gray, pyramid, alignment, score, cam, source, soft, blind)
         if located.result.ok:
             return located
@@ -403,21 +425,34 @@ class Locator:
         blind: bool,
         relit_from: float | None = None,
         in_shadow: bool = False,
+        first_looks_only: bool = False,
     ) -> Located:
         """:meth:`decode_drawing` in one photo (the photo itself, or the photo lit by the
         template's light, ``relit_from`` the alignment in the photo itself): the readings at the
         alignment, at the symmetric turns and at the other turns. ``in_shadow``: the alignment is
-        in a grid of light, and every reading is checked in the shadow's light alone."""
-        H, checked, probs = self._read_and_check(
-            gray, pyramid, alignment, source, soft, blind, relit_from, in_shadow=in_shadow
-        )
-        for turn in self.template.symmetric_turns:
-            if _settled(checked.result):
-                break
-            turned = replace(alignment, homography=alignment.homography @ turn)
-            other = self._read_and_check(gray, pyramid, turned, source, soft, blind, relit_from, in_shadow=in_shadow)
+        in a grid of light, and every reading is checked in the shadow's light alone.
+        ``first_looks_only``: the first looks at each symmetric turn, and nothing else."""
+        turned = [replace(alignment, homography=alignment.homography @ t) for t in self.template.symmetric_turns]
+        turns = [alignment, *turned]
+        # The first looks at every turn before the later looks at any: which turn the alignment
+        # ended at is chance, and a first look at the right turn reads most prints.
+        readings: dict[int, tuple[np.ndarray, PayloadCheck, np.ndarray]] = {}
+        for first_only in (True, False) if len(turns) > 1 and not first_looks_only else (first_looks_only,):
+            for k, at in enumerate(turns):
+                if any(_settled(r[1].result) for r in readings.values()):
+                    break
+                if k in readings and readings[k][1].status == "passed":
+                    continue  # its later looks would end at the same passing reading
+                readings[k] = self._read_and_check(
+                    gray, pyramid, at, source, soft, blind, relit_from, in_shadow=in_shadow, first_only=first_only
+                )
+        H, checked, probs = readings[0]
+        for k in sorted(readings)[1:]:
+            other = readings[k]
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
+        if first_looks_only:
+            return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
         if not _settled(checked.result) and alignment.correlation >= UNREAD_BLIND_CORRELATION:
             margin = TURN_TIE_MARGIN if checked.result.ok else 0.0
             realigned = self.aligner.other_turn(pyramid, alignment, margin)
@@ -442,6 +477,7 @@ class Locator:
         relit_from: float | None = None,
         stronger_than: DecodeResult | None = None,
         in_shadow: bool = False,
+        first_only: bool = False,
     ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
         """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
         place the drawing by (the passed payload's morph fit, else the alignment's), the
@@ -449,7 +485,8 @@ class Locator:
         template's light, the alignment in the photo itself (:meth:`PayloadChecker.check
         <deepmorph_detect.check.PayloadChecker.check>`). ``stronger_than``: only readings
         stronger than this one are checked (and can pass); the others count as not read.
-        ``in_shadow``: checked in the shadow's light alone (:meth:`_decode_at`)."""
+        ``in_shadow``: checked in the shadow's light alone (:meth:`_decode_at`). ``first_only``:
+        the first looks alone."""
         H = alignment.homography
         views = [self.reader.rectify(pyramid, H)]
         whole = source == WHOLE_FRAME
@@ -462,7 +499,8 @@ class Locator:
         checked: PayloadCheck | None = None  # the verdict on the first payload that passed the CRC
         probs = np.full(self.model.codec.spec.code_bits, 0.5, dtype=np.float32)
         # a reading asked only whether it beats another: the first looks are enough
-        first_only = (blind and alignment.correlation < BLIND_READ_CORRELATION) or stronger_than is not None
+        weakly_blind = blind and alignment.correlation < BLIND_READ_CORRELATION
+        first_only = first_only or weakly_blind or stronger_than is not None
         for reading, bitwise in self.reader.looks(pyramid, H, views, readings, soft, first_only):
             readings.append(reading)
             if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
@@ -510,6 +548,12 @@ class Locator:
         return f"Locator({self.model.meta.drawing_name!r}, detector={detector!r}, renderer={self.renderer_name!r})"
 
 
+def _read_too_small(located: Located) -> bool:
+    """Whether ``located`` was read, and its payload passed every check, but is refused as too
+    small: the drawing is found, and a whole image framed by its ink would not find it again."""
+    return located.too_small and located.morph_check == "passed"
+
+
 def _settled(result: DecodeResult) -> bool:
     """Whether a reading needs no reading at another turn: it passed, and is not weak."""
     return result.ok and not is_weak(result)
@@ -527,6 +571,7 @@ __all__ = [
     "UNREAD_BLIND_CORRELATION",
     "TURN_TIE_MARGIN",
     "FILLS_FRAME",
+    "NARROW_SHARE",
     "INK_OUTSIDE",
     "BLIND_READ_CORRELATION",
     "Locator",

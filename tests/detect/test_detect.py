@@ -1040,6 +1040,31 @@ def test_a_symmetric_drawing_aligned_at_the_wrong_turn_is_read_at_the_right_one(
     assert np.abs(read.corners - placed.corners).max() < 3.0
 
 
+def test_a_symmetric_drawing_is_read_by_the_first_looks_at_every_turn_before_the_later_looks_at_any(
+    model: DeepMorphModel, locator: Locator
+) -> None:
+    """Which turn a symmetric drawing's alignment ends at is chance: aligned at the wrong one, its
+    first looks there fail, and the first looks at the right turn read it before any later look
+    (second looks, the last look by synthesis: 50-400 ms a turn) is tried at the wrong one."""
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
+    half = _half_turn(locator.viewbox)
+    wrong = replace(right, homography=right.homography @ half)
+    symmetric = Locator(model)
+    symmetric.template.__dict__["symmetric_turns"] = (half,)
+    real = symmetric._read_and_check
+    asked: list[tuple[bool, bool]] = []  # (at the right turn, first looks only) per call
+
+    def recorded(gray, pyramid, alignment, *args, **kwargs) -> tuple:
+        at_right = bool(np.abs(alignment.homography - right.homography).max() < 1e-6 * np.abs(right.homography).max())
+        asked.append((at_right, kwargs.get("first_only", False)))
+        return real(gray, pyramid, alignment, *args, **kwargs)
+
+    symmetric._read_and_check = recorded  # type: ignore[method-assign]
+    read = symmetric.decode_drawing(gray, pyramid, wrong, 1.0, cam, "detector", True)
+    assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
+    assert asked == [(False, True), (True, True)]
+
+
 def test_a_whole_frame_reading_whose_morph_fits_poorly_must_explain_the_photo(
     model: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -154,3 +154,42 @@ def test_a_model_trained_for_wider_prints_reads_no_payload_from_narrower_ones(lo
     read = [f for photo in wide for f in trained_wider.locate(photo)]
     assert len(read) == 3 and all(f.width_px >= 150 and f.result.ok for f in read)
     assert all(np.array_equal(f.result.payload, payload) for f in read)
+
+
+def test_a_print_aligned_too_narrow_is_read_by_its_first_looks_alone(locator, monkeypatch) -> None:
+    """A print aligned narrower than ``NARROW_SHARE`` of the width a model was trained for is too
+    small whatever it reads: its first looks are read (a passing one says it is the drawing),
+    and none of the later looks, realignments or whole-image framings is tried. Aligned at the
+    width it needs, the later looks are tried as before."""
+    import deepmorph_detect.locate as locate_module
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    model.meta.train["print_px"] = 150
+    trained_wider = Locator(model)
+    later: list[str] = []
+    monkeypatch.setattr(trained_wider.reader, "read_again", lambda *a, **k: later.append("second looks") or iter(()))
+    monkeypatch.setattr(trained_wider.aligner, "as_flat_sheet", lambda *a, **k: later.append("flat sheet"))
+    monkeypatch.setattr(locate_module, "whole_frame", lambda *a, **k: later.append("whole frame") or [])
+    rng = np.random.default_rng(3)
+    payload = rng.integers(0, 2, model.codec.spec.payload_bits).astype(np.uint8)
+    narrow = close_up_photo(render_svg(model.encode(payload), 400), "easy", rng, size=160)
+    (refused,) = trained_wider.locate(narrow)
+    assert refused.too_small and refused.morph_check == "passed" and later == []
+
+    gray, _, pyramid, (aligned,) = trained_wider._proposed(narrow, None)
+    assert trained_wider.aligned_too_narrow(aligned.alignment)
+    asked: list[bool] = []
+
+    def unread(*args, first_only: bool = False, **kwargs) -> tuple:
+        asked.append(first_only)
+        result = DecodeResult(np.zeros_like(payload), False, -1, 0.5)
+        return aligned.alignment.homography, locate_module.PayloadCheck(result, None, "not run"), np.full(8, 0.5)
+
+    monkeypatch.setattr(trained_wider, "_read_and_check", unread)
+    cam = trained_wider.frame(narrow, None)[1]
+    found = trained_wider.decode_drawing(gray, pyramid, aligned.alignment, 1.0, cam, "detector", True)
+    assert not found.result.ok and asked == [True] and later == []
+    model.meta.train["print_px"] = int(refused.width_px)  # as wide as it needs: the later looks too
+    assert not trained_wider.aligned_too_narrow(aligned.alignment)
+    trained_wider.decode_drawing(gray, pyramid, aligned.alignment, 1.0, cam, "detector", True)
+    assert asked[1] is False and "flat sheet" in later
