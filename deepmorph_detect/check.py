@@ -372,7 +372,9 @@ class PayloadChecker:
             shown = self.synthesis.shown_on(pyramid, fit.homography, rival, differ, in_colour, light_grid)
             if float(shown.sum()) <= 0:
                 return None
-            return self.synthesis.evidence(pyramid, fit.homography, rival, in_colour, True, light_grid).deviation
+            # its deviation is asked of the photo as it is: the pass with a shadow divided out
+            # would serve its bits, which are not asked
+            return self.synthesis.evidence(pyramid, fit.homography, rival, in_colour, False, light_grid).deviation
         theirs = self.synthesis.evidence(pyramid, fit.homography, rival, in_colour, True, light_grid)
         return theirs.deviation if float(theirs.evidence[differ].sum()) > 0 else None
 

@@ -567,6 +567,9 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
         in_gray = synthesis.evidence(pyramid, H, code, in_colour=False, lit=False)
         unlit = synthesis.evidence(pyramid, H, code, lit=False)
         assert 1 - unlit.fit**2 < 0.8 * (1 - in_gray.fit**2)  # a third less of the photo left unexplained
+        # how much the morph leaves unexplained is the photo's as it is, lit or not (what a
+        # rival's deviation alone needs)
+        assert unlit.deviation == in_colour.deviation
         gains.append(in_gray.deviation - in_colour.deviation)
         near = face.codec.encode(_near_payloads(payload)[0])
         assert not synthesis.evidence(pyramid, H, near).agrees
