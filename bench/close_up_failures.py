@@ -12,7 +12,10 @@ A close-up that is not read is:
   than two bits shown flipped; the weakest bits barely shown; the morph leaving the photo
   unexplained; the nearest rival explaining it better), from the attempt that broke fewest rules;
 * **other words only**: payloads that passed the CRC, none of them right, all withdrawn;
-* **wrong**: a wrong payload reported (never expected; the check exists to stop it).
+* **wrong**: a wrong payload reported (never expected; the check exists to stop it);
+* **narrower**: a print narrower than a ``--pixels`` model reads, which the simulator makes now
+  and then (no pose of the asked size fitted the frame) and the chain rightly refuses as too
+  small (``validate_close_ups`` does not count them either).
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
-KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words only", "wrong")
+KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words only", "wrong", "narrower")
 REASONS = ("morph fit", "bits flipped", "weakest bits", "unexplained", "rival")
 
 
@@ -77,6 +80,8 @@ def classify(model: Any, samples: int, seed: int, severity: str, detector: str) 
             kind = "read"
         elif found:
             kind = "wrong"
+        elif model.print_px is not None and shot.width_px < model.print_px:
+            kind = "narrower"
         elif right:
             kind = "right word withdrawn"
             reasons[min((_reasons(c) or ("?",) for c in right), key=len)[0]] += 1

@@ -130,7 +130,7 @@ def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.metrics import SceneTally
-    from deepmorph_detect.results import measure_width
+    from deepmorph_detect.results import across_px
     from deepmorph_detect.scenes import SceneMaker
 
     model = DeepMorphModel.load(bundle)
@@ -148,7 +148,7 @@ def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
             times.append(time.perf_counter() - t0)
             read = {id(p) for det, p, right in tally.add(dets, drawings) if p is not None and det.result.ok and right}
             for p in drawings:
-                if measure_width(p.corners) >= model.smallest_print_px:
+                if across_px(p.corners, p.truth) >= model.smallest_print_px:
                     wide["prints"] += 1
                     wide["read"] += id(p) in read
         out[sev] = {"prints": tally.prints, "read": tally.read, "wrong": tally.wrong,

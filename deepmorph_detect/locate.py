@@ -51,7 +51,7 @@ from deepmorph_detect.propose import (
 )
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
-from deepmorph_detect.results import Located, measure_width
+from deepmorph_detect.results import Located, across_px, measure_width
 from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
 
@@ -320,7 +320,8 @@ class Locator:
         needs = self.model.print_px
         if needs is None:
             return False
-        return measure_width(project(alignment.homography, self.frame_corners)) < NARROW_SHARE * needs
+        corners = project(alignment.homography, self.frame_corners)
+        return across_px(corners, alignment.homography) < NARROW_SHARE * needs
 
     def shown_whole(self, homography: np.ndarray, image_size: tuple[int, int]) -> bool:
         """Whether ``homography`` puts the drawing in the photo of ``image_size`` ``(height,

@@ -24,8 +24,10 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.severity import VALIDATION_SEVERITY
+from deepmorph_detect.camera import project
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_photo, colour_print, model_added_steps
+from deepmorph_detect.results import across_px
+from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_placed, colour_print, model_added_steps
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
 #: The close-up photo's width: its drawing spans 60-80 % of it, 144-192 camera pixels.
@@ -54,11 +56,13 @@ def printed(
 
 @dataclass(frozen=True)
 class CloseUp:
-    """One close-up of :func:`close_ups`: the photo, and the payload and code bits it shows."""
+    """One close-up of :func:`close_ups`: the photo, the payload and code bits it shows, and the
+    print's width in it (:func:`~deepmorph_detect.results.across_px`)."""
 
     photo: np.ndarray
     payload: np.ndarray
     code: np.ndarray
+    width_px: float
 
 
 def close_up_width(model: DeepMorphModel, print_px: float | None = None) -> int:
@@ -94,7 +98,10 @@ def close_ups(
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
         art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
-        yield CloseUp(close_up_photo(art, severity, rng, size=photo_px, extra=added), payload, code)
+        photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added)
+        height, width = art.shape[:2]
+        corners = project(art_to_photo, np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64))
+        yield CloseUp(photo, payload, code, across_px(corners, art_to_photo))
 
 
 def validate_close_ups(  # noqa: PLR0913
@@ -108,15 +115,25 @@ def validate_close_ups(  # noqa: PLR0913
     """Read ``samples`` fresh payloads from close-up photos through the photo chain: photos
     :data:`PHOTO_PX` wide (a model trained for prints ``model.print_px`` wide: photos whose
     prints span that width or more), or with the drawing about ``print_px`` camera pixels wide; with the
-    model's detector, or the one named by ``detector`` (``"none"``: whole images only)."""
+    model's detector, or the one named by ``detector`` (``"none"``: whole images only).
+
+    A model trained for prints at least ``print_px`` wide refuses a narrower one as too small.
+    The simulator makes a few close-ups narrower than asked (where no pose of the asked size fits
+    the frame, it tries smaller ones): those are not counted, unless they give a wrong payload,
+    and the description says how many there were."""
     start = time.perf_counter()
     locator = Locator(model, detector=detector)
     photo_px = close_up_width(model, print_px)
     low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
     tally = PayloadTally()
-    right_bits = missed = unread = 0
+    right_bits = missed = unread = narrower = 0
     for shot in close_ups(model, samples, seed, severity, print_px):
         found = locator.locate(shot.photo)
+        if model.print_px is not None and shot.width_px < model.print_px:
+            narrower += 1
+            vouched = [f.result.payload for f in found if f.result.ok]
+            tally.wrong += any(not np.array_equal(payload, shot.payload) for payload in vouched)
+            continue
         if not found:
             # found but not read (a blind detector reports only what it reads), or not found
             missed += not locator.aligns(shot.photo)
@@ -124,14 +141,18 @@ def validate_close_ups(  # noqa: PLR0913
             continue
         right_bits += int(((found[0].probabilities > 0.5) == (shot.code == 1)).sum())
         tally.add([f.result.payload for f in found if f.result.ok], shot.payload)
+    counted = samples - narrower
+    description = f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain"
+    if narrower:
+        description += f"; {narrower} narrower than {model.print_px} px not counted"
     return ValidationRecord(
         name="close-ups",
-        description=f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain",
+        description=description,
         severity=severity,
-        samples=samples,
+        samples=max(counted, 1),
         read=tally.read,
         wrong=tally.wrong,
-        bit_accuracy=right_bits / ((samples - unread) * model.codec.spec.code_bits) if unread < samples else None,
+        bit_accuracy=right_bits / ((counted - unread) * model.codec.spec.code_bits) if unread < counted else None,
         missed=missed,
         seconds=round(time.perf_counter() - start, 2),
     )

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from deepmorph_core.model import Detection
-from deepmorph_detect.camera import Camera
+from deepmorph_detect.camera import Camera, project
 from deepmorph_detect.check import MorphFit
 from deepmorph_detect.synthesis import BitEvidence
 
@@ -18,6 +18,25 @@ def measure_width(corners: np.ndarray) -> float:
     """The printed width as seen: the mean length of the frame's top and bottom edges."""
     c = np.asarray(corners, dtype=np.float64)
     return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
+
+
+def across_px(corners: np.ndarray, homography: np.ndarray) -> float:
+    """A print's width in a photo as the project means it everywhere (``train --pixels``,
+    ``capacity --print-mm --distance-cm``, the photo simulator): its width seen head-on at its
+    distance. ``corners`` are its frame's corners in the photo (TL, TR, BR, BL) and
+    ``homography`` the map (SVG units -> image pixels) that put them there.
+
+    A tilt shortens a print in the photo along one direction only: along the tilt's axis it
+    keeps its head-on scale, the largest stretch the homography makes at the drawing's centre.
+    The mean of the top and bottom edges (:func:`measure_width`) is shortened by a tilt about
+    the vertical axis and not by one about the horizontal axis: a close-up 201 px wide head-on
+    and tilted 15° measured 196.5 px."""
+    H = np.asarray(homography, dtype=np.float64)
+    frame = project(np.linalg.inv(H), np.asarray(corners, dtype=np.float64))  # SVG units
+    cx, cy = frame.mean(axis=0)
+    x, y, w = H @ np.array([cx, cy, 1.0])
+    jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
+    return float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
 
 
 #: The side of :meth:`Pose.cube` in drawing widths.
@@ -100,8 +119,13 @@ class Located(Detection):
 
     @property
     def width_px(self) -> float | None:
-        """The print's width in the photo: the mean length of its frame's top and bottom edges."""
-        return None if self.corners is None else measure_width(self.corners)
+        """The print's width in the photo, seen head-on at its distance (:func:`across_px`; the
+        mean of its frame's top and bottom edges where no homography is known)."""
+        if self.corners is None:
+            return None
+        if self.homography is None:
+            return measure_width(self.corners)
+        return across_px(self.corners, self.homography)
 
     @property
     def too_narrow(self) -> bool:

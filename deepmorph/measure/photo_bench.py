@@ -37,7 +37,7 @@ from deepmorph_detect.labels import Label, read_labels
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.media import IMAGE_SUFFIXES
 from deepmorph_detect.metrics import corner_error
-from deepmorph_detect.results import Located, measure_width
+from deepmorph_detect.results import Located, across_px
 
 STATUSES = ("read", "wrong", "not verified", "missed")
 MIN_BLUR_PIXELS = 16  # a frame covering fewer pixels than this has no sharpness to speak of
@@ -124,6 +124,14 @@ def _take(dets: list[Located], label: Label, want: Any) -> Located | None:
     return None
 
 
+def print_width(corners: np.ndarray, viewbox: tuple[float, float, float, float]) -> float:
+    """The print's width in the photo, seen head-on at its distance, as the photo chain measures
+    it for a model's smallest print (:func:`~deepmorph_detect.results.across_px`)."""
+    c = np.asarray(corners, dtype=np.float64)
+    H = cv2.getPerspectiveTransform(viewbox_corners(viewbox).astype(np.float32), c.astype(np.float32))
+    return across_px(c, H)
+
+
 def measure_tilt(corners: np.ndarray, viewbox: tuple[float, float, float, float], camera: Camera) -> float:
     """The angle between the print's normal and the camera's axis, from PnP on its frame."""
     frame = project_points(viewbox_to_frame(viewbox), viewbox_corners(viewbox))
@@ -175,7 +183,7 @@ def score_photo(
         corners = label.corners if label.corners is not None else (None if det is None else det.corners)
         if corners is not None:
             ps.corners_from = "label" if label.corners is not None else "detection"
-            ps.width_px = measure_width(corners)
+            ps.width_px = print_width(corners, viewbox)
             ps.tilt_deg = measure_tilt(corners, viewbox, camera)
             ps.sharpness = measure_sharpness(gray, corners)
         score.codes.append(ps)
@@ -280,4 +288,4 @@ def bench_photos(
 
 
 __all__ = ["STATUSES", "PhotoScore", "CodeScore", "bench_photos", "check_labels", "measure_sharpness", "measure_tilt",
-           "measure_width", "photo_files", "score_photo", "summarise"]  # fmt: skip
+           "photo_files", "print_width", "score_photo", "summarise"]  # fmt: skip

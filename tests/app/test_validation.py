@@ -154,3 +154,33 @@ def test_a_print_found_but_not_read_is_not_counted_as_not_found(monkeypatch: pyt
     assert record.read == 0 and record.missed == 0 and record.bit_accuracy is None
     monkeypatch.setattr(Locator, "aligns", lambda self, image: False)
     assert validate_close_ups(model, 3, 0, "easy", detector="universal").missed == 3
+
+
+def test_close_ups_narrower_than_a_model_reads_are_not_counted_unless_wrong(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model trained for prints at least ``print_px`` wide refuses narrower ones as too small;
+    the simulator makes a few narrower than asked (no pose of that size fitted the frame). Those
+    are left out of the count and named in the description, unless they give a wrong payload,
+    which counts whatever the print's width."""
+    from dataclasses import replace
+
+    import deepmorph_detect.photo_validation as validation
+    from deepmorph_detect.locate import Locator
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    model.meta.train["print_px"] = 150
+    real = validation.close_ups
+    shots = list(real(model, 4, 0, "easy"))
+    assert all(150 <= shot.width_px <= 210 for shot in shots)  # 200-267 px photos' 60-80 %, head-on
+    shrunk = [replace(shot, width_px=120.0) if k < 2 else shot for k, shot in enumerate(shots)]
+    monkeypatch.setattr(validation, "close_ups", lambda *args, **kwargs: iter(shrunk))
+    record = validation.validate_close_ups(model, 4, 0, "easy")
+    assert record.samples == 2 and record.read == 2 and record.wrong == 0
+    assert record.description.endswith("; 2 narrower than 150 px not counted")
+    locate = Locator.locate
+
+    def misread(self: Locator, image: np.ndarray, camera: object = None, soft: bool = True) -> list:
+        found = locate(self, image, camera, soft)
+        return [replace(f, result=replace(f.result, payload=1 - f.result.payload, ok=True)) for f in found]
+
+    monkeypatch.setattr(Locator, "locate", misread)
+    assert validation.validate_close_ups(model, 4, 0, "easy").wrong == 4

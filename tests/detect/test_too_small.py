@@ -9,6 +9,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
@@ -51,7 +52,7 @@ def test_unread_small_prints_are_too_small_and_read_ones_are_not(model, locator)
     assert flagged >= 3 and read >= 3
     # the same unread drawing at twice the size in the photo is not too small: another reason
     unread = next(f for photo, _ in small_prints(model) for f in locator.locate(photo) if not f.result.ok)
-    wide = replace(unread, corners=unread.corners * 3)
+    wide = replace(unread, corners=unread.corners * 3, homography=np.diag([3.0, 3.0, 1.0]) @ unread.homography)
     assert wide.width_px > 96 and not wide.too_small
 
 
@@ -80,6 +81,30 @@ def test_decode_says_a_print_is_too_small(model, locator, tmp_path: Path) -> Non
     data = json.loads(CliRunner().invoke(app, ["decode", str(BUNDLED_MODEL), str(path), "--json"]).output)
     (detection,) = data[0]["detections"]
     assert detection["too_small"]["needs_px"] == 96.0 and not detection["ok"]
+
+
+def test_a_print_is_as_wide_as_it_would_be_seen_head_on_at_its_distance() -> None:
+    """A print's width in the photo is what ``train --pixels``, ``capacity --print-mm
+    --distance-cm`` and the photo simulator mean by it: its width seen head-on at its distance
+    (the camera's focal length over the distance, for a print one unit wide). A tilt about any
+    axis, and a turn, leave it so, while the mean of the frame's top and bottom edges shrinks
+    with a tilt about the vertical axis (a 200-px print tilted 15° and turned measured 196.5 px)."""
+    from deepmorph_detect.camera import Camera, homography_from_pose, project
+    from deepmorph_detect.results import across_px, measure_width
+
+    cam = Camera.default(640, 480)
+    square = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    distance = cam.fx / 200.0  # 200 px across, head-on
+    for axis in ([0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.7071, 0.7071, 0.0]):
+        for tilt in (0.0, 15.0, 30.0):
+            tilted, _ = cv2.Rodrigues(np.radians(tilt) * np.array(axis))
+            turned, _ = cv2.Rodrigues(np.array([0.0, 0.0, 0.3]))
+            rvec, _ = cv2.Rodrigues(tilted @ turned)
+            H = homography_from_pose(cam, rvec.reshape(3), np.array([0.05, -0.03, 1.0]) * distance)
+            corners = project(H, square)
+            assert across_px(corners, H) == pytest.approx(200.0, rel=0.01)
+            if axis[0] == 0.0 and tilt == 15.0:
+                assert measure_width(corners) < 198.0
 
 
 def test_info_gives_the_smallest_print() -> None:
