@@ -151,8 +151,7 @@ def validation_warning(records: list[ValidationRecord], label: str) -> str | Non
              for r in weak]  # fmt: skip
     missed = sum(r.missed or 0 for r in weak)
     misread = sum(r.samples - r.read - r.wrong - (r.missed or 0) for r in weak)
-    # the code reads its renders: photos' misses are their captures'. At --pixels 200, close-ups of
-    # the narrowest prints read 98.0-98.5 % for codes of 14 to 24 bits alike (bench/README.md)
+    # the code reads its renders: photos' misses are their captures'
     renders_read = any(r.name == "renders" for r in records) and all(r.name != "renders" for r in weak)
     advice = []
     if any(r.wrong for r in weak) or (misread >= missed and not renders_read):
