@@ -102,6 +102,15 @@ def parse_ints(text: str) -> list[int]:
     return [int(x) for x in text.replace(" ", "").split(",") if x]
 
 
+def frame_size(text: str) -> tuple[int, int]:
+    """``"1280x720"`` -> ``(1280, 720)``."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT (e.g. 1280x720)") from None
+    return w, h
+
+
 def add_scene_options(ap: argparse.ArgumentParser, n: int, out: Path) -> None:
     """The options every scene benchmark takes: the bundle, scenes per severity, severities,
     threads, seed and the JSON output."""

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, environment, frame_size, set_threads, table, write_json  # noqa: E402
 
 MODES = ("onnx", "torch")
 # what is recorded per frame
@@ -103,15 +103,6 @@ def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
         clocks["detector"] = Clock(locator.detector.net)
         locator.detector.net = clocks["detector"]
     return locator, clocks
-
-
-def frame_size(text: str) -> tuple[int, int]:
-    """``"1280x720"`` -> ``(1280, 720)``."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT (e.g. 1280x720)") from None
-    return w, h
 
 
 def main() -> None:

@@ -29,11 +29,19 @@ too small), and every payload it accepts from them is counted, and the detection
 small.
 ``--samples 0`` reads no close-ups (false accepts only).
 
+**Photos**: with ``--scenes N``, each model also reads ``N`` medium and ``N`` hard scenes of
+``--frame`` pixels (``bench/time_to_print.py``'s: one or two prints, another drawing, an ArUco
+marker in every other scene; the universal detector), and the prints at least ``--pixels`` wide
+seen head-on (``deepmorph_detect.results.across_px``) are counted: read, and any wrong payload.
+Scenes tilt prints as far as their severity allows (45° medium, 60° hard), three times as far as
+close-ups.
+
     .venv/bin/python bench/pixels_panel.py /work/shared/data/drawings/feather --models /tmp/panel
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --only coffee,cpu --out half.json
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/p58 --only codesandbox --largest-code 58 \
         --bits-per-group 1.25
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --samples 0 --unrelated 5000
+    .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --samples 0 --scenes 60 --frame 1280x720
 """
 
 from __future__ import annotations
@@ -47,8 +55,8 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, parse_ints, set_threads, table, write_json  # noqa: E402
-from time_to_print import pick_drawings  # noqa: E402
+from _common import RESULTS, environment, frame_size, parse_ints, set_threads, table, write_json  # noqa: E402
+from time_to_print import pick_drawings, read_scenes  # noqa: E402
 
 BARS = {"medium": 0.99, "hard": 0.95}
 FITTED_ON = ("battery-charging", "codepen")  # the plan was chosen on these two (the rule's first and third)
@@ -151,6 +159,13 @@ def sizing(model: Any) -> str:
     return ", ".join(f"{s.code_bits[0]}->{s.code_bits[1]} {s.measured_on}" for s in shrunk) or "-"
 
 
+def _wide_read(read: dict[str, Any]) -> str:
+    """``read/prints (percent)`` of the prints at least as wide as the model reads, from
+    :func:`time_to_print.read_scenes`'s counts for one severity."""
+    n = read["wide_prints"]
+    return f"{read['wide_read']}/{n} ({100 * read['wide_read'] / n:.1f} %)" if n else "-"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("feather", type=Path, help="the Feather icons folder")
@@ -163,6 +178,8 @@ def main() -> None:
     ap.add_argument("--widths", type=parse_ints, default=[240, 330])
     ap.add_argument("--samples", type=int, default=200, help="close-ups per width and severity (0: none)")
     ap.add_argument("--unrelated", type=int, default=0, help="unrelated images each model reads (false accepts)")
+    ap.add_argument("--scenes", type=int, default=0, help="medium and hard scenes each model reads (photos)")
+    ap.add_argument("--frame", type=frame_size, default=(1280, 720), help="the scenes' size, WxH (1280x720)")
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--only", default="", help="comma-separated icons of the panel to run (default: all)")
@@ -176,7 +193,7 @@ def main() -> None:
     from deepmorph_detect.photo_validation import validate_close_ups
 
     args.models.mkdir(parents=True, exist_ok=True)
-    rows, results, ratios = [], [], []
+    rows, results, ratios, scene_rows = [], [], [], []
     only = {name for name in args.only.split(",") if name}
     panel = pick_drawings(args.feather, args.drawings)
     for svg, move, n in panel:
@@ -207,6 +224,10 @@ def main() -> None:
             names = {p.stem for p, _, _ in panel}
             unrelated = false_accepts(model, args.unrelated, args.feather, names, args.seed + 99)
             print(f"{svg.stem} unrelated: {unrelated}", file=sys.stderr, flush=True)
+        scenes = read_scenes(bundle, args.scenes, args.seed, args.frame) if args.scenes else None
+        if scenes is not None:
+            print(f"{svg.stem} scenes: {scenes}", file=sys.stderr, flush=True)
+            scene_rows.append([svg.stem, *(_wide_read(scenes[s]) for s in BARS), sum(scenes[s]["wrong"] for s in BARS)])
         batches = batch_read(bundle.with_suffix(".log.jsonl"))
         ratio = trained.payload_bits / report.visible
         role = "fitted" if svg.stem in FITTED_ON else "checked"
@@ -216,7 +237,8 @@ def main() -> None:
         rows.append(
             [svg.stem, role, n, report.visible, report.readable_groups, f"{code.payload_bits} ({code.code_bits})",
              sizing(model), f"{trained.payload_bits} ({trained.code_bits})", f"{ratio:.2f}",
-             *(" / ".join(f"{100 * reads[s][w]['read'] / args.samples:.1f}" for w in reads[s]) or "-" for s in BARS),
+             *(" / ".join(f"{100 * reads[s][w]['read'] / reads[s][w]['samples']:.1f}" for w in reads[s]) or "-"
+               for s in BARS),
              wrong, "-" if unrelated is None else f"{unrelated['false_accepts']} / {unrelated['n']}",
              "-" if batches is None else f"{batches:.2f}", {True: "yes", False: "no", None: "-"}[passed]]
         )  # fmt: skip
@@ -227,7 +249,7 @@ def main() -> None:
              "code_bits": trained.code_bits, "auto": model.meta.record.payload_auto is not None,
              "shrunk": [s.model_dump() for s in model.meta.record.shrunk],
              "predicted_96px": report.payload_bits, "payload_per_visible": ratio, "close_ups": reads,
-             "unrelated": unrelated, "batch_read": batches, "passed": passed, "train_s": train_s}
+             "unrelated": unrelated, "scenes": scenes, "batch_read": batches, "passed": passed, "train_s": train_s}
         )  # fmt: skip
     px = "/".join(map(str, args.widths))
     headers = ["drawing", "role", "variables", "visible", "readable", "plan: payload (code bits)", "training cut",
@@ -235,6 +257,10 @@ def main() -> None:
                f"medium % ({px} px)", f"hard % ({px} px)", "wrong", "false accepts", "batch read",
                "passes"]  # fmt: skip
     print(table(headers, rows))
+    if scene_rows:
+        frame = "x".join(map(str, args.frame))
+        print(f"\n{args.scenes} scenes of {frame} per severity: prints at least {args.pixels} px wide seen head-on")
+        print(table(["drawing", "medium read", "hard read", "wrong (all prints)"], scene_rows))
     tried = [r["unrelated"] for r in results if r["unrelated"]]
     if tried:
         fa, fa_n = sum(u["false_accepts"] for u in tried), sum(u["n"] for u in tried)
@@ -246,6 +272,7 @@ def main() -> None:
         {"environment": {**environment(), "threads": threads}, "pixels": args.pixels, "samples": args.samples,
          "seed": args.seed, "widths": args.widths, "bits_per_group": args.bits_per_group,
          "largest_code": args.largest_code, "ecc_t": args.ecc_t, "unrelated": args.unrelated,
+         "scenes": args.scenes, "frame": list(args.frame),
          "results": results},
     )  # fmt: skip
     print(f"wrote {args.out}")

@@ -123,10 +123,11 @@ def trained_code(bundle: Path) -> tuple[int, int]:
     return spec.payload_bits, spec.code_bits
 
 
-def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
-    """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes, universal detector, each
-    scored as ``bench/universal_detector.py`` scores its scenes; also among the prints at least
-    as wide as the model reads (``smallest_print_px``: narrower ones are too small for it)."""
+def read_scenes(bundle: Path, n: int, seed: int, frame: tuple[int, int] = (640, 480)) -> dict[str, Any]:
+    """Prints read (and wrong) in ``n`` medium and ``n`` hard scenes of ``frame`` pixels,
+    universal detector, each scored as ``bench/universal_detector.py`` scores its scenes; also
+    among the prints at least as wide as the model reads (``smallest_print_px``, seen head-on:
+    narrower ones are too small for it)."""
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.metrics import SceneTally
@@ -137,7 +138,7 @@ def read_scenes(bundle: Path, n: int, seed: int) -> dict[str, Any]:
     locator = Locator(model, detector="universal")
     out: dict[str, Any] = {}
     for sev in ("medium", "hard"):
-        maker = SceneMaker(model, (640, 480), sev, seed=seed)
+        maker = SceneMaker(model, frame, sev, seed=seed)
         tally, wide = SceneTally(), {"prints": 0, "read": 0}
         times = []
         for i in range(n):
