@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,11 +33,18 @@ def across_px(corners: np.ndarray, homography: np.ndarray) -> float:
     the vertical axis and not by one about the horizontal axis: a close-up 201 px wide head-on
     and tilted 15° measured 196.5 px."""
     H = np.asarray(homography, dtype=np.float64)
-    frame = project(np.linalg.inv(H), np.asarray(corners, dtype=np.float64))  # SVG units
+    try:
+        frame = project(np.linalg.inv(H), np.asarray(corners, dtype=np.float64))  # SVG units
+    except np.linalg.LinAlgError:  # a degenerate map: the edges as seen are all there is
+        return measure_width(corners)
     cx, cy = frame.mean(axis=0)
     x, y, w = H @ np.array([cx, cy, 1.0])
-    jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
-    return float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
+    with np.errstate(all="ignore"):  # a centre on the horizon: no width but the edges'
+        jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
+        if not np.isfinite(jacobian).all():
+            return measure_width(corners)
+        across = float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
+    return across if math.isfinite(across) else measure_width(corners)
 
 
 #: The side of :meth:`Pose.cube` in drawing widths.

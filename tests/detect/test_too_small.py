@@ -105,6 +105,8 @@ def test_a_print_is_as_wide_as_it_would_be_seen_head_on_at_its_distance() -> Non
             assert across_px(corners, H) == pytest.approx(200.0, rel=0.01)
             if axis[0] == 0.0 and tilt == 15.0:
                 assert measure_width(corners) < 198.0
+    # a degenerate map gives the edges as seen, never an error
+    assert across_px(corners, np.zeros((3, 3))) == measure_width(corners)
 
 
 def test_info_gives_the_smallest_print() -> None:
