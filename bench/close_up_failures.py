@@ -33,23 +33,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
 KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words only", "wrong", "narrower")
-REASONS = ("morph fit", "bits flipped", "weakest bits", "unexplained", "rival")
 
 
 def _reasons(check: Any) -> tuple[str, ...]:
-    """The rules a withdrawn attempt broke (:class:`~deepmorph_detect.check.PayloadCheck`)."""
-    from deepmorph_detect.synthesis import MAX_CONTRADICTED, MAX_DEVIATION, MIN_WEAKEST_SUM
+    """The rules a withdrawn attempt broke (:class:`~deepmorph_detect.check.PayloadCheck`): the
+    morph fit, else :func:`~deepmorph_detect.synthesis.broken_rules`."""
+    from deepmorph_detect.synthesis import broken_rules
 
     if check.status == "failed" or check.bits is None:
         return ("morph fit",)
     bits = check.bits
-    broken = (
-        ("bits flipped", bits.contradicted > MAX_CONTRADICTED),
-        ("weakest bits", bits.weakest_sum < MIN_WEAKEST_SUM),
-        ("unexplained", bits.deviation > MAX_DEVIATION),
-        ("rival", bits.rival_deviation is not None and bits.rival_deviation < bits.deviation),
-    )
-    return tuple(name for name, hit in broken if hit)
+    return broken_rules(bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation)
 
 
 def classify(model: Any, samples: int, seed: int, severity: str, detector: str) -> tuple[Counter, Counter]:
@@ -104,7 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     set_threads(args.threads)
     from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.synthesis import BIT_RULES
 
+    reasons_in_order = ("morph fit", *BIT_RULES)
     start = time.perf_counter()
     rows = []
     for path in args.models:
@@ -112,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         for severity, seed in (("medium", args.seed), ("hard", args.seed + 1)):
             kinds, reasons = classify(model, args.close_ups, seed, severity, args.detector)
             rows.append({"model": path.stem, "severity": severity, **{k: kinds[k] for k in KINDS},
-                         "withdrawn_because": {r: reasons[r] for r in REASONS if reasons[r]}})  # fmt: skip
+                         "withdrawn_because": {r: reasons[r] for r in reasons_in_order if reasons[r]}})  # fmt: skip
             print(f"{path.stem} {severity}: {dict(kinds)}", flush=True)
     headers = ["model", "severity", *KINDS, "withdrawn because"]
     body = [

@@ -194,29 +194,46 @@ class BitEvidence:
         return disagreement(self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation)
 
 
+#: The per-bit check's rules (:attr:`BitEvidence.agrees`), by name, in the order they are asked.
+BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival")
+
+
+def broken_rules(
+    contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None
+) -> tuple[str, ...]:
+    """The :data:`BIT_RULES` a code word breaks (empty when it agrees): too many bits shown
+    flipped, its weakest bits barely shown, a photo its morph does not explain, or a photo that
+    the nearest rival word explains better, its bits shown where the two differ
+    (``rival_deviation``)."""
+    broken = (
+        contradicted > MAX_CONTRADICTED,
+        weakest_sum < MIN_WEAKEST_SUM,
+        deviation > MAX_DEVIATION,
+        rival_deviation is not None and rival_deviation < deviation,
+    )
+    return tuple(rule for rule, hit in zip(BIT_RULES, broken) if hit)
+
+
 def disagreement(contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None) -> str:
-    """Which part of :attr:`BitEvidence.agrees` a code word fails, in words (empty when none):
-    too many bits shown flipped, its weakest bits barely shown, a photo its morph does not
-    explain, or a photo that the nearest rival word explains better, its bits shown where the two
-    differ (``rival_deviation``)."""
-    if contradicted > MAX_CONTRADICTED:
-        return f"the photo shows {contradicted} of its code bits flipped"
-    if weakest_sum < MIN_WEAKEST_SUM:
-        return (
+    """The first of :func:`broken_rules` a code word breaks, in words (empty when none)."""
+    broken = broken_rules(contradicted, weakest_sum, deviation, rival_deviation)
+    if not broken:
+        return ""
+    return {
+        "bits flipped": lambda: f"the photo shows {contradicted} of its code bits flipped",
+        "weakest bits": lambda: (
             f"the photo barely shows its {WEAKEST_BITS} weakest code bits "
             f"(support {weakest_sum:.2f}, at least {MIN_WEAKEST_SUM} needed)"
-        )
-    if deviation > MAX_DEVIATION:
-        return (
+        ),
+        "unexplained": lambda: (
             f"its morph does not explain the photo where its bits act "
             f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
-        )
-    if rival_deviation is not None and rival_deviation < deviation:
-        return (
+        ),
+        "rival": lambda: (
             f"the nearest other code word explains the photo better, its bits shown where the two differ "
             f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
-        )
-    return ""
+        ),
+    }[broken[0]]()
 
 
 def disagreement_in(fields: dict[str, Any]) -> str:
@@ -599,6 +616,8 @@ __all__ = [
     "WEAKEST_BITS",
     "BitEvidence",
     "MorphSynthesis",
+    "BIT_RULES",
+    "broken_rules",
     "disagreement",
     "disagreement_in",
     "morph_template",

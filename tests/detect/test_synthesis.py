@@ -26,12 +26,14 @@ from deepmorph_detect.read import Reader, Reading
 from deepmorph_detect.refine import ImagePyramid
 from deepmorph_detect.scenes import SceneMaker
 from deepmorph_detect.synthesis import (
+    BIT_RULES,
     MAX_CONTRADICTED,
     MAX_DEVIATION,
     MIN_WEAKEST_SUM,
     WEAKEST_BITS,
     BitEvidence,
     MorphSynthesis,
+    broken_rules,
     disagreement,
     disagreement_in,
 )
@@ -238,6 +240,10 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert said.reason == "the photo barely shows its 5 weakest code bits (support -0.10, at least 0.5 needed)"
     assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
+    # every rule a word breaks, by name and in the order asked (the first is the reason given)
+    assert broken_rules(3, -1.0, 1.5, 0.4) == BIT_RULES == ("bits flipped", "weakest bits", "unexplained", "rival")
+    assert broken_rules(0, -1.0, 1.5) == ("weakest bits", "unexplained") and broken_rules(2, 5.0, 1.0, 1.0) == ()
+    assert disagreement(0, 5.0, 0.5, 0.3).startswith("the nearest other code word explains the photo better")
 
 
 def test_a_word_with_a_few_bits_shown_flipped_is_withdrawn_however_far_its_rivals(
