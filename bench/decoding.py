@@ -35,46 +35,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
 
-def gf2_null_space(G: np.ndarray) -> np.ndarray:
-    """``H`` (r x n) whose rows span the words orthogonal to every row of ``G`` over GF(2)."""
-    M = G.copy() % 2
-    pivots: list[int] = []
-    row = 0
-    for col in range(M.shape[1]):
-        hit = next((i for i in range(row, M.shape[0]) if M[i, col]), None)
-        if hit is None:
-            continue
-        M[[row, hit]] = M[[hit, row]]
-        for i in range(M.shape[0]):
-            if i != row and M[i, col]:
-                M[i] ^= M[row]
-        pivots.append(col)
-        row += 1
-    free = [c for c in range(M.shape[1]) if c not in pivots]
-    H = np.zeros((len(free), M.shape[1]), np.uint8)
-    for j, f in enumerate(free):
-        H[j, f] = 1
-        for i, p in enumerate(pivots):
-            H[j, p] = M[i, f]
-    return H
-
-
 class BudgetedML:
     """The most likely code word among the ``budget`` most likely words under a read, the
     budget set so that a read unrelated to the code passes with probability at most ``bound``."""
 
     def __init__(self, codec: Any, bound: float) -> None:
-        k = codec.spec.payload_bits
-        self.offset = codec.encode(np.zeros(k, np.uint8))
-        G = np.stack([codec.encode(np.eye(k, dtype=np.uint8)[j]) ^ self.offset for j in range(k)])
-        if not np.array_equal(G[:, :k], np.eye(k, dtype=np.uint8)):
-            raise ValueError("the code is not systematic in the payload")
-        H = gf2_null_space(G)
-        if ((G.astype(int) @ H.T.astype(int)) % 2).any():
-            raise AssertionError("parity check does not annihilate the code")
-        self.k, self.check_bits = k, H.shape[0]
+        self.k = codec.spec.payload_bits
+        self.check_bits = codec.spec.code_bits - self.k
         self.budget = max(1, int(bound * 2**self.check_bits))  # words tried: each a 2^-r chance for garbage
-        self.columns = (H.astype(np.int64) << np.arange(H.shape[0])[:, None]).sum(0)  # a bit's syndrome
+        # each code bit's column of the parity checks, as an integer (the codec's own, for its syndromes)
+        self.columns = codec._check_columns()
+        self.offset = codec._zero_word  # the zero payload's word (the whitening), set with the columns
         self.target = self._syndrome(self.offset)
 
     def _syndrome(self, word: np.ndarray) -> int:
