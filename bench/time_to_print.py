@@ -149,7 +149,7 @@ def read_scenes(bundle: Path, n: int, seed: int, frame: tuple[int, int] = (640, 
             times.append(time.perf_counter() - t0)
             read = {id(p) for det, p, right in tally.add(dets, drawings) if p is not None and det.result.ok and right}
             for p in drawings:
-                if across_px(p.corners, p.homography) >= model.smallest_print_px:
+                if across_px(p.homography, locator.frame_corners) >= model.smallest_print_px:
                     wide["prints"] += 1
                     wide["read"] += id(p) in read
         out[sev] = {"prints": tally.prints, "read": tally.read, "wrong": tally.wrong,

@@ -320,8 +320,7 @@ class Locator:
         needs = self.model.print_px
         if needs is None:
             return False
-        corners = project(alignment.homography, self.frame_corners)
-        return across_px(corners, alignment.homography) < NARROW_SHARE * needs
+        return across_px(alignment.homography, self.frame_corners) < NARROW_SHARE * needs
 
     def shown_whole(self, homography: np.ndarray, image_size: tuple[int, int]) -> bool:
         """Whether ``homography`` puts the drawing in the photo of ``image_size`` ``(height,

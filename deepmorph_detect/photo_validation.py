@@ -24,7 +24,6 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.severity import VALIDATION_SEVERITY
-from deepmorph_detect.camera import project
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.results import across_px
 from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_placed, colour_print, model_added_steps
@@ -100,8 +99,8 @@ def close_ups(
         art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
         photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added)
         height, width = art.shape[:2]
-        corners = project(art_to_photo, np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64))
-        yield CloseUp(photo, payload, code, across_px(corners, art_to_photo))
+        frame = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64)  # the art's pixels
+        yield CloseUp(photo, payload, code, across_px(art_to_photo, frame))
 
 
 def validate_close_ups(  # noqa: PLR0913

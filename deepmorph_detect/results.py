@@ -21,30 +21,29 @@ def measure_width(corners: np.ndarray) -> float:
     return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
 
 
-def across_px(corners: np.ndarray, homography: np.ndarray) -> float:
+def across_px(homography: np.ndarray, frame: np.ndarray) -> float:
     """A print's width in a photo as the project means it everywhere (``train --pixels``,
     ``capacity --print-mm --distance-cm``, the photo simulator): its width seen head-on at its
-    distance. ``corners`` are its frame's corners in the photo (TL, TR, BR, BL) and
-    ``homography`` the map (SVG units -> image pixels) that put them there.
+    distance. ``homography`` maps the print's own units (SVG units for a drawing) to image pixels
+    and ``frame`` is its frame's corners (TL, TR, BR, BL) in those units.
 
     A tilt shortens a print in the photo along one direction only: along the tilt's axis it
     keeps its head-on scale, the largest stretch the homography makes at the drawing's centre.
     The mean of the top and bottom edges (:func:`measure_width`) is shortened by a tilt about
     the vertical axis and not by one about the horizontal axis: a close-up 201 px wide head-on
-    and tilted 15° measured 196.5 px."""
+    and tilted 15° measured 196.5 px. A centre on the map's horizon has no such stretch: there
+    the edges as seen are all there is."""
     H = np.asarray(homography, dtype=np.float64)
-    try:
-        frame = project(np.linalg.inv(H), np.asarray(corners, dtype=np.float64))  # SVG units
-    except np.linalg.LinAlgError:  # a degenerate map: the edges as seen are all there is
-        return measure_width(corners)
+    frame = np.asarray(frame, dtype=np.float64)
     cx, cy = frame.mean(axis=0)
     x, y, w = H @ np.array([cx, cy, 1.0])
-    with np.errstate(all="ignore"):  # a centre on the horizon: no width but the edges'
+    with np.errstate(all="ignore"):
         jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
-        if not np.isfinite(jacobian).all():
-            return measure_width(corners)
-        across = float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
-    return across if math.isfinite(across) else measure_width(corners)
+        if np.isfinite(jacobian).all():
+            across = float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
+            if math.isfinite(across):
+                return across
+        return measure_width(project(H, frame))
 
 
 #: The side of :meth:`Pose.cube` in drawing widths.
@@ -133,7 +132,11 @@ class Located(Detection):
             return None
         if self.homography is None:
             return measure_width(self.corners)
-        return across_px(self.corners, self.homography)
+        try:  # the frame in SVG units, from where the homography put it
+            frame = project(np.linalg.inv(self.homography), self.corners)
+        except np.linalg.LinAlgError:  # a degenerate map: the edges as seen are all there is
+            return measure_width(self.corners)
+        return across_px(self.homography, frame)
 
     @property
     def too_narrow(self) -> bool:

@@ -127,9 +127,9 @@ def _take(dets: list[Located], label: Label, want: Any) -> Located | None:
 def print_width(corners: np.ndarray, viewbox: tuple[float, float, float, float]) -> float:
     """The print's width in the photo, seen head-on at its distance, as the photo chain measures
     it for a model's smallest print (:func:`~deepmorph_detect.results.across_px`)."""
-    c = np.asarray(corners, dtype=np.float64)
-    H = cv2.getPerspectiveTransform(viewbox_corners(viewbox).astype(np.float32), c.astype(np.float32))
-    return across_px(c, H)
+    frame = viewbox_corners(viewbox)
+    H = cv2.getPerspectiveTransform(frame.astype(np.float32), np.asarray(corners, dtype=np.float32))
+    return across_px(H, frame)
 
 
 def measure_tilt(corners: np.ndarray, viewbox: tuple[float, float, float, float], camera: Camera) -> float:

@@ -102,11 +102,15 @@ def test_a_print_is_as_wide_as_it_would_be_seen_head_on_at_its_distance() -> Non
             rvec, _ = cv2.Rodrigues(tilted @ turned)
             H = homography_from_pose(cam, rvec.reshape(3), np.array([0.05, -0.03, 1.0]) * distance)
             corners = project(H, square)
-            assert across_px(corners, H) == pytest.approx(200.0, rel=0.01)
+            assert across_px(H, square) == pytest.approx(200.0, rel=0.01)
+            found = Located(
+                DecodeResult(np.zeros(5, np.uint8), True, 0, 1.0), np.ones(5), corners=corners, homography=H
+            )
+            assert found.width_px == pytest.approx(across_px(H, square))
             if axis[0] == 0.0 and tilt == 15.0:
                 assert measure_width(corners) < 198.0
     # a degenerate map gives the edges as seen, never an error
-    assert across_px(corners, np.zeros((3, 3))) == measure_width(corners)
+    assert replace(found, homography=np.zeros((3, 3))).width_px == measure_width(corners)
 
 
 def test_info_gives_the_smallest_print() -> None:
