@@ -74,7 +74,7 @@ def classify(model: Any, samples: int, seed: int, severity: str, detector: str) 
             kind = "read"
         elif found:
             kind = "wrong"
-        elif model.print_px is not None and shot.width_px < model.print_px:
+        elif shot.narrower_than_read(model):
             kind = "narrower"
         elif right:
             kind = "right word withdrawn"

@@ -63,6 +63,12 @@ class CloseUp:
     code: np.ndarray
     width_px: float
 
+    def narrower_than_read(self, model: DeepMorphModel) -> bool:
+        """Whether the print is narrower than ``model`` was trained to read (``print_px``), so
+        that its right answer is "too small": the simulator makes a few close-ups narrower than
+        asked, where no pose of the asked size fits the frame and it tries smaller ones."""
+        return model.print_px is not None and self.width_px < model.print_px
+
 
 def close_up_width(model: DeepMorphModel, print_px: float | None = None) -> int:
     """The close-up photo's width for ``model``: :data:`PHOTO_PX`, or wide enough that the print
@@ -128,7 +134,7 @@ def validate_close_ups(  # noqa: PLR0913
     right_bits = missed = unread = narrower = 0
     for shot in close_ups(model, samples, seed, severity, print_px):
         found = locator.locate(shot.photo)
-        if model.print_px is not None and shot.width_px < model.print_px:
+        if shot.narrower_than_read(model):
             narrower += 1
             vouched = [f.result.payload for f in found if f.result.ok]
             tally.wrong += any(not np.array_equal(payload, shot.payload) for payload in vouched)

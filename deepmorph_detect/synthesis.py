@@ -216,24 +216,25 @@ def broken_rules(
 
 def disagreement(contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None) -> str:
     """The first of :func:`broken_rules` a code word breaks, in words (empty when none)."""
-    broken = broken_rules(contradicted, weakest_sum, deviation, rival_deviation)
-    if not broken:
-        return ""
-    return {
-        "bits flipped": lambda: f"the photo shows {contradicted} of its code bits flipped",
-        "weakest bits": lambda: (
+    first = next(iter(broken_rules(contradicted, weakest_sum, deviation, rival_deviation)), "")
+    if first == "bits flipped":
+        return f"the photo shows {contradicted} of its code bits flipped"
+    if first == "weakest bits":
+        return (
             f"the photo barely shows its {WEAKEST_BITS} weakest code bits "
             f"(support {weakest_sum:.2f}, at least {MIN_WEAKEST_SUM} needed)"
-        ),
-        "unexplained": lambda: (
+        )
+    if first == "unexplained":
+        return (
             f"its morph does not explain the photo where its bits act "
             f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
-        ),
-        "rival": lambda: (
+        )
+    if first == "rival":
+        return (
             f"the nearest other code word explains the photo better, its bits shown where the two differ "
             f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
-        ),
-    }[broken[0]]()
+        )
+    return ""
 
 
 def disagreement_in(fields: dict[str, Any]) -> str:
