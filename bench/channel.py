@@ -59,7 +59,6 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import math
 import statistics
 import sys
 import time
@@ -72,149 +71,27 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
-WIDTH = 96
+from deepmorph_core.channel import (  # noqa: E402
+    GROUPS_WIDTH,
+    ChannelTable,
+    channel_table,
+    corrupted,
+    framed_renders,
+    group_codes,
+    information_at,
+    medium_steps,
+    payload_within,
+    ridge_rms,
+)
+
+WIDTH = GROUPS_WIDTH
 TEST_SAMPLES = 1000
-RIDGE = 10.0
-GRAM_BLOCK = 8192
 #: the CNN reader's batch and peak learning rate (one-cycle schedule)
 CNN_BATCH, CNN_LR = 32, 2e-3
 #: the CNN reader's stride-2 layers in a frame wider than the decoder's (no full-resolution stem)
 WIDE_FRAME = (16, 32, 48, 64, 64)
-WORD_RATE = 0.99
-GEOMETRIC_STEPS = {"perspective", "scale", "rotation", "translation"}
-SIGMA_GRID = np.linspace(0.02, 0.6, 59)
 #: the views of a panel drawing (``--undone-warp`` adds the second)
 PERFECT, UNDONE = "perfect alignment", "medium's warp undone exactly"
-
-
-# -- the channel of one variable ---------------------------------------------------------------
-
-
-def gaussian_channel(levels: np.ndarray, sigma: float, outputs: int) -> np.ndarray:
-    """``P(y | x)`` of ``y = x + N(0, sigma^2)`` for inputs ``levels`` in ``[0, 1]``, ``y`` on a
-    grid of ``outputs`` points reaching five ``sigma`` beyond the range: ``(len(levels), outputs)``."""
-    y = np.linspace(-5 * sigma, 1 + 5 * sigma, outputs)
-    channel = np.exp(-((y[None] - levels[:, None]) ** 2) / (2 * sigma**2))
-    return channel / channel.sum(1, keepdims=True)
-
-
-def information_density(p: np.ndarray, channel: np.ndarray) -> np.ndarray:
-    """``log2 P(y | x) / P(y)`` (bits) for the input distribution ``p``."""
-    return np.log2(channel / (p @ channel)[None] + 1e-300)
-
-
-def amplitude_limited(sigma: float, inputs: int = 41, outputs: int = 801, iters: int = 600) -> tuple[float, float]:
-    """Capacity (bits) and dispersion (bits^2) of the Gaussian channel with its input held to
-    ``[0, 1]``: Blahut-Arimoto over ``inputs`` evenly spaced levels."""
-    channel = gaussian_channel(np.linspace(0.0, 1.0, inputs), sigma, outputs)
-    p = np.full(inputs, 1.0 / inputs)
-    for _ in range(iters):
-        p *= np.exp2((channel * information_density(p, channel)).sum(1))
-        p /= p.sum()
-    info = information_density(p, channel)
-    capacity = float((p[:, None] * channel * info).sum())
-    dispersion = float((p[:, None] * channel * (info - capacity) ** 2).sum())
-    return capacity, dispersion
-
-
-def binary_input(sigma: float, outputs: int = 2001) -> float:
-    """Capacity (bits) of the same channel with the input at one end or the other (one bit per group)."""
-    p = np.array([0.5, 0.5])
-    channel = gaussian_channel(np.array([0.0, 1.0]), sigma, outputs)
-    return float((p[:, None] * channel * information_density(p, channel)).sum())
-
-
-class ChannelTable:
-    """Capacity, dispersion and binary capacity against sigma, computed once and interpolated."""
-
-    def __init__(self) -> None:
-        rows = [(*amplitude_limited(s), binary_input(s)) for s in SIGMA_GRID]
-        self.capacity, self.dispersion, self.binary = (np.array(col) for col in zip(*rows))
-
-    def __call__(self, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        s = np.clip(sigma, SIGMA_GRID[0], SIGMA_GRID[-1])
-        return tuple(np.interp(s, SIGMA_GRID, col) for col in (self.capacity, self.dispersion, self.binary))
-
-
-def information_at(capacity: float, dispersion: float, symbols: int, word_rate: float = WORD_RATE) -> float:
-    """Normal approximation of the information bits a code of ``symbols`` uses of channels with
-    summed ``capacity`` and ``dispersion`` carries with ``word_rate`` of its words right."""
-    if symbols == 0:
-        return 0.0
-    q = statistics.NormalDist().inv_cdf(word_rate)
-    return max(0.0, capacity - math.sqrt(dispersion) * q + 0.5 * math.log2(symbols))
-
-
-def payload_within(information_bits: float) -> int:
-    """The largest payload whose bits and default CRC fit in ``information_bits`` (0 if none)."""
-    from deepmorph_core.codec import choose_codec
-
-    for payload in range(int(information_bits), 0, -1):
-        if payload + choose_codec(payload, bch_t=0).crc_bits <= information_bits:
-            return payload
-    return 0
-
-
-# -- reading the groups ------------------------------------------------------------------------
-
-
-def ridge_rms(pixels: np.ndarray, targets: np.ndarray, test: int, width: int = WIDTH) -> np.ndarray:
-    """Rms error per target column of a ridge map fitted on all rows but the last ``test``.
-
-    Solved in its dual form (the Gram matrix of the fitted rows, accumulated in float64 over
-    blocks of pixels), which gives the primal's weights and needs no pixels-by-pixels matrix:
-    a 300-px frame has 90,000. The ridge grows with the frame's area (:data:`RIDGE` at
-    :data:`WIDTH` px, times ``(width / WIDTH)^2``), so that wider frames are regularised alike."""
-    fit, held = slice(None, -test), slice(-test, None)
-    mean_x, mean_t = pixels[fit].mean(0, dtype=np.float64), targets[fit].mean(0)
-    rows = len(pixels)
-    gram = np.zeros((rows, rows))
-    for lo in range(0, pixels.shape[1], GRAM_BLOCK):
-        block = pixels[:, lo : lo + GRAM_BLOCK].astype(np.float64) - mean_x[lo : lo + GRAM_BLOCK]
-        gram += block @ block.T
-    fitted = gram[fit, fit].copy()
-    fitted[np.diag_indices_from(fitted)] += RIDGE * (width / WIDTH) ** 2
-    dual = np.linalg.solve(fitted, targets[fit] - mean_t)
-    return np.sqrt(((gram[held, fit] @ dual + mean_t - targets[held]) ** 2).mean(0))
-
-
-def medium_part(width: int, geometric: bool, print_px: int | None = None) -> Any:
-    """The ``medium`` corruption with only its geometric steps (``geometric``) or without them;
-    with ``print_px``, its pixel parameters the camera's for a print that many pixels wide."""
-    from deepmorph_core.corruption import AugmentPipeline
-    from deepmorph_core.severity import residual_steps
-
-    steps = [
-        {"name": name, "p": p, "params": params}
-        for name, p, params in residual_steps("medium", width, print_px=print_px)
-        if (name in GEOMETRIC_STEPS) == geometric
-    ]
-    return AugmentPipeline({"steps": steps})
-
-
-def framed_renders(drawing: Any, unit: Any, width: int) -> Any:
-    """resvg renders of the encoder outputs ``unit`` (B, N_v), framed by their ink: (B, 1, H, W)."""
-    from deepmorph_core.framing import frame_renders
-
-    real = drawing.render_real(drawing.values_from_unit(unit), width)
-    return frame_renders(real, drawing.neutral_moments(width), tuple(real.shape[-2:]))
-
-
-def corrupted(
-    images: Any, steps: Callable[[Any, Any], Any], seed: int, batch: int = 500, standardise: bool = False
-) -> np.ndarray:
-    """``steps(images, generator)`` over ``images`` in batches, as float32 rows of pixels; with
-    ``standardise``, each row at zero mean and unit variance (a reading that ignores contrast
-    and brightness, as a CNN's normalisation does)."""
-    import torch
-
-    generator = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        out = [steps(images[i : i + batch], generator) for i in range(0, len(images), batch)]
-    flat = torch.cat(out).flatten(1)
-    if standardise:
-        flat = (flat - flat.mean(1, keepdim=True)) / flat.std(1, keepdim=True).clamp_min(1e-6)
-    return flat.numpy()
 
 
 def group_sigma(
@@ -225,25 +102,9 @@ def group_sigma(
     (groups and visibility judged at :data:`WIDTH`). The groups are set by one code bit each, or
     with ``--continuous`` (always for ``--reader cnn``) anywhere between: a regression of binary
     positions measures how well a reader classifies, not how finely it reads positions."""
-    import torch
-
-    from deepmorph_core.capacity import INVISIBLE
-    from deepmorph_core.networks import spread_weights, twin_groups
-
-    effects = drawing.effects(drawing.rasterizer(WIDTH))
-    groups = twin_groups(effects)
-    shown = drawing.visibility(WIDTH) > INVISIBLE
-    firsts = [members[0] for members, _ in groups if shown[members].any()]
-    weights = spread_weights(effects, len(groups), torch.Generator().manual_seed(args.seed))
-    rng = np.random.default_rng(args.seed + 1)
-    shape = (args.samples + TEST_SAMPLES, len(groups))
-    if continuous_inputs(args):
-        levels = rng.uniform(-1.0, 1.0, shape)
-    else:
-        levels = 2 * rng.integers(0, 2, shape) - 1
-    unit = torch.sigmoid(torch.from_numpy(levels.astype(np.float32)) @ weights.T)
-    renders = framed_renders(drawing, unit, width)
-    targets = unit[:, firsts].numpy().astype(np.float64)
+    codes = group_codes(drawing, args.samples + TEST_SAMPLES, args.seed, continuous_inputs(args))
+    renders = framed_renders(drawing, codes.unit, width)
+    targets = codes.targets
     sigmas = {}
     for view, steps in views.items():
         if args.reader == "cnn":
@@ -251,7 +112,7 @@ def group_sigma(
         else:
             seen = corrupted(renders, steps, args.seed + 2, standardise=args.standardise)
             sigmas[view] = ridge_rms(seen, targets, TEST_SAMPLES, width)
-    return sigmas, int(shown.sum())
+    return sigmas, codes.visible
 
 
 def continuous_inputs(args: argparse.Namespace) -> bool:
@@ -323,8 +184,8 @@ def undone_warp(width: int, print_px: int | None = None) -> Callable[[Any, Any],
 
     from deepmorph_core.corruption import fused_matrices, warp_white
 
-    geometry = medium_part(width, geometric=True).steps
-    light = medium_part(width, geometric=False, print_px=print_px)
+    geometry = medium_steps(width, geometric=True).steps
+    light = medium_steps(width, geometric=False, print_px=print_px)
 
     def steps(images: Any, generator: Any) -> Any:
         _, matrix = fused_matrices(geometry, images, generator)
@@ -346,7 +207,7 @@ def measure_drawing(
     results = []
     for print_px in args.pixels or [None]:
         width = print_px or WIDTH
-        pipeline = medium_part(width, geometric=False, print_px=print_px)
+        pipeline = medium_steps(width, geometric=False, print_px=print_px)
         views = {PERFECT: lambda x, g, pipeline=pipeline: pipeline(x, generator=g)}
         if args.undone_warp:
             views[UNDONE] = undone_warp(width, print_px)
@@ -482,11 +343,11 @@ def measured_pixels_reads(paths: list[Path]) -> dict[tuple[str, int], int]:
 def planned_payload(svg: Path, move: float | None, print_px: int) -> int:
     """The payload ``deepmorph capacity --pixels print_px`` plans for a panel drawing (from
     200 px a ``--pixels`` model's plan, below it the default one)."""
-    from deepmorph_core.capacity import payload_for_width, predict
+    from deepmorph_core.capacity import payload_for_width, predict, with_channel
     from deepmorph_core.morphable import MorphableDrawing
 
-    report = predict(MorphableDrawing.load(svg, **({} if move is None else {"move": move})))
-    return payload_for_width(report, print_px, needs_px=0)[0] or 0
+    drawing = MorphableDrawing.load(svg, **({} if move is None else {"move": move}))
+    return payload_for_width(with_channel(predict(drawing), drawing), print_px, needs_px=0)[0] or 0
 
 
 def with_figures(
@@ -601,7 +462,7 @@ def main() -> None:
         print(table(HEADERS, rows(done)))
         print("\n".join(summary(done)))
         return
-    table_ = ChannelTable()
+    table_ = channel_table()
     done: list[dict] = []
 
     def record(result: dict) -> None:
