@@ -3,11 +3,11 @@ fixed by rule.
 
 **Drawings**, by rule: ``bench/time_to_print.py``'s (the first ``--drawings`` Feather icons,
 alphabetically, with 30 to 60 variables at 2 % of the viewBox width, that the universal detector
-never saw). The plan was chosen on two of them (``battery-charging`` reads 44 code bits and
-``codepen`` 40 at 96.5-99 % of close-ups, ``bench/README.md``); the rest check it.
+never saw). The plan's share of the channel was fitted on two of them (``battery-charging`` and
+``codepen``, ``bench/README.md``); the rest check it.
 
-**The plan**: :func:`deepmorph_core.capacity.for_print` at ``--pixels`` (1.25 code bits per
-readable group, at most 44, BCH codes correcting two errors), trained as a user does with
+**The plan**: :func:`deepmorph_core.capacity.for_print` at ``--pixels`` (a share of the drawing's
+channel, :mod:`deepmorph_core.channel`, in BCH codes correcting two errors), trained as a user does with
 ``--payload-bits auto``: training may make the code smaller, by its batches or by fresh renders
 when it ends (:mod:`deepmorph.training.code_shrink`), and the table says where it did. Or, to try
 another plan, ``--bits-per-group`` code bits per readable group up to ``--largest-code``, in BCH
@@ -38,8 +38,8 @@ close-ups.
 
     .venv/bin/python bench/pixels_panel.py /work/shared/data/drawings/feather --models /tmp/panel
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --only coffee,cpu --out half.json
-    .venv/bin/python bench/pixels_panel.py ... --models /tmp/p58 --only codesandbox --largest-code 58 \
-        --bits-per-group 1.25
+    .venv/bin/python bench/pixels_panel.py ... --models /tmp/p52 --only cpu --largest-code 52 \
+        --bits-per-group 1.3
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --samples 0 --unrelated 5000
     .venv/bin/python bench/pixels_panel.py ... --models /tmp/panel --samples 0 --scenes 60 --frame 1280x720
 """
@@ -87,14 +87,14 @@ def batch_read(log: Path) -> float | None:
 def planned_code(report: Any, args: argparse.Namespace) -> Any:
     """The code of the largest payload the plan gives the drawing of ``report`` (its
     :func:`~deepmorph_core.capacity.predict`)."""
-    from deepmorph_core.capacity import figures_for, for_print, largest_payload
+    from deepmorph_core.capacity import for_print, largest_payload, plan_ecc
 
     if args.bits_per_group is None:
         return for_print(report, args.pixels).codec
-    figures = figures_for(args.pixels)
-    largest = figures.largest_code if args.largest_code is None else args.largest_code
-    code_bits = min(math.floor(args.bits_per_group * report.readable_groups + 1e-9), largest)
-    return largest_payload(code_bits, None, figures.ecc if args.ecc_t is None else (args.ecc_t,))
+    code_bits = math.floor(args.bits_per_group * report.readable_groups + 1e-9)
+    if args.largest_code is not None:
+        code_bits = min(code_bits, args.largest_code)
+    return largest_payload(code_bits, None, plan_ecc(args.pixels) if args.ecc_t is None else (args.ecc_t,))
 
 
 def false_accepts(model: Any, n: int, feather: Path, panel: set[str], seed: int) -> dict[str, Any]:
@@ -199,7 +199,8 @@ def main() -> None:
     for svg, move, n in panel:
         if only and svg.stem not in only:
             continue
-        report = predict(MorphableDrawing.load(svg, move=move))
+        drawing = MorphableDrawing.load(svg, move=move)
+        report = predict(drawing, print_px=None if args.bits_per_group is not None else args.pixels)
         code = planned_code(report, args)
         if code is None:
             raise SystemExit(f"{svg.stem}: no payload fits the plan")

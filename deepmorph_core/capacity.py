@@ -22,24 +22,25 @@ payload is then the largest one whose code (CRC and a BCH code correcting one or
 
 A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo (``train
 --pixels``) sees each print sharper and is trained on the photo chain's own view of it
-(:mod:`deepmorph_core.registration`), and carries more: :data:`CODE_BITS_PER_GROUP_AT_PIXELS`
-code bits per readable group, up to :data:`LARGEST_CODE_AT_PIXELS`, in codes correcting two bit
-errors (:data:`ECC_AT_PIXELS`, the codes it was measured with), fitted on two drawings of
-``bench/pixels_panel.py``'s rule and checked on four more (``bench/README.md``). The plan can
-overshoot a drawing whose outline aligns poorly (``codepen``: 20 payload bits planned, 14 read);
-``train --payload-bits auto`` then cuts the code on fresh renders when training ends
-(``deepmorph.training.code_shrink``). It can also undershoot, which nothing catches: ``cloud-snow``
-(20 groups) is planned 7 payload bits and reads 15, ``cpu`` is planned 24 and reads 30. Below
-that width nothing larger was measured, and the 96-px figure stands.
+(:mod:`deepmorph_core.registration`). Its plan starts from the drawing's measured channel
+(:func:`deepmorph_core.channel.read_channel` at :data:`PIXELS_MEASURED` px, about half a minute):
+how well a linear reading of photos of the print tells each readable group's two ends apart, which
+sees how far each variable moves in the photo's pixels, the contrast of the edge it moves and how
+groups crowd each other. A model reads :data:`CHANNEL_SHARE` of the payload that reading carries,
+in codes correcting two bit errors (:data:`ECC_AT_PIXELS`, the codes it was measured with):
+fitted on two drawings of ``bench/pixels_panel.py``'s rule and checked on four more
+(``bench/README.md``). Below that width nothing larger was measured, and the 96-px figure stands.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
+import torch
 
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.errors import DeepMorphError
@@ -49,17 +50,14 @@ from deepmorph_core.payload import MAX_PAYLOAD_BITS
 
 #: Code bits a decoder reads reliably per readable group (see the module docstring).
 CODE_BITS_PER_GROUP = 0.70
-#: Code bits per readable group of a model trained with ``--pixels`` of at least
-#: :data:`PIXELS_MEASURED` (see the module docstring).
-CODE_BITS_PER_GROUP_AT_PIXELS = 1.25
-#: The print width in photo pixels :data:`CODE_BITS_PER_GROUP_AT_PIXELS` was measured at.
+#: The share of its channel's payload (:func:`deepmorph_core.channel.read_channel` at
+#: :data:`PIXELS_MEASURED` px) a model trained with ``--pixels`` of at least that reads from 99 %
+#: of captures (see the module docstring).
+CHANNEL_SHARE = 0.48
+#: The print width in photo pixels :data:`CHANNEL_SHARE` was measured at.
 PIXELS_MEASURED = 200
 #: BCH codes the prediction at :data:`PIXELS_MEASURED` uses: correcting two bit errors.
 ECC_AT_PIXELS = (2,)
-#: The largest code the prediction at :data:`PIXELS_MEASURED` gives: the largest measured to read
-#: on ``codesandbox`` (48 readable groups: 44 code bits from 100 % of close-ups, 52 from 95 %);
-#: ``battery-charging`` read 44 from 98.5-99 %.
-LARGEST_CODE_AT_PIXELS = 44
 #: The largest code a model of a crowded drawing (many readable groups in a small space, which
 #: the count of groups does not see) was measured to read from 99 % of captures; the prediction
 #: does not reach beyond it (a drawing with many readable groups is not predicted to carry more).
@@ -118,6 +116,9 @@ class CapacityReport:
         visible_mask: per variable, whether it is counted as visible (not in the JSON).
         print_px: the print width the prediction is for (``train --pixels``); ``None``: the
             default reading in the decoder's 96-px frame.
+        channel_payload: the payload a linear reading of photos of the print carries at 99 % at
+            :data:`PIXELS_MEASURED` px (:func:`deepmorph_core.channel.read_channel`), which the
+            plan for ``--pixels`` models starts from; ``None``: not measured.
     """
 
     n_variables: int
@@ -130,6 +131,7 @@ class CapacityReport:
     static: list[int | None] = field(default_factory=list)
     visible_mask: list[bool] = field(default_factory=list)
     print_px: int | None = None
+    channel_payload: int | None = None
 
     def fits(self, spec: CodecSpec) -> bool:
         """Whether a code is within the prediction."""
@@ -138,11 +140,16 @@ class CapacityReport:
     def limits(self) -> list[str]:
         """What limits the capacity, and where loosening bounds would help, in lines."""
         lines = []
-        uncapped = _code_bits_of_groups(self.readable_groups, self.print_px)
-        largest = figures_for(self.print_px).largest_code
-        if uncapped > largest:
+        uncapped = _code_bits_of_groups(self.readable_groups)
+        if at_pixels(self.print_px) and self.channel_payload is not None:
             lines.append(
-                f"the prediction stops at {largest} code bits, the largest code measured to read on a "
+                f"photos of a print {PIXELS_MEASURED} px wide show its moves well enough for a linear reading to "
+                f"carry {self.channel_payload} payload bits at 99 %; a trained model reads about "
+                f"{CHANNEL_SHARE:.2f} of that"
+            )
+        elif uncapped > LARGEST_CODE_MEASURED:
+            lines.append(
+                f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read on a "
                 f"crowded drawing ({self.readable_groups} readable variables would give {uncapped}); above it only "
                 "a training's validation says what reads"
             )
@@ -187,48 +194,27 @@ class CapacityReport:
         return data
 
 
-@dataclass(frozen=True)
-class ReadingFigures:
-    """The measured figures a plan uses for one kind of model.
-
-    Attributes:
-        bits_per_group: code bits read reliably per readable group.
-        largest_code: the largest code the plan gives.
-        ecc: the BCH strengths the plan chooses from.
-    """
-
-    bits_per_group: float
-    largest_code: int
-    ecc: tuple[int, ...]
-
-
-#: The default training: every print read in the decoder's 96-px frame.
-FIGURES_96 = ReadingFigures(CODE_BITS_PER_GROUP, LARGEST_CODE_MEASURED, ECC_CHOICES)
-#: A model trained with ``--pixels`` of at least :data:`PIXELS_MEASURED`.
-FIGURES_AT_PIXELS = ReadingFigures(CODE_BITS_PER_GROUP_AT_PIXELS, LARGEST_CODE_AT_PIXELS, ECC_AT_PIXELS)
-
-
 def at_pixels(print_px: int | None) -> bool:
-    """Whether a model trained for prints ``print_px`` wide is planned with the figures measured
+    """Whether a model trained for prints ``print_px`` wide is planned from its channel, measured
     at :data:`PIXELS_MEASURED` px."""
     return print_px is not None and print_px >= PIXELS_MEASURED
 
 
-def figures_for(print_px: int | None = None) -> ReadingFigures:
-    """The figures of a model trained for prints ``print_px`` wide (``None``: the default
-    training): :data:`FIGURES_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else :data:`FIGURES_96`."""
-    return FIGURES_AT_PIXELS if at_pixels(print_px) else FIGURES_96
+def plan_ecc(print_px: int | None = None) -> tuple[int, ...]:
+    """The BCH strengths the plan for a model trained for prints ``print_px`` wide chooses from:
+    :data:`ECC_AT_PIXELS` from :data:`PIXELS_MEASURED` up, else :data:`ECC_CHOICES`."""
+    return ECC_AT_PIXELS if at_pixels(print_px) else ECC_CHOICES
 
 
-def code_bits_for(readable_groups: int, print_px: int | None = None) -> int:
-    """Code bits a decoder reads reliably from ``readable_groups`` groups of a model trained for
-    prints ``print_px`` wide (:func:`figures_for`), at most its largest code."""
-    return min(_code_bits_of_groups(readable_groups, print_px), figures_for(print_px).largest_code)
+def code_bits_for(readable_groups: int) -> int:
+    """Code bits the default training's decoder reads reliably from ``readable_groups`` groups,
+    at most :data:`LARGEST_CODE_MEASURED`."""
+    return min(_code_bits_of_groups(readable_groups), LARGEST_CODE_MEASURED)
 
 
-def _code_bits_of_groups(readable_groups: int, print_px: int | None = None) -> int:
-    """:func:`figures_for`'s code bits per group, before the cap (rounded down)."""
-    return int(math.floor(figures_for(print_px).bits_per_group * readable_groups + 1e-9))
+def _code_bits_of_groups(readable_groups: int) -> int:
+    """:data:`CODE_BITS_PER_GROUP` times the groups, before the cap (rounded down)."""
+    return int(math.floor(CODE_BITS_PER_GROUP * readable_groups + 1e-9))
 
 
 def largest_payload(
@@ -269,8 +255,9 @@ def predict(
     """Predict what ``drawing`` carries, from renders of each variable at both ends of its
     range (real renderer for visibility, soft rasterizer for look-alikes) at ``width`` pixels,
     with codes of ``crc_bits`` (default: the codec's choice) and BCH codes correcting ``ecc``
-    bit errors (default: :func:`figures_for` ``print_px``), for a model trained for prints
-    ``print_px`` wide in the photo (``train --pixels``; ``None``: the default reading)."""
+    bit errors (default: :func:`plan_ecc` ``print_px``), for a model trained for prints
+    ``print_px`` wide in the photo (``train --pixels``; ``None``: the default reading). From
+    :data:`PIXELS_MEASURED` px up it measures the drawing's channel too (:func:`with_channel`)."""
     n = drawing.n_variables
     if n == 0:
         return CapacityReport(0, 0, 0, 0, 0, None, [], [p.line for p in drawing.drawing.primitives], print_px=print_px)
@@ -281,7 +268,6 @@ def predict(
     shown = (visibility > INVISIBLE) & ~faint
     groups = twin_groups(drawing.effects(drawing.rasterizer(width)))
     readable = sum(1 for members, _ in groups if shown[members].any())
-    code_bits, spec = _planned_code(readable, print_px, crc_bits, ecc)
     per_prim: dict[int, list[int]] = {}
     for k, var in enumerate(drawing.variables):
         if var.owner == "primitive":
@@ -304,7 +290,8 @@ def predict(
                 round(float(contrast[prim.index]), 3),
             )
         )
-    return CapacityReport(
+    code_bits, spec = _planned_code(readable, None, crc_bits, ecc)
+    report = CapacityReport(
         n,
         int(shown.sum()),
         readable,
@@ -314,16 +301,60 @@ def predict(
         elements,
         static,
         [bool(v) for v in shown],
-        print_px,
     )
+    if at_pixels(print_px):
+        report = for_print(with_channel(report, drawing), print_px, crc_bits, ecc)
+    return report
+
+
+def with_channel(report: CapacityReport, drawing: MorphableDrawing) -> CapacityReport:
+    """``report`` (``drawing``'s :func:`predict`) with the drawing's channel measured at
+    :data:`PIXELS_MEASURED` px (:func:`deepmorph_core.channel.read_channel`, about half a
+    minute), which plans for ``--pixels`` models need; as it is when already measured. The
+    measurement is kept for the drawing with the same bounds and reading channel, so that
+    ``capacity`` then ``train``, or the studio's tabs, measure it once in a process."""
+    if report.channel_payload is not None:
+        return report
+    if report.readable_groups == 0:
+        return replace(report, channel_payload=0)
+    key = channel_key(drawing)
+    if key not in _CHANNELS:
+        from deepmorph_core.channel import read_channel
+
+        _CHANNELS[key] = read_channel(drawing, PIXELS_MEASURED).payload_bits
+        while len(_CHANNELS) > _CHANNELS_KEPT:
+            _CHANNELS.pop(next(iter(_CHANNELS)))
+    return replace(report, channel_payload=_CHANNELS[key])
+
+
+def known_channel(drawing: MorphableDrawing) -> int | None:
+    """The channel payload :func:`with_channel` measured for ``drawing`` (the same bounds and
+    reading channel) in this process; ``None`` when it has not."""
+    return _CHANNELS.get(channel_key(drawing))
+
+
+#: Measured channels' payloads by :func:`channel_key`, the last :data:`_CHANNELS_KEPT`.
+_CHANNELS: dict[str, int] = {}
+_CHANNELS_KEPT = 16
+
+
+def channel_key(drawing: MorphableDrawing) -> str:
+    """A digest of what a channel measurement depends on: the drawing as written, the ends of
+    every variable's range (its bounds) and the channel it is read in."""
+    ends = drawing.values_from_unit(torch.stack([torch.zeros(drawing.n_variables), torch.ones(drawing.n_variables)]))
+    digest = hashlib.sha256(drawing.to_svg(drawing.neutral_values()[0]).encode("utf-8"))
+    digest.update(ends.detach().double().numpy().tobytes())
+    digest.update(np.asarray(drawing.channel, dtype=np.float64).tobytes())
+    return digest.hexdigest()
 
 
 def for_print(
     report: CapacityReport, print_px: int | None, crc_bits: int | None = None, ecc: tuple[int, ...] | None = None
 ) -> CapacityReport:
     """``report``'s prediction for a model trained for prints ``print_px`` wide instead (the
-    same readable groups; no new renders), with codes of ``crc_bits`` and ``ecc``."""
-    code_bits, spec = _planned_code(report.readable_groups, print_px, crc_bits, ecc)
+    same readable groups and channel; no new renders), with codes of ``crc_bits`` and ``ecc``.
+    From :data:`PIXELS_MEASURED` px up the report must hold the channel (:func:`with_channel`)."""
+    code_bits, spec = _planned_code(report.readable_groups, print_px, crc_bits, ecc, report.channel_payload)
     payload = 0 if spec is None else spec.payload_bits
     return replace(report, code_bits=code_bits, payload_bits=payload, codec=spec, print_px=print_px)
 
@@ -344,19 +375,37 @@ def payload_for_width(
 
 
 def _planned_code(
-    readable_groups: int, print_px: int | None, crc_bits: int | None, ecc: tuple[int, ...] | None
+    readable_groups: int,
+    print_px: int | None,
+    crc_bits: int | None,
+    ecc: tuple[int, ...] | None,
+    channel_payload: int | None = None,
 ) -> tuple[int, CodecSpec | None]:
-    """The code bits ``readable_groups`` carry for prints ``print_px`` wide, and the largest
-    payload's code in them (BCH strengths ``ecc``, default :func:`figures_for`'s). Never less than the
-    default reading's plan: a ``--pixels`` model reads prints at least as well (a crowded
-    drawing's 96-px plan, in a BCH t = 1 code, can carry more than the capped t = 2 one)."""
-    code_bits = code_bits_for(readable_groups, print_px)
-    spec = largest_payload(code_bits, crc_bits, figures_for(print_px).ecc if ecc is None else ecc)
-    if at_pixels(print_px):
-        default_bits, default = _planned_code(readable_groups, None, crc_bits, ecc)
-        if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
-            return default_bits, default
-    return code_bits, spec
+    """The code bits a model trained for prints ``print_px`` wide reads reliably, and the largest
+    payload's code in them (BCH strengths ``ecc``, default :func:`plan_ecc`'s): for the default
+    training, :data:`CODE_BITS_PER_GROUP` per readable group; from :data:`PIXELS_MEASURED` px,
+    :data:`CHANNEL_SHARE` of ``channel_payload``, the payload of the drawing's channel. Never less
+    than the default training's plan: a ``--pixels`` model reads prints at least as well."""
+    default_bits = code_bits_for(readable_groups)
+    default = largest_payload(default_bits, crc_bits, ECC_CHOICES if ecc is None else ecc)
+    if not at_pixels(print_px):
+        return default_bits, default
+    if channel_payload is None:
+        raise ValueError(f"a plan for prints {print_px} px wide needs the drawing's channel (capacity.with_channel)")
+    spec = _largest_code_within(math.floor(CHANNEL_SHARE * channel_payload + 1e-9), crc_bits, ecc or ECC_AT_PIXELS)
+    if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
+        return default_bits, default
+    return (0 if spec is None else spec.code_bits), spec
+
+
+def _largest_code_within(payload_bits: int, crc_bits: int | None, ecc: tuple[int, ...]) -> CodecSpec | None:
+    """The code (BCH strengths ``ecc``, the first that exists) of the largest payload of at most
+    ``payload_bits``; ``None`` when there is none."""
+    for payload in range(min(payload_bits, MAX_PAYLOAD_BITS), 0, -1):
+        codes = payload_codes(payload, crc_bits, ecc)
+        if codes:
+            return codes[0]
+    return None
 
 
 def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | None:
@@ -378,19 +427,18 @@ def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | N
 
 __all__ = [
     "CODE_BITS_PER_GROUP",
-    "CODE_BITS_PER_GROUP_AT_PIXELS",
+    "CHANNEL_SHARE",
     "ECC_AT_PIXELS",
-    "FIGURES_96",
-    "FIGURES_AT_PIXELS",
-    "LARGEST_CODE_AT_PIXELS",
     "LARGEST_CODE_MEASURED",
     "PIXELS_MEASURED",
     "CapacityReport",
     "ElementCapacity",
-    "ReadingFigures",
     "at_pixels",
     "code_bits_for",
-    "figures_for",
+    "channel_key",
+    "known_channel",
+    "plan_ecc",
+    "with_channel",
     "for_print",
     "payload_for_width",
     "largest_payload",

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from deepmorph_core.capacity import CapacityReport, payload_for_width
+from deepmorph_core.capacity import PIXELS_MEASURED, CapacityReport, at_pixels, payload_for_width
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 
@@ -159,6 +159,8 @@ class SizeRow:
             or no prediction asked for.
         train_pixels: the ``train --pixels`` of the model that carries it (``None``: the
             default training).
+        measuring: its payload waits for the drawing's channel, which is being measured
+            (:func:`~deepmorph_core.capacity.with_channel`; the studio measures it in the background).
     """
 
     pixels: float
@@ -167,10 +169,13 @@ class SizeRow:
     sub_pixel: int
     payload_bits: int | None = None
     train_pixels: int | None = None
+    measuring: bool = False
 
     @property
     def payload_text(self) -> str:
         """The payload cell of ``capacity``'s table (and the studio's)."""
+        if self.measuring:
+            return f"measuring ... (--pixels {self.train_pixels})"
         if self.payload_bits is None:
             return "too small"
         how = "" if self.train_pixels is None else f" (--pixels {self.train_pixels})"
@@ -188,12 +193,18 @@ def plan(
     """Each print width of ``sizes`` (photo pixels) with the travel of the ``visible``
     variables (a ``(N_v,)`` bool) there; with ``report`` (the drawing's
     :func:`~deepmorph_core.capacity.predict`), also the payload each width carries, for a model
-    whose default frame is ``needs_px`` wide and codes with ``crc_bits``."""
+    whose default frame is ``needs_px`` wide and codes with ``crc_bits``. From
+    :data:`~deepmorph_core.capacity.PIXELS_MEASURED` px up that needs the report's channel; a
+    report without it gives those rows as still measuring."""
     share = movement(drawing)[np.asarray(visible, dtype=bool)]
     rows = []
     for px in sizes:
         moves = share * px
-        payload, train_px = (None, None) if report is None else payload_for_width(report, px, needs_px, crc_bits)
+        measuring = report is not None and px >= needs_px and at_pixels(int(px)) and report.channel_payload is None
+        if report is None or measuring:
+            payload, train_px = None, PIXELS_MEASURED if measuring else None
+        else:
+            payload, train_px = payload_for_width(report, px, needs_px, crc_bits)
         rows.append(
             SizeRow(
                 float(px),
@@ -202,6 +213,7 @@ def plan(
                 int((moves < SUB_PIXEL).sum()),
                 payload,
                 train_px,
+                measuring,
             )
         )
     return rows

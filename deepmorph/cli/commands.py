@@ -205,8 +205,9 @@ def capacity(
     """Predict the payload a drawing carries before training: its readable variables, the
     largest payload that reads from 99 % of captures, and what limits it; with how far its
     variables move in a photo at 96, 150, 200 and 300 px across (and at --pixels, or at the
-    width a --print-mm print has at --distance-cm)."""
-    from deepmorph_core.capacity import at_pixels, for_print, predict
+    width a --print-mm print has at --distance-cm). From 200 px up the payload is planned from how
+    well photos of the print show the drawing's moves, measured in about half a minute."""
+    from deepmorph_core.capacity import PIXELS_MEASURED, at_pixels, for_print, predict, with_channel
     from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
     from deepmorph_core.reading_channel import channel_for, channel_name
 
@@ -220,6 +221,9 @@ def capacity(
         pixels = pixels_across(print_mm, distance_cm, frame_px, fov_deg)
     drawing = _load(svg, move, shift, scale, rotate, drop).read_in(channel_for(read_in))
     report = predict(drawing, crc_bits=crc)
+    if report.readable_groups and not as_json:  # the plan from PIXELS_MEASURED px up starts from the channel there
+        err.print(f"measuring how photos of a print {PIXELS_MEASURED} px wide show its moves (about half a minute) ...")
+    report = with_channel(report, drawing)
     read_in = channel_name(drawing.channel)
     sizes = plan(drawing, report.visible_mask, plan_sizes(pixels), report, DEFAULTS.width, crc)
     train_px = int(pixels) if pixels is not None and at_pixels(int(pixels)) else None

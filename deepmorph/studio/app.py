@@ -22,6 +22,7 @@ import tempfile
 import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -313,8 +314,12 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
             await run_in_threadpool(lambda: drawings.random_morph(drawings.load(svg.encode(), name), seed, extreme))
         )
 
+    # the drawings' channels (about half a minute each), measured one at a time beside the requests
+    channel_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="deepmorph-channel")
+    channels_measuring: dict[str, Future[Any]] = {}
+
     async def capacity(request: Request) -> Response:
-        from deepmorph_core.capacity import predict
+        from deepmorph_core.capacity import channel_key, known_channel, predict, with_channel
         from deepmorph_core.reading_channel import channel_name
 
         svg, name = current()
@@ -325,12 +330,25 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         def work() -> dict[str, Any]:
             md = drawings.load(svg.encode(), name).read_in()  # what training will read
             report = predict(md)
+            # the plan from 200 px up starts from the drawing's channel: measured once, in the background
+            if report.readable_groups and known_channel(md) is None:
+                key = channel_key(md)
+                measuring = channels_measuring.get(key)
+                if measuring is not None and measuring.done():
+                    del channels_measuring[key]
+                    measuring.result()  # its error, if it failed; a later request measures again
+                    measuring = None  # measured, and since forgotten: measure again
+                if measuring is None:
+                    channels_measuring[key] = channel_worker.submit(with_channel, report, md)
+            else:
+                report = with_channel(report, md)
             return {
                 "name": name,
                 "reading_channel": channel_name(md.channel),
                 **report.to_json(),
                 "limits": report.limits(),
                 "print_size": print_size(md, report, print_mm, distance_cm),
+                "channel_measured": report.channel_payload is not None,
             }
 
         return JSONResponse(await run_in_threadpool(work))

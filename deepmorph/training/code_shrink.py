@@ -42,7 +42,7 @@ from torch import Tensor, nn
 
 from deepmorph.training.validation import RENDER_SAMPLES, TARGET_RATE, read_renders, tally_decoded
 from deepmorph_core.bundle import AutoPayload, CodeShrink
-from deepmorph_core.capacity import figures_for, payload_codes
+from deepmorph_core.capacity import payload_codes, plan_ecc
 from deepmorph_core.codec import CodecSpec, PayloadCodec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -98,10 +98,10 @@ def information(errors: Tensor) -> float:
 
 def shrink_ecc(auto: AutoPayload, print_px: int | None) -> tuple[int, ...]:
     """The BCH strengths a cut code may have: the user's, or those the plan for a model trained
-    for prints ``print_px`` wide chooses from (:func:`~deepmorph_core.capacity.figures_for`: t = 2
+    for prints ``print_px`` wide chooses from (:func:`~deepmorph_core.capacity.plan_ecc`: t = 2
     alone under ``--pixels 200``, where a t = 1 code cut from a t = 2 one passed a wrong payload
     in 10,008 close-ups)."""
-    return (auto.ecc_t,) if auto.ecc_t is not None else figures_for(print_px).ecc
+    return (auto.ecc_t,) if auto.ecc_t is not None else plan_ecc(print_px)
 
 
 def largest_smaller(

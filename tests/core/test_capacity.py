@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -12,8 +13,8 @@ from deepmorph.cli import application
 from deepmorph.training.code_shrink import SHRINK_BELOW, SHRINK_BELOW_AT_PIXELS, shrink_below
 from deepmorph.training.codec import train_model
 from deepmorph_core.capacity import (
+    CHANNEL_SHARE,
     CODE_BITS_PER_GROUP,
-    CODE_BITS_PER_GROUP_AT_PIXELS,
     ECC_CHOICES,
     LARGEST_CODE_MEASURED,
     PIXELS_MEASURED,
@@ -23,6 +24,7 @@ from deepmorph_core.capacity import (
     payload_for_width,
     predict,
     size_warning,
+    with_channel,
 )
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.errors import DeepMorphError
@@ -70,23 +72,31 @@ def test_the_prediction_grows_with_readable_groups_up_to_the_largest_code_measur
     assert bits[40] == int(CODE_BITS_PER_GROUP * 40) and max(bits) == LARGEST_CODE_MEASURED
 
 
-def test_a_model_trained_for_wide_prints_is_planned_with_what_was_measured_there() -> None:
-    """``--pixels`` of at least :data:`PIXELS_MEASURED`: more code bits per readable group, in
-    codes correcting two errors (those measured); narrower, the 96-px figure stands."""
+def test_a_model_trained_for_wide_prints_is_planned_from_its_channel_there() -> None:
+    """``--pixels`` of at least :data:`PIXELS_MEASURED`: a share of what photos of a print that
+    wide let a linear reading carry, in codes correcting two errors (those measured); narrower,
+    the 96-px figure stands."""
     md = MorphableDrawing.load(DRAWING)
     plain = predict(md)
     wide = predict(md, print_px=250)
+    assert plain.channel_payload is None and wide.channel_payload is not None
     assert wide.readable_groups == plain.readable_groups and wide.print_px == 250 and plain.print_px is None
-    assert wide.code_bits == int(CODE_BITS_PER_GROUP_AT_PIXELS * wide.readable_groups) > plain.code_bits
-    assert wide.codec is not None and wide.codec.bch_t == 2 and wide.payload_bits > plain.payload_bits
-    assert predict(md, print_px=PIXELS_MEASURED - 1).code_bits == plain.code_bits  # not measured below
-    # the same plan from the readable groups alone, with no new renders
-    assert for_print(plain, 250) == wide and for_print(wide, None) == plain
-    assert for_print(plain, 250, ecc=(1,)).codec.bch_t == 1  # a user's own BCH strength is kept
+    share = math.floor(CHANNEL_SHARE * wide.channel_payload)
+    assert wide.codec is not None and wide.codec.bch_t == 2 and wide.code_bits == wide.codec.code_bits
+    assert wide.payload_bits == share > plain.payload_bits
+    assert any(f"carry {wide.channel_payload} payload bits" in line for line in wide.limits())
+    assert predict(md, print_px=PIXELS_MEASURED - 1) == plain  # not measured below, and no channel read
+    # the same plan from the readable groups and the channel, with no new renders
+    with pytest.raises(ValueError, match="needs the drawing's channel"):
+        for_print(plain, 250)
+    measured = with_channel(plain, md)
+    assert for_print(measured, 250) == wide and for_print(wide, None) == measured
+    assert with_channel(measured, md) is measured  # measured once
+    assert for_print(measured, 250, ecc=(1,)).codec.bch_t == 1  # a user's own BCH strength is kept
     # per print width: too small, the default training, or a model trained for 200 px
-    assert payload_for_width(plain, 80, 96) == (None, None)
-    assert payload_for_width(plain, 150, 96) == (plain.payload_bits, None)
-    assert payload_for_width(plain, 300, 96) == (for_print(plain, 200).payload_bits, 200)
+    assert payload_for_width(measured, 80, 96) == (None, None)
+    assert payload_for_width(measured, 150, 96) == (plain.payload_bits, None)
+    assert payload_for_width(measured, 300, 96) == (wide.payload_bits, 200)
     assert ECC_CHOICES == (2, 1)
 
 
@@ -104,9 +114,6 @@ def test_a_drawing_with_more_readable_variables_than_measured_is_told_where_the_
     assert report.readable_groups * CODE_BITS_PER_GROUP > LARGEST_CODE_MEASURED
     assert report.code_bits == LARGEST_CODE_MEASURED
     assert any(f"stops at {LARGEST_CODE_MEASURED} code bits" in line for line in report.limits())
-    # a --pixels model's plan is capped lower, in t = 2 codes: it falls back to the default plan
-    wide = for_print(report, PIXELS_MEASURED)
-    assert wide.codec == report.codec and wide.print_px == PIXELS_MEASURED
 
 
 def test_every_payload_size_that_fits_is_the_largest() -> None:

@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
+from deepmorph_core.capacity import predict
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_core.print_size import (
@@ -132,3 +133,14 @@ def test_capacity_plans_a_print_from_its_size_and_distance(tmp_path) -> None:
         assert bad.exit_code in (1, 2), bad.output
         flat = " ".join(bad.output.replace("│", " ").split())  # the usage box wraps lines
         assert message in flat and "Traceback" not in bad.output
+
+
+def test_a_plan_without_the_drawings_channel_says_its_wide_rows_are_still_measuring() -> None:
+    """The studio answers at once and measures the channel in the background: until then the
+    rows from 200 px up say so instead of a payload, and the narrower ones have theirs."""
+    md = MorphableDrawing.load((FEATHER / "airplay.svg").read_bytes(), move=0.5)
+    report = predict(md)
+    rows = plan(md, report.visible_mask, plan_sizes(None), report)
+    assert [(r.pixels, r.measuring) for r in rows] == [(96.0, False), (150.0, False), (200.0, True), (300.0, True)]
+    assert rows[0].payload_bits == rows[1].payload_bits == report.payload_bits
+    assert rows[2].payload_bits is None and rows[2].payload_text == "measuring ... (--pixels 200)"

@@ -686,14 +686,14 @@ def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple
     """The travel and payload table the CLI prints for the studio's drawing as it is now, from
     the library."""
     from deepmorph.studio import drawing as drawings
-    from deepmorph_core.capacity import predict
+    from deepmorph_core.capacity import predict, with_channel
     from deepmorph_core.print_size import pixels_across, plan, plan_sizes
 
     status, svg = request(server, "/api/drawing.svg", token=server.token)
     assert status == 200
     md = drawings.load(svg, "drawing.svg")
     pixels = pixels_across(print_mm, distance_cm)
-    report = predict(md)
+    report = with_channel(predict(md), md)
     rows = plan(md, report.visible_mask, plan_sizes(pixels), report)
     return pixels, [
         [f"{r.pixels:.0f} px" + (" ←" if abs(r.pixels - pixels) < 0.5 else ""), f"{r.median_move:.1f} px",
@@ -706,6 +706,11 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
     request(server, "/api/drawing/bundled", token=server.token, data=b"{}")
     open_studio(page, server, "capacity")
     page.wait_for_selector("#capacity-sizes tr.yours")
+    # the payloads from 200 px up wait for the drawing's channel, measured in the background
+    page.wait_for_function(
+        "() => ![...document.querySelectorAll('#capacity-sizes td')].some(td => td.textContent.startsWith('measuring'))",
+        timeout=240_000,
+    )
     pixels, rows = _expected_rows(server, 50, 30)
     assert page.text_content("#capacity-span") == (
         f"a 50 mm print at 30 cm spans {pixels:.0f} px of a 1920-px, 65° frame"

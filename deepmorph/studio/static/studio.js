@@ -292,6 +292,8 @@ async function runCapacity() {
   state.weak = new Set((r.elements || []).filter((e) => e.weak > 0).map((e) => e.index));
   drawOverlay();
   showPrintSize(r.print_size);
+  // the payloads from 200 px up wait for the drawing's channel, measured in the background
+  if (!r.channel_measured) setTimeout(() => { if (location.hash === "#capacity") runCapacity(); }, 2000);
 }
 
 // how far the visible variables move in a photo, as `deepmorph capacity --print-mm --distance-cm` says it
