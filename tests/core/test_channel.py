@@ -18,8 +18,8 @@ from deepmorph_core.codec import choose_codec
 from deepmorph_core.morphable import MorphableDrawing
 from tests.conftest import make_svg
 
-#: Fewer renders than a plan fits its reading on: enough to rank drawings, in a few seconds.
-SAMPLES = 800
+#: Fewer renders than a plan fits its reading on, of a smaller print: enough to rank drawings.
+SAMPLES, PRINT_PX = 800, 120
 
 
 def strokes(colour: str, move: float) -> bytes:
@@ -60,7 +60,7 @@ def test_wider_bounds_and_darker_ink_carry_more_in_photos_of_the_same_print() ->
     the edge it moves; a count of readable variables sees neither. (Moves of about a stroke's
     width: the linear reading undervalues far wider ones, see the module's docstring.)"""
     read = {
-        key: read_channel(MorphableDrawing.load(strokes(colour, move)), 200, samples=SAMPLES)
+        key: read_channel(MorphableDrawing.load(strokes(colour, move)), PRINT_PX, samples=SAMPLES)
         for key, (colour, move) in {"black": ("black", 0.6), "narrow": ("black", 0.2), "grey": ("#c8c8c8", 0.6)}.items()
     }
     assert np.median(read["black"].sigma) < np.median(read["narrow"].sigma)
@@ -68,4 +68,4 @@ def test_wider_bounds_and_darker_ink_carry_more_in_photos_of_the_same_print() ->
     assert read["black"].payload_bits > read["narrow"].payload_bits
     assert read["black"].payload_bits > read["grey"].payload_bits
     assert read["black"].information_bits <= read["black"].capacity_bits + 0.5 * np.log2(len(read["black"].sigma))
-    assert all(r.print_px == 200 and r.visible > 0 for r in read.values())
+    assert all(r.print_px == PRINT_PX and r.visible > 0 for r in read.values())

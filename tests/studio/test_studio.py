@@ -684,16 +684,21 @@ def _capacity_rows(page) -> list[list[str]]:  # noqa: ANN001
 
 def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple[float, list[list[str]]]:
     """The travel and payload table the CLI prints for the studio's drawing as it is now, from
-    the library."""
+    the library, with the channel the studio measured (``tests/core/test_channel.py`` tests the
+    measurement)."""
+    from dataclasses import replace
+
     from deepmorph.studio import drawing as drawings
-    from deepmorph_core.capacity import predict, with_channel
+    from deepmorph_core.capacity import predict
     from deepmorph_core.print_size import pixels_across, plan, plan_sizes
 
     status, svg = request(server, "/api/drawing.svg", token=server.token)
     assert status == 200
+    status, answer = request(server, f"/api/capacity?print_mm={print_mm}&distance_cm={distance_cm}", token=server.token)
+    assert status == 200 and json.loads(answer)["channel_measured"]
     md = drawings.load(svg, "drawing.svg")
     pixels = pixels_across(print_mm, distance_cm)
-    report = with_channel(predict(md), md)
+    report = replace(predict(md), channel_payload=json.loads(answer)["channel_payload"])
     rows = plan(md, report.visible_mask, plan_sizes(pixels), report)
     return pixels, [
         [f"{r.pixels:.0f} px" + (" ←" if abs(r.pixels - pixels) < 0.5 else ""), f"{r.median_move:.1f} px",
