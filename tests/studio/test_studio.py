@@ -453,6 +453,7 @@ def test_the_limiting_shapes_are_highlighted_as_the_bounds_change(page, server: 
         page.fill("#bounds-form input[name=move]", move)
         with page.expect_response("**/api/drawing/bounds"):
             page.click("#apply-bounds")
+        page.evaluate("clearCapacity()")  # the last view's table is not mistaken for this one
         with page.expect_response("**/api/capacity?**"):
             page.click("#tabs button[data-tab=capacity]")
         page.wait_for_selector("#capacity-sizes tr.yours")
@@ -682,6 +683,16 @@ def _capacity_rows(page) -> list[list[str]]:  # noqa: ANN001
     )
 
 
+def _wait_for_the_channel(page) -> None:  # noqa: ANN001
+    """Until the capacity table is drawn with the payloads from 200 px up, which wait for the
+    drawing's channel, measured in the background (about half a minute a drawing and bounds)."""
+    page.wait_for_selector("#capacity-sizes tr.yours")
+    page.wait_for_function(
+        "() => ![...document.querySelectorAll('#capacity-sizes td')].some(td => td.textContent.startsWith('measuring'))",
+        timeout=240_000,
+    )
+
+
 def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple[float, list[list[str]]]:
     """The travel and payload table the CLI prints for the studio's drawing as it is now, from
     the library, with the channel the studio measured (``tests/core/test_channel.py`` tests the
@@ -710,12 +721,7 @@ def _expected_rows(server: Server, print_mm: float, distance_cm: float) -> tuple
 def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> None:
     request(server, "/api/drawing/bundled", token=server.token, data=b"{}")
     open_studio(page, server, "capacity")
-    page.wait_for_selector("#capacity-sizes tr.yours")
-    # the payloads from 200 px up wait for the drawing's channel, measured in the background
-    page.wait_for_function(
-        "() => ![...document.querySelectorAll('#capacity-sizes td')].some(td => td.textContent.startsWith('measuring'))",
-        timeout=240_000,
-    )
+    _wait_for_the_channel(page)
     pixels, rows = _expected_rows(server, 50, 30)
     assert page.text_content("#capacity-span") == (
         f"a 50 mm print at 30 cm spans {pixels:.0f} px of a 1920-px, 65° frame"
@@ -765,9 +771,10 @@ def test_capacity_at_a_print_size_and_reading_distance(page, server: Server) -> 
     page.fill("#bounds-form input[name=move]", "3")
     with page.expect_response("**/api/drawing/bounds"):
         page.click("#apply-bounds")
+    page.evaluate("clearCapacity()")  # the last view's table is not mistaken for this one
     with page.expect_response("**/api/capacity?**"):
         page.click("#tabs button[data-tab=capacity]")
-    page.wait_for_selector("#capacity-sizes tr.yours")
+    _wait_for_the_channel(page)
     _, rows = _expected_rows(server, 80, 20)
     assert _capacity_rows(page) == rows and rows != before
     assert float(rows[-1][2].split()[0]) > float(before[-1][2].split()[0])
