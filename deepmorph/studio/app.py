@@ -22,7 +22,7 @@ import tempfile
 import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -314,9 +314,25 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
             await run_in_threadpool(lambda: drawings.random_morph(drawings.load(svg.encode(), name), seed, extreme))
         )
 
-    # the drawings' channels (about half a minute each), measured one at a time beside the requests
-    channel_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="deepmorph-channel")
+    # the drawings' channels (about half a minute each), measured one at a time beside the requests,
+    # on daemon threads: quitting the studio does not wait for a measurement
     channels_measuring: dict[str, Future[Any]] = {}
+    one_measurement = threading.Lock()
+
+    def measure_later(report: CapacityReport, md: MorphableDrawing) -> Future[Any]:
+        from deepmorph_core.capacity import with_channel
+
+        future: Future[Any] = Future()
+
+        def run() -> None:
+            with one_measurement:
+                try:
+                    future.set_result(with_channel(report, md))
+                except BaseException as exc:  # noqa: BLE001 - handed to the request that asks next
+                    future.set_exception(exc)
+
+        threading.Thread(target=run, name="deepmorph-channel", daemon=True).start()
+        return future
 
     async def capacity(request: Request) -> Response:
         from deepmorph_core.capacity import channel_key, known_channel, predict, with_channel
@@ -339,7 +355,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
                     measuring.result()  # its error, if it failed; a later request measures again
                     measuring = None  # measured, and since forgotten: measure again
                 if measuring is None:
-                    channels_measuring[key] = channel_worker.submit(with_channel, report, md)
+                    channels_measuring[key] = measure_later(report, md)
             else:
                 report = with_channel(report, md)
             return {
