@@ -73,6 +73,7 @@ from _common import RESULTS, environment, set_threads, table, write_json  # noqa
 
 from deepmorph_core.channel import (  # noqa: E402
     GROUPS_WIDTH,
+    TEST_SAMPLES,
     ChannelTable,
     channel_table,
     corrupted,
@@ -85,7 +86,6 @@ from deepmorph_core.channel import (  # noqa: E402
 )
 
 WIDTH = GROUPS_WIDTH
-TEST_SAMPLES = 1000
 #: the CNN reader's batch and peak learning rate (one-cycle schedule)
 CNN_BATCH, CNN_LR = 32, 2e-3
 #: the CNN reader's stride-2 layers in a frame wider than the decoder's (no full-resolution stem)

@@ -311,8 +311,9 @@ def with_channel(report: CapacityReport, drawing: MorphableDrawing) -> CapacityR
     """``report`` (``drawing``'s :func:`predict`) with the drawing's channel measured at
     :data:`PIXELS_MEASURED` px (:func:`deepmorph_core.channel.read_channel`, about half a
     minute), which plans for ``--pixels`` models need; as it is when already measured. The
-    measurement is kept for the drawing with the same bounds and reading channel, so that
-    ``capacity`` then ``train``, or the studio's tabs, measure it once in a process."""
+    measurement is kept for the drawing with the same bounds and reading channel, so that a
+    process that plans it again (the studio's capacity tab, each time it is opened) measures it
+    once."""
     if report.channel_payload is not None:
         return report
     if report.readable_groups == 0:
