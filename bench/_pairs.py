@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _common import RESULTS, environment, table, write_json
+from _common import RESULTS, environment, frame_size, table, write_json
 
 Locate = Callable[[str, Any, Any], tuple[float, list[Any]]]
 CHAINS = ("a", "b")
@@ -28,6 +28,7 @@ def add_scene_arguments(ap: argparse.ArgumentParser, out_name: str) -> None:
     ap.add_argument("--negatives", type=int, default=300, help="scenes without the drawing")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--frame", type=frame_size, default=(640, 480), help="the scenes' size, WxH (640x480)")
     ap.add_argument("--out", type=Path, default=RESULTS / out_name)
 
 
@@ -43,8 +44,8 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
     from deepmorph_detect.metrics import SceneTally, corner_error
     from deepmorph_detect.scenes import SceneMaker
 
-    qr = QrClock(model, (640, 480), frames=20)  # the QR frames bench-scenes times too
-    warm = SceneMaker(model, (640, 480), "medium", seed=args.seed + 500)
+    qr = QrClock(model, args.frame, frames=20)  # the QR frames bench-scenes times too
+    warm = SceneMaker(model, args.frame, "medium", seed=args.seed + 500)
     for _ in range(3):  # first calls allocate and load; keep them out of the timings
         scene = warm.make(drawings=1)
         for k in CHAINS:
@@ -54,7 +55,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
     report: dict[str, Any] = {"severities": {}}
     rows: list[tuple] = []
     for sev in args.severities.split(","):
-        maker = SceneMaker(model, (640, 480), sev, seed=args.seed)
+        maker = SceneMaker(model, args.frame, sev, seed=args.seed)
         stats = {k: {"tally": SceneTally(), "ms": [], "corner": []} for k in CHAINS}
         differ = 0
         qr.times.clear()  # this severity's series, from the first QR frame again
@@ -97,7 +98,7 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
         report["severities"][sev] = sev_report
         print(f"{sev}: done", flush=True)
 
-    maker = SceneMaker(model, (640, 480), "medium", seed=args.seed + 1000)
+    maker = SceneMaker(model, args.frame, "medium", seed=args.seed + 1000)
     negatives = {k: {"images": args.negatives, "detections": 0, "wrong_ok": 0} for k in CHAINS}
     for i in range(args.negatives):
         scene = maker.make(drawings=0, distractors=1 + i % 3, aruco=i % 2 == 0)

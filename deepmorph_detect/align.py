@@ -21,12 +21,21 @@ import numpy as np
 from deepmorph_core.photo import flatten_illumination
 from deepmorph_core.protocols import Candidate
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine, refine_affine
+from deepmorph_detect.refine import WIDE_SEARCH_MARGIN, Alignment, ImagePyramid, Template, refine, refine_affine
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 # a detector outline aligned in the photo below this is aligned in flat light too, and the better
 # kept: a sharp shadow across a print can bend the alignment to its edge and still pass the bar
 WEAK_ALIGNMENT = 0.65
+#: a blind proposal (the universal detector's) aligned below this takes the wider searches in flat
+#: light, and what they find replaces its alignment where it reaches this (plus their margin): an
+#: ink square is a square, and a print seen steeply from the side can align from it at the wrong
+#: corner order at 0.6-0.7, where the right pose correlates at 0.93-0.97
+BLIND_SEARCH_BELOW = 0.8
+#: a blind proposal scored below this (the universal detector proposes from 0.2) takes the quick
+#: path alone: the clear prints it finds there align at once (0.96), and clutter found there is
+#: not worth a wider search
+FAINT_PROPOSAL = 0.3
 #: ... and so is one whose outline lies further than this share of its width from any a flat print
 #: can make (:func:`~deepmorph_detect.camera.rigid_misfit`): on 200 medium close-ups of a colour
 #: drawing and 200 hard ones of another, alignments within 5 % of the truth were at most 0.031
@@ -139,28 +148,37 @@ class Aligner:
         (``Candidate.blind``: most of them are other drawings, each wider search costing one
         about 17 ms) takes the wider searches in flat light only, after the photo's quick path:
         away from shadows flat light is the photo, and on 200 scenes of the ghost it read the
-        same prints in half the frame time. A detector that knows
+        same prints in half the frame time. It goes there also when it aligns in the photo
+        below :data:`BLIND_SEARCH_BELOW`, and the flat light's alignment replaces that one only
+        where it reaches that bar plus the wider searches' margin; one scored below
+        :data:`FAINT_PROPOSAL` takes the photo's quick path alone. A detector that knows
         the drawing takes them in both, which finds a few more prints that do not read.
         """
         start = self.homography(cand.corners)
+        aim = BLIND_SEARCH_BELOW if cand.blind else None
 
         def search(seen_in: ImagePyramid, wide: bool) -> Alignment | None:
             accept = self.min_correlation if wide else None
-            return refine(seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized)
+            return refine(seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized, aim=aim)
 
         alignment = search(pyramid, gray is None or not cand.blind)
-        if gray is None:
+        if gray is None or (cand.blind and cand.score < FAINT_PROPOSAL):
             return pyramid, alignment
         missed = not self.accepts(alignment)
-        if (
+        weak = (
             missed
             or alignment.correlation < WEAK_ALIGNMENT
             or alignment.searched
             or self.bent(alignment.homography, gray.shape)
-        ):
+        )
+        if weak or (aim is not None and alignment.correlation < aim):
             flat = self.in_flat_light(gray, cand.corners)
             in_flat = search(flat, True)
-            if missed or (self.accepts(in_flat) and in_flat.correlation > alignment.correlation):
+            # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
+            if missed:
+                return flat, in_flat
+            better = self.accepts(in_flat) and in_flat.correlation > alignment.correlation
+            if better and (weak or in_flat.correlation >= BLIND_SEARCH_BELOW + WIDE_SEARCH_MARGIN):
                 return flat, in_flat
         return pyramid, alignment
 

@@ -41,6 +41,10 @@ SWEEP_TURNS = 24  # outline_sweep: turns of the detector's outline in 15-degree 
 # their size, so most scales enlarge the outline
 SWEEP_SCALES = (0.85, 1.0, 1.15, 1.35, 1.6, 1.85)
 SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain correlation)
+#: an ink square's sweep (``refine(sized=True)``): its four corner orders at these scales. Prints
+#: tilted 45-60 degrees, 200-300 px wide in 1280x720 scenes, were outlined at 0.75-0.9 of their
+#: size, where ECC diverged from every corner order; enlarged, 4 of 6 aligned
+SIZED_SWEEP_SCALES = (1.15, 1.3)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
 # a coarse solve by inverse composition that reaches this correlation is kept; below it, OpenCV's
 # wider-basin solve runs from the same start (:func:`_coarse_steps`)
@@ -48,6 +52,17 @@ COARSE_FAST_BAR = 0.7
 #: A turn of the unmorphed drawing whose render correlates with the render this well maps the
 #: drawing onto itself (:attr:`Template.symmetric_turns`): 79 of the 287 Feather icons reach it
 SYMMETRY_CORRELATION = 0.9
+#: Turns other than quarter turns (:attr:`Template.symmetric_turns`: a triangle's thirds, a star's
+#: fifths, an octagon's eighths) are found by turning the finest level about the ink's centre in
+#: steps of this many degrees, each angle that correlates at least ``SYMMETRY_SCAN_BAR`` refined
+#: to a tenth of a degree; angles within ``QUARTER_CLEARANCE`` degrees of a quarter turn are the
+#: quarter turns' own
+SYMMETRY_SCAN_STEP, SYMMETRY_SCAN_BAR, QUARTER_CLEARANCE = 2.0, 0.8, 8.0
+#: A drawing that maps onto itself at more turns than this (a circle, a target: at every angle)
+#: has no turn a print could tell; only its quarter turns are kept
+MAX_SYMMETRIC_TURNS = 11
+#: ... and so has one that maps onto itself at each of these turns (no polygon of up to 11 sides does)
+ROUND_CHECK_ANGLES = (13.0, 29.0, 47.0, 71.0, 103.0, 157.0, 199.0)
 
 
 @dataclass
@@ -77,14 +92,55 @@ class Template:
 
     @functools.cached_property
     def symmetric_turns(self) -> tuple[np.ndarray, ...]:
-        """The turns about the frame's centre (90, 180 and 270 degrees; 90 and 270 only in a
-        square frame) that map the unmorphed drawing onto itself, as ``(3, 3)`` SVG -> SVG
+        """The turns that map the unmorphed drawing onto itself, as ``(3, 3)`` SVG -> SVG
         matrices: its render turned correlates with itself at least
         :data:`SYMMETRY_CORRELATION`. A print of such a drawing (a hexagon, a star) aligns
         as well at each of these turns; only its morph, so only its reading, tells them apart.
+        They are the quarter turns about the frame's centre (90, 180 and 270 degrees; 90 and 270
+        only in a square frame), then any other turns about the ink's centre
+        (:attr:`symmetric_angles`: the codesandbox cube's thirds, whose prints seen steeply from
+        the side aligned at the wrong third at 0.93-0.97 and read nothing there).
         The set is closed under inverses, so the direction each is taken in does not matter."""
         x, y, w, h = self.viewbox
-        return tuple(quarter_turn(k, x + w / 2, y + h / 2) for k in self._symmetric_quarters)
+        cx, cy = self.ink_moments[0]
+        quarters = tuple(quarter_turn(k, x + w / 2, y + h / 2) for k in self._symmetric_quarters)
+        return quarters + tuple(turn_about(angle, cx, cy) for angle in self.symmetric_angles)
+
+    @functools.cached_property
+    def symmetric_angles(self) -> tuple[float, ...]:
+        """The turns (degrees, counter-clockwise as seen) other than quarter turns about which the
+        drawing, turned about its ink's centre, correlates with itself at least
+        :data:`SYMMETRY_CORRELATION`: scanned at the coarsest level (:data:`SYMMETRY_SCAN_STEP`),
+        refined at the finest. None for a round drawing, which does so at every turn
+        (:data:`ROUND_CHECK_ANGLES`) or at more than :data:`MAX_SYMMETRIC_TURNS`: a circle has no
+        turn to tell apart."""
+        coarse, finest = min(self.images), max(self.images)
+        if all(self._turned_correlation(finest, a) >= SYMMETRY_CORRELATION for a in ROUND_CHECK_ANGLES):
+            return ()
+        angles = np.arange(SYMMETRY_SCAN_STEP, 360.0, SYMMETRY_SCAN_STEP)
+        scores = np.array([self._turned_correlation(coarse, float(a)) for a in angles])
+        padded = np.concatenate([[-1.0], scores, [-1.0]])
+        found: list[float] = []
+        for i in np.nonzero(scores >= SYMMETRY_SCAN_BAR)[0]:
+            if not padded[i] <= scores[i] >= padded[i + 2]:
+                continue
+            fine = np.arange(angles[i] - SYMMETRY_SCAN_STEP, angles[i] + SYMMETRY_SCAN_STEP + 1e-9, 0.2)
+            refined = [(self._turned_correlation(finest, float(a)), round(float(a), 1)) for a in fine]
+            rho, angle = max(refined)
+            if rho >= SYMMETRY_CORRELATION and all(abs(angle - other) > SYMMETRY_SCAN_STEP for other in found):
+                found.append(angle)
+        if len(found) > MAX_SYMMETRIC_TURNS:
+            return ()
+        return tuple(a for a in found if abs((a + 45.0) % 90.0 - 45.0) > QUARTER_CLEARANCE)
+
+    def _turned_correlation(self, width: int, degrees: float) -> float:
+        """How well the level at ``width``, turned by ``degrees`` about the ink's centre,
+        correlates with itself (both blurred as candidates are)."""
+        image = self.images[width]
+        cx, cy = project(np.linalg.inv(self.to_svg_units(width)), self.ink_moments[0][None])[0]
+        matrix = cv2.getRotationMatrix2D((float(cx), float(cy)), degrees, 1.0)
+        turned = cv2.warpAffine(image, matrix, image.shape[::-1], flags=cv2.INTER_LINEAR, borderValue=1.0)
+        return correlation(cv2.GaussianBlur(image, (5, 5), 0), cv2.GaussianBlur(turned, (5, 5), 0))
 
     @functools.cached_property
     def other_turns(self) -> tuple[np.ndarray, ...]:
@@ -315,6 +371,12 @@ def corner_orders(homography: np.ndarray, template: Template) -> list[np.ndarray
     return [cv2.getPerspectiveTransform(frame, np.roll(quad, k, axis=0)).astype(np.float64) for k in range(4)]
 
 
+def turn_about(degrees: float, cx: float, cy: float) -> np.ndarray:
+    """``(3, 3)`` the turn by ``degrees`` (counter-clockwise as seen, y down) about ``(cx, cy)``
+    (SVG -> SVG)."""
+    return np.vstack([cv2.getRotationMatrix2D((float(cx), float(cy)), float(degrees), 1.0), [0.0, 0.0, 1.0]])
+
+
 def quarter_turn(k: int, cx: float, cy: float) -> np.ndarray:
     """``(3, 3)`` the turn by ``k`` quarters about ``(cx, cy)`` (SVG -> SVG)."""
     c, s = round(math.cos(k * math.pi / 2)), round(math.sin(k * math.pi / 2))
@@ -357,6 +419,7 @@ def refine(
     min_start: float = 0.1,
     accept: float | None = None,
     sized: bool = False,
+    aim: float | None = None,
 ) -> Alignment | None:
     """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
     template's levels.
@@ -377,12 +440,16 @@ def refine(
             (:func:`~deepmorph_detect.inkstart.ink_starts`). What they find must reach
             ``accept`` plus :data:`WIDE_SEARCH_MARGIN`, else the quick path's result is
             returned. ``None``: the quick path only.
+        aim: with ``accept``, the correlation below which the quick path's result, though
+            accepted, is searched beyond (a blind proposal's: it can end at a wrong pose); the
+            wider searches then look on until one reaches ``aim`` plus the margin, and replace
+            an accepted quick result only then. ``None``: ``accept``.
         sized: the outline's size comes from the print's own ink (the universal detector's ink
-            square): the wider searches then skip the outline sweep (its turns at that size found
-            no print the corner orders and the ink starts missed, in 400 scenes of two drawings,
-            and took about a quarter of the time spent on other drawings); the starts from the
-            print's ink still follow, for a print whose outline the square misses in shape (seen
-            steeply from the side).
+            square): the wider searches then sweep only its corner orders, enlarged
+            (:data:`SIZED_SWEEP_SCALES`: a square falls short of a print seen steeply from the
+            side), not its turns (which found no print the corner orders and the ink starts
+            missed, in 400 scenes of two drawings, and took about a quarter of the time spent on
+            other drawings); the starts from the print's ink still follow.
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -414,11 +481,12 @@ def refine(
     # of the ink alone, turned and at 0.6-0.7x the frame): the wider searches below may still
     # find the print
 
-    if accept is None or (best is not None and best.correlation >= accept):
+    aim = accept if accept is None or aim is None else max(aim, accept)
+    if accept is None or (best is not None and best.correlation >= aim):
         return best
     quick = best
     # every wider start is one more chance to fit clutter: what they find must clear a higher bar
-    bar = accept + WIDE_SEARCH_MARGIN
+    bar = aim + WIDE_SEARCH_MARGIN
 
     def good(a: Alignment | None) -> bool:
         return a is not None and a.correlation >= bar
@@ -445,16 +513,21 @@ def refine(
         best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
     if good(best):
         return searched(best)
-    # the outline itself is off: turned or scaled starts
-    if not sized:  # an ink square is the print's own size and turned as its ink: no sweep
-        best = best_few(outline_sweep(homography, template), best)
-        if good(best):
-            return searched(best)
+    # the outline itself is off: turned or scaled starts; an ink square is turned as its ink, but
+    # falls short of a print seen steeply from the side: only its corner orders, enlarged
+    sweep = outline_sweep(homography, template, 4, SIZED_SWEEP_SCALES) if sized else outline_sweep(homography, template)
+    best = best_few(sweep, best)
+    if good(best):
+        return searched(best)
     # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
     # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
     quad = project(homography, viewbox_corners(template.viewbox))
     best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
-    return searched(best) if good(best) else quick
+    if good(best):
+        return searched(best)
+    # short of the aim, a wider search still beats a quick path that was not accepted at all
+    failed = quick is None or quick.correlation < accept
+    return searched(best) if failed and best is not None and best.correlation >= accept + WIDE_SEARCH_MARGIN else quick
 
 
 def _plain_scores(
@@ -507,5 +580,6 @@ __all__ = [
     "quarter_turn",
     "refine",
     "refine_at",
+    "turn_about",
     "warp_to_template",
 ]

@@ -146,7 +146,7 @@ class UniversalDetector(CentreNetDetector):
         square: np.ndarray,
         viewbox: tuple[float, float, float, float],
         runner: Runner,
-        threshold: float = 0.3,
+        threshold: float = 0.2,
         max_detections: int = 12,
     ) -> None:
         self.net = runner

@@ -41,7 +41,7 @@ from deepmorph_detect.locate import Locator
 from deepmorph_detect.metrics import SceneTally
 from deepmorph_detect.propose import whole_frame
 from deepmorph_detect.read import Reader
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, refine
 from deepmorph_detect.results import Located, Pose
 from deepmorph_detect.scene_folders import write_scenes
 from deepmorph_detect.scenes import Placement, SceneMaker, close_up_photo
@@ -901,6 +901,32 @@ def test_turns_that_map_a_drawing_onto_itself_are_found() -> None:
     turns = {name: _template_of(name).symmetric_turns for name in ("codepen", "plus", "battery-charging")}
     assert {name: len(found) for name, found in turns.items()} == {"codepen": 1, "plus": 3, "battery-charging": 0}
     np.testing.assert_allclose(turns["codepen"][0], _half_turn(_template_of("codepen").viewbox), atol=1e-9)
+
+
+def test_turns_other_than_quarter_turns_that_map_a_drawing_onto_itself_are_found() -> None:
+    """The codesandbox cube looks the same turned by a third, a star by a fifth, an octagon by
+    an eighth (its quarter turns are the quarter turns'); a circle at every angle, so no turn of
+    it can be told and none is listed. Each turn is about the ink's centre and maps the
+    template onto itself."""
+    templates = {name: _template_of(name) for name in ("codesandbox", "star", "octagon", "circle", "battery-charging")}
+    assert {name: t.symmetric_angles for name, t in templates.items()} == {
+        "codesandbox": (120.0, 240.0),
+        "star": (72.0, 144.0, 216.0, 288.0),
+        "octagon": (45.0, 135.0, 225.0, 315.0),
+        "circle": (),
+        "battery-charging": (),
+    }
+    assert len(templates["octagon"].symmetric_turns) == 7
+    cube = templates["codesandbox"]
+    finest = max(cube.images)
+    to_pixels = np.linalg.inv(cube.to_svg_units(finest))
+    for turn in cube.symmetric_turns:
+        centre = np.append(cube.ink_moments[0], 1.0)
+        np.testing.assert_allclose(turn @ centre, centre, atol=1e-9)
+        in_pixels = (to_pixels @ turn @ cube.to_svg_units(finest))[:2]
+        image = cube.images[finest]
+        turned = cv2.warpAffine(image, in_pixels, image.shape[::-1], borderValue=1.0)
+        assert correlation(cv2.GaussianBlur(image, (5, 5), 0), cv2.GaussianBlur(turned, (5, 5), 0)) > 0.9
 
 
 def test_the_other_turns_of_a_frame_are_those_that_do_not_map_the_drawing_onto_itself() -> None:

@@ -1,29 +1,102 @@
-"""The universal detector's outlines (``Candidate.sized``) skip the outline sweep: their size and
-turn come from the print's ink, and on 400 scenes the sweep read no print more."""
+"""The universal detector's outlines (``Candidate.sized``): their turn comes from the print's ink,
+so their sweep is their corner orders only, enlarged (a print seen steeply from the side is
+wider than its ink square); an outline from a detector that knows the drawing sweeps turns and
+scales."""
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
+import cv2
 import numpy as np
 import pytest
 
+from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.protocols import Candidate
+from deepmorph_core.render import render_svg
 from deepmorph_detect import refine as refine_module
+from deepmorph_detect.align import Aligner, ink_thickness
+from deepmorph_detect.camera import Camera, homography_from_pose, project, viewbox_corners
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.refine import ImagePyramid, refine
+from deepmorph_detect.propose import quad_bbox
+from deepmorph_detect.refine import SIZED_SWEEP_SCALES, SWEEP_TURNS, ImagePyramid, Template, refine
+
+FEATHER = Path(__file__).parents[1] / "data" / "feather"
 
 
-def test_only_an_outline_not_sized_by_ink_is_swept(locator: Locator, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_sized_outline_sweeps_its_corner_orders_enlarged(locator: Locator, monkeypatch: pytest.MonkeyPatch) -> None:
     """On a photo of noise (nothing aligns, so every wider search runs), a sized outline takes
-    the corner orders and the ink starts, and never the sweep; an unsized one takes the sweep."""
+    the corner orders, its four orders enlarged and the ink starts; an unsized one takes the
+    whole sweep of turns and scales."""
     photo = np.random.default_rng(0).uniform(0.2, 1.0, (480, 640)).astype(np.float32)
     start = locator.aligner.homography(np.array([[200.0, 120], [440, 120], [440, 360], [200, 360]]))
-    swept: list[bool] = []
+    swept: list[tuple[int, tuple[float, ...]]] = []
     inked: list[bool] = []
     sweep, ink = refine_module.outline_sweep, refine_module.ink_starts
-    monkeypatch.setattr(refine_module, "outline_sweep", lambda *a, **k: swept.append(True) or sweep(*a, **k))
+
+    def recorded_sweep(homography, template, turns=SWEEP_TURNS, scales=refine_module.SWEEP_SCALES):  # noqa: ANN001, ANN202
+        swept.append((turns, tuple(scales)))
+        return sweep(homography, template, turns, scales)
+
+    monkeypatch.setattr(refine_module, "outline_sweep", recorded_sweep)
     monkeypatch.setattr(refine_module, "ink_starts", lambda *a, **k: inked.append(True) or ink(*a, **k))
     for sized in (True, False):
         swept.clear()
         inked.clear()
         found = refine(ImagePyramid(photo), start, locator.template, orders=4, accept=0.55, sized=sized)
         assert found is None or found.correlation < 0.6
-        assert swept == ([] if sized else [True]) and inked == [True]
+        assert swept == ([(4, SIZED_SWEEP_SCALES)] if sized else [(SWEEP_TURNS, refine_module.SWEEP_SCALES)])
+        assert inked == [True]
+
+
+def _steep_photo(svg: str, viewbox: tuple[float, float, float, float], tilt_deg: float, seed: int):  # noqa: ANN202
+    """A 640x480 photo of a print of ``svg`` tilted ``tilt_deg`` from head-on about a random axis,
+    turned at random, over dark stripes; and the drawing frame's true corners in it."""
+    rng = np.random.default_rng(seed)
+    width, height = 640, 480
+    camera = Camera.default(width, height)
+    art, margin = render_svg(svg, 400), 60
+    paper = np.pad(art, margin, constant_values=1.0)
+    side = paper.shape[1]
+    axis, spin = rng.uniform(0, 2 * math.pi, 2)
+    tilt, _ = cv2.Rodrigues(np.array([math.cos(axis), math.sin(axis), 0.0]) * math.radians(tilt_deg))
+    turn, _ = cv2.Rodrigues(np.array([0.0, 0.0, spin]))
+    rvec, _ = cv2.Rodrigues(tilt @ turn)
+    sheet = homography_from_pose(camera, rvec.ravel(), np.array([0.0, 0.0, camera.fx / (0.45 * width)]))
+    paper_to_photo = sheet @ np.array([[1 / side, 0, -0.5], [0, 1 / side, -0.5], [0, 0, 1]])
+    photo = np.full((height, width), 0.4, np.float32)
+    photo[:, ::20] = 0.2
+    seen = cv2.warpPerspective(paper, paper_to_photo, (width, height), borderValue=-1)
+    photo = np.where(seen >= 0, seen * 0.85 + 0.08, photo).astype(np.float32)
+    photo = cv2.GaussianBlur(photo, (3, 3), 0) + rng.normal(0, 0.02, photo.shape).astype(np.float32)
+    s = 400 / viewbox[2]
+    svg_to_paper = np.array([[s, 0, margin - viewbox[0] * s], [0, s, margin - viewbox[1] * s], [0, 0, 1]])
+    return np.clip(photo, 0, 1), project(paper_to_photo @ svg_to_paper, viewbox_corners(viewbox))
+
+
+def test_a_print_seen_steeply_is_aligned_from_an_outline_that_falls_short_of_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The Feather chip tilted 55 degrees, outlined at 0.8 of its size as the universal detector
+    outlines such prints in 1280x720 scenes: ECC diverges from each corner order as it is, and
+    aligns to within 2 px from the enlarged ones."""
+    md = MorphableDrawing.load(FEATHER / "cpu.svg", move=0.5)
+    svg, viewbox = md.to_svg(md.neutral_values()[0]), md.drawing.viewbox
+    template = Template.from_svg(svg, viewbox)
+    aligner = Aligner(template, 0.55, ink_thickness(template, 256), 256)
+
+    def aligned_off(photo: np.ndarray, truth: np.ndarray) -> float:
+        short = truth.mean(0) + 0.8 * (truth - truth.mean(0))
+        cand = Candidate(short, 0.5, quad_bbox(short, 640, 480), source="universal", sized=True, blind=True)
+        _, alignment = aligner.align_outline(ImagePyramid(photo), cand, photo)
+        if not aligner.accepts(alignment):
+            return math.inf
+        found = project(alignment.homography, viewbox_corners(viewbox))
+        # the chip looks the same turned: the corners in any cyclic order
+        return min(float(np.abs(np.roll(found, k, 0) - truth).max()) for k in range(4))
+
+    photos = [_steep_photo(svg, viewbox, 55.0, seed) for seed in range(3)]
+    assert all(aligned_off(photo, truth) < 2.0 for photo, truth in photos)
+    monkeypatch.setattr(refine_module, "SIZED_SWEEP_SCALES", (1.0,))
+    assert all(aligned_off(photo, truth) == math.inf for photo, truth in photos)
