@@ -53,10 +53,10 @@ COARSE_FAST_BAR = 0.7
 #: drawing onto itself (:attr:`Template.symmetric_turns`): 79 of the 287 Feather icons reach it
 SYMMETRY_CORRELATION = 0.9
 #: Turns other than quarter turns (:attr:`Template.symmetric_turns`: a triangle's thirds, a star's
-#: fifths, an octagon's eighths) are found by turning the finest level about the ink's centre in
-#: steps of this many degrees, each angle that correlates at least ``SYMMETRY_SCAN_BAR`` refined
-#: to a tenth of a degree; angles within ``QUARTER_CLEARANCE`` degrees of a quarter turn are the
-#: quarter turns' own
+#: fifths, an octagon's eighths) are found by turning the coarsest level about the ink's centre in
+#: steps of this many degrees, each peak that correlates at least ``SYMMETRY_SCAN_BAR`` refined at
+#: the finest level in steps of 0.2 degrees; angles within ``QUARTER_CLEARANCE`` degrees of a
+#: quarter turn are the quarter turns' own
 SYMMETRY_SCAN_STEP, SYMMETRY_SCAN_BAR, QUARTER_CLEARANCE = 2.0, 0.8, 8.0
 #: A drawing that maps onto itself at more turns than this (a circle, a target: at every angle)
 #: has no turn a print could tell; only its quarter turns are kept
