@@ -307,31 +307,28 @@ def predict(
     return report
 
 
-def with_channel(report: CapacityReport, drawing: MorphableDrawing) -> CapacityReport:
+def with_channel(report: CapacityReport, drawing: MorphableDrawing, measure: bool = True) -> CapacityReport:
     """``report`` (``drawing``'s :func:`predict`) with the drawing's channel measured at
     :data:`PIXELS_MEASURED` px (:func:`deepmorph_core.channel.read_channel`, about half a
     minute), which plans for ``--pixels`` models need; as it is when already measured. The
     measurement is kept for the drawing with the same bounds and reading channel, so that a
     process that plans it again (the studio's capacity tab, each time it is opened) measures it
-    once."""
+    once. ``measure`` false: only a measurement this process kept is filled in (the studio
+    measures in the background)."""
     if report.channel_payload is not None:
         return report
     if report.readable_groups == 0:
         return replace(report, channel_payload=0)
     key = channel_key(drawing)
     if key not in _CHANNELS:
+        if not measure:
+            return report
         from deepmorph_core.channel import read_channel
 
         _CHANNELS[key] = read_channel(drawing, PIXELS_MEASURED).payload_bits
         while len(_CHANNELS) > _CHANNELS_KEPT:
             _CHANNELS.pop(next(iter(_CHANNELS)))
     return replace(report, channel_payload=_CHANNELS[key])
-
-
-def known_channel(drawing: MorphableDrawing) -> int | None:
-    """The channel payload :func:`with_channel` measured for ``drawing`` (the same bounds and
-    reading channel) in this process; ``None`` when it has not."""
-    return _CHANNELS.get(channel_key(drawing))
 
 
 #: Measured channels' payloads by :func:`channel_key`, the last :data:`_CHANNELS_KEPT`.
@@ -366,11 +363,14 @@ def payload_for_width(
     """The payload bits a print ``pixels`` wide in the photo carries, and the ``--pixels`` to
     train its model with (``None``: the default training): ``(None, None)`` below ``needs_px``,
     the narrowest print a default model reads; from :data:`PIXELS_MEASURED` up, a model trained
-    for that width (it reads wider prints too); between, the default prediction (nothing else
-    was measured there)."""
+    for that width (it reads wider prints too), its payload ``None`` while ``report``'s channel is
+    not measured (:func:`with_channel`); between, the default prediction (nothing else was
+    measured there)."""
     if pixels < needs_px:
         return None, None
     if at_pixels(int(pixels)):
+        if report.channel_payload is None:
+            return None, PIXELS_MEASURED
         return for_print(report, PIXELS_MEASURED, crc_bits).payload_bits, PIXELS_MEASURED
     return for_print(report, None, crc_bits).payload_bits, None
 
@@ -437,7 +437,6 @@ __all__ = [
     "at_pixels",
     "code_bits_for",
     "channel_key",
-    "known_channel",
     "plan_ecc",
     "with_channel",
     "for_print",

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from deepmorph_core.capacity import PIXELS_MEASURED, CapacityReport, at_pixels, payload_for_width
+from deepmorph_core.capacity import CapacityReport, payload_for_width
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import MorphableDrawing
 
@@ -200,11 +200,8 @@ def plan(
     rows = []
     for px in sizes:
         moves = share * px
-        measuring = report is not None and px >= needs_px and at_pixels(int(px)) and report.channel_payload is None
-        if report is None or measuring:
-            payload, train_px = None, PIXELS_MEASURED if measuring else None
-        else:
-            payload, train_px = payload_for_width(report, px, needs_px, crc_bits)
+        payload, train_px = (None, None) if report is None else payload_for_width(report, px, needs_px, crc_bits)
+        measuring = payload is None and train_px is not None  # a --pixels model's, its channel not measured yet
         rows.append(
             SizeRow(
                 float(px),

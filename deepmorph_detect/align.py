@@ -178,7 +178,7 @@ class Aligner:
             if missed:
                 return flat, in_flat
             better = self.accepts(in_flat) and in_flat.correlation > alignment.correlation
-            if better and (weak or in_flat.correlation >= BLIND_SEARCH_BELOW + WIDE_SEARCH_MARGIN):
+            if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):
                 return flat, in_flat
         return pyramid, alignment
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -114,18 +115,18 @@ class Template:
         refined at the finest. None for a round drawing, which does so at every turn
         (:data:`ROUND_CHECK_ANGLES`) or at more than :data:`MAX_SYMMETRIC_TURNS`: a circle has no
         turn to tell apart."""
-        coarse, finest = min(self.images), max(self.images)
-        if all(self._turned_correlation(finest, a) >= SYMMETRY_CORRELATION for a in ROUND_CHECK_ANGLES):
+        coarse, finest = self._turned_correlation(min(self.images)), self._turned_correlation(max(self.images))
+        if all(finest(a) >= SYMMETRY_CORRELATION for a in ROUND_CHECK_ANGLES):
             return ()
         angles = np.arange(SYMMETRY_SCAN_STEP, 360.0, SYMMETRY_SCAN_STEP)
-        scores = np.array([self._turned_correlation(coarse, float(a)) for a in angles])
+        scores = np.array([coarse(float(a)) for a in angles])
         padded = np.concatenate([[-1.0], scores, [-1.0]])
         found: list[float] = []
         for i in np.nonzero(scores >= SYMMETRY_SCAN_BAR)[0]:
             if not padded[i] <= scores[i] >= padded[i + 2]:
                 continue
             fine = np.arange(angles[i] - SYMMETRY_SCAN_STEP, angles[i] + SYMMETRY_SCAN_STEP + 1e-9, 0.2)
-            refined = [(self._turned_correlation(finest, float(a)), round(float(a), 1)) for a in fine]
+            refined = [(finest(float(a)), round(float(a), 1)) for a in fine]
             rho, angle = max(refined)
             if rho >= SYMMETRY_CORRELATION and all(abs(angle - other) > SYMMETRY_SCAN_STEP for other in found):
                 found.append(angle)
@@ -133,14 +134,20 @@ class Template:
             return ()
         return tuple(a for a in found if abs((a + 45.0) % 90.0 - 45.0) > QUARTER_CLEARANCE)
 
-    def _turned_correlation(self, width: int, degrees: float) -> float:
-        """How well the level at ``width``, turned by ``degrees`` about the ink's centre,
-        correlates with itself (both blurred as candidates are)."""
+    def _turned_correlation(self, width: int) -> Callable[[float], float]:
+        """How well the level at ``width``, turned by a number of degrees about the ink's centre,
+        correlates with itself (both blurred as candidates are): the level, its blur and its ink's
+        centre taken once for every turn asked."""
         image = self.images[width]
+        reference = cv2.GaussianBlur(image, (5, 5), 0)
         cx, cy = project(np.linalg.inv(self.to_svg_units(width)), self.ink_moments[0][None])[0]
-        matrix = cv2.getRotationMatrix2D((float(cx), float(cy)), degrees, 1.0)
-        turned = cv2.warpAffine(image, matrix, image.shape[::-1], flags=cv2.INTER_LINEAR, borderValue=1.0)
-        return correlation(cv2.GaussianBlur(image, (5, 5), 0), cv2.GaussianBlur(turned, (5, 5), 0))
+
+        def at(degrees: float) -> float:
+            matrix = cv2.getRotationMatrix2D((float(cx), float(cy)), degrees, 1.0)
+            turned = cv2.warpAffine(image, matrix, image.shape[::-1], flags=cv2.INTER_LINEAR, borderValue=1.0)
+            return correlation(reference, cv2.GaussianBlur(turned, (5, 5), 0))
+
+        return at
 
     @functools.cached_property
     def other_turns(self) -> tuple[np.ndarray, ...]:

@@ -335,7 +335,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         return future
 
     async def capacity(request: Request) -> Response:
-        from deepmorph_core.capacity import channel_key, known_channel, predict, with_channel
+        from deepmorph_core.capacity import channel_key, predict, with_channel
         from deepmorph_core.reading_channel import channel_name
 
         svg, name = current()
@@ -345,9 +345,9 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
 
         def work() -> dict[str, Any]:
             md = drawings.load(svg.encode(), name).read_in()  # what training will read
-            report = predict(md)
             # the plan from 200 px up starts from the drawing's channel: measured once, in the background
-            if report.readable_groups and known_channel(md) is None:
+            report = with_channel(predict(md), md, measure=False)
+            if report.channel_payload is None:
                 key = channel_key(md)
                 measuring = channels_measuring.get(key)
                 if measuring is not None and measuring.done():
@@ -356,8 +356,6 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
                     measuring = None  # measured, and since forgotten: measure again
                 if measuring is None:
                     channels_measuring[key] = measure_later(report, md)
-            else:
-                report = with_channel(report, md)
             return {
                 "name": name,
                 "reading_channel": channel_name(md.channel),

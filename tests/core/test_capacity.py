@@ -97,6 +97,8 @@ def test_a_model_trained_for_wide_prints_is_planned_from_its_channel_there() -> 
     assert payload_for_width(measured, 80, 96) == (None, None)
     assert payload_for_width(measured, 150, 96) == (plain.payload_bits, None)
     assert payload_for_width(measured, 300, 96) == (wide.payload_bits, 200)
+    assert payload_for_width(plain, 300, 96) == (None, 200)  # a model for 200 px, its channel not measured yet
+    assert with_channel(plain, md, measure=False) == measured  # the measurement this process kept
     assert ECC_CHOICES == (2, 1)
 
 
