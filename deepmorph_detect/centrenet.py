@@ -84,10 +84,24 @@ class CentreNetDetector:
         """Quadrilaterals (corners TL, TR, BR, BL in pixels) and scores, best first."""
         gray = to_gray(image)
         h, w = gray.shape
+        found = self._peaks(*self._shrunk(gray))
+        return [Candidate(quad, score, quad_bbox(quad, w, h), source="detector") for quad, score in found]
+
+    @staticmethod
+    def _shrunk(gray: np.ndarray) -> tuple[np.ndarray, float]:
+        """``gray`` area-shrunk to fit :data:`~deepmorph_detect.network.INPUT_SIZE` (not yet
+        padded), and the scale it was shrunk by."""
+        h, w = gray.shape
         W, H = INPUT_SIZE
         scale = min(W / w, H / h)
-        rw, rh = max(1, round(w * scale)), max(1, round(h * scale))
-        small = area_resize(gray, (rw, rh))
+        return area_resize(gray, (max(1, round(w * scale)), max(1, round(h * scale)))), scale
+
+    def _peaks(self, small: np.ndarray, scale: float) -> list[tuple[np.ndarray, float]]:
+        """``(4, 2)`` quads (pixels of the photo ``small`` was shrunk from by ``scale``, corners
+        in the network's order) and their centre probabilities, for every peak above
+        :attr:`threshold`, best first."""
+        W, H = INPUT_SIZE
+        rh, rw = small.shape
         small = cv2.copyMakeBorder(small, 0, H - rh, 0, W - rw, cv2.BORDER_REPLICATE)
         with torch.inference_mode():
             heat, corners = self.net(torch.from_numpy(np.ascontiguousarray(small, dtype=np.float32))[None, None])
@@ -108,8 +122,7 @@ class CentreNetDetector:
             # neighbours may list the corners in another cyclic order: bring each to the peak's
             quads = _same_order(quads, ref)
             quad = (quads * wts.reshape(-1, 1, 1)).sum(0) / wts.sum()
-            quad = quad * STRIDE / scale
-            out.append(Candidate(quad, float(p_np[y, x]), quad_bbox(quad, w, h), source="detector"))
+            out.append((quad * STRIDE / scale, float(p_np[y, x])))
         return out
 
 

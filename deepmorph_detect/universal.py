@@ -29,6 +29,7 @@ from deepmorph_core.bundle import GraphMeta, TrainingRecord, check_weights, load
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.graphs import StoredGraph, read_graphs
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.photo import to_gray
 from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg_rgb
 from deepmorph_detect.camera import project, viewbox_corners
@@ -45,6 +46,9 @@ UNIVERSAL_PATH = Path(__file__).parent / "data" / "universal-detector.safetensor
 #: (any colour darker or more saturated than a pale tint).
 INK_RENDER_WIDTH = 256
 INK_LEVEL = 0.9
+#: a peak of the photo mirrored within this share of a print's side from a peak of the photo
+#: itself is the same print (:func:`merged_with_mirrored`)
+SAME_PRINT = 0.35
 
 
 class UniversalMeta(BaseModel):
@@ -137,6 +141,11 @@ class UniversalDetector(CentreNetDetector):
         square: the model's :func:`ink_square` (SVG units).
         viewbox: the model's viewBox.
         runner: the shared network (:func:`shared_runner`).
+        threshold: minimum centre probability of a peak.
+        max_detections: proposals kept per photo (highest first).
+        flip_test: also read the photo mirrored left to right and merge the two readings, as
+            CenterNet tests: the network is not quite symmetric, and a print one reading
+            scores under the threshold the other may not (:func:`merged_with_mirrored`).
     """
 
     name: ClassVar[str] = "universal"
@@ -148,10 +157,12 @@ class UniversalDetector(CentreNetDetector):
         runner: Runner,
         threshold: float = 0.2,
         max_detections: int = 12,
+        flip_test: bool = True,
     ) -> None:
         self.net = runner
         self.threshold = threshold
         self.max_detections = max_detections
+        self.flip_test = flip_test
         self.square = np.asarray(square, dtype=np.float64)
         self.frame = viewbox_corners(viewbox)
 
@@ -178,15 +189,63 @@ class UniversalDetector(CentreNetDetector):
 
     def detect(self, image: np.ndarray) -> list[Candidate]:
         """The network's ink squares mapped to the model's viewBox corners (TL, TR, BR, BL as
-        far as the square's order tells; alignment tries the other cyclic orders)."""
-        h, w = np.asarray(image).shape[:2]
+        far as the square's order tells; alignment tries the other cyclic orders). With
+        :attr:`flip_test`, the photo is read mirrored too and the readings merged
+        (:func:`merged_with_mirrored`)."""
+        gray = to_gray(image)
+        h, w = gray.shape
+        small, scale = self._shrunk(gray)
+        found = self._peaks(small, scale)
+        if self.flip_test:
+            in_mirror = self._peaks(np.ascontiguousarray(small[:, ::-1]), scale)
+            mirrored = [(unmirrored(quad, small.shape[1] / scale), score) for quad, score in in_mirror]
+            found = merged_with_mirrored(found, mirrored)[: self.max_detections]
         out = []
-        for found in super().detect(image):
-            to_image = cv2.getPerspectiveTransform(self.square.astype(np.float32), found.corners.astype(np.float32))
+        for quad, score in found:
+            to_image = cv2.getPerspectiveTransform(self.square.astype(np.float32), quad.astype(np.float32))
             corners = project(to_image, self.frame)
-            box = quad_bbox(corners, w, h)
-            out.append(Candidate(corners, found.score, box, source=self.name, sized=True, blind=True))
+            out.append(Candidate(corners, score, quad_bbox(corners, w, h), source=self.name, sized=True, blind=True))
         return out
+
+
+def unmirrored(quad: np.ndarray, width: float) -> np.ndarray:
+    """A ``(4, 2)`` quad found in a photo mirrored left to right (``width`` pixels wide), in the
+    photo itself, its corners in the same roles (the mirrored top-left is the top-right)."""
+    out = np.array(quad, dtype=np.float64)
+    out[:, 0] = width - out[:, 0]
+    return out[[1, 0, 3, 2]]
+
+
+def merged_with_mirrored(
+    found: list[tuple[np.ndarray, float]], mirrored: list[tuple[np.ndarray, float]]
+) -> list[tuple[np.ndarray, float]]:
+    """Peaks of a photo and of its mirror image (:func:`unmirrored`), as ``(quad, score)``, merged:
+    a mirrored peak whose centre lies within :data:`SAME_PRINT` of a print's side from a peak of
+    the photo is that print, its quad the two averaged by score and its score the higher; the
+    others are added. Best first."""
+    merged = [(np.asarray(quad, dtype=np.float64), score) for quad, score in found]
+    taken = [False] * len(merged)
+    for quad, score in sorted(mirrored, key=lambda peak: -peak[1]):
+        centre = quad.mean(0)
+        near = [
+            i for i, (other, _) in enumerate(merged[: len(found)])
+            if not taken[i] and np.linalg.norm(other.mean(0) - centre) < SAME_PRINT * _side(other)
+        ]  # fmt: skip
+        if not near:
+            merged.append((quad, score))
+            taken.append(True)
+            continue
+        i = min(near, key=lambda k: np.linalg.norm(merged[k][0].mean(0) - centre))
+        other, other_score = merged[i]
+        quad = min((np.roll(quad, k, 0) for k in range(4)), key=lambda rolled: np.abs(rolled - other).sum())
+        merged[i] = ((other * other_score + quad * score) / (other_score + score), max(score, other_score))
+        taken[i] = True
+    return sorted(merged, key=lambda peak: -peak[1])
+
+
+def _side(quad: np.ndarray) -> float:
+    """The mean side of a ``(4, 2)`` quad, in pixels."""
+    return float(np.linalg.norm(quad - np.roll(quad, 1, 0), axis=1).mean())
 
 
 __all__ = [
@@ -195,7 +254,10 @@ __all__ = [
     "UniversalMeta",
     "ink_square",
     "ink_square_of",
+    "SAME_PRINT",
     "load_universal",
+    "merged_with_mirrored",
     "save_universal",
     "shared_runner",
+    "unmirrored",
 ]

@@ -7,6 +7,7 @@ import hashlib
 import re
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -24,6 +25,7 @@ from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.plugins import default_registry
+from deepmorph_detect.camera import project
 from deepmorph_detect.centrenet import CentreNetDetector
 from deepmorph_detect.locate import Locator, detector_for
 from deepmorph_detect.metrics import corner_error
@@ -33,7 +35,9 @@ from deepmorph_detect.universal import (
     UniversalDetector,
     ink_square,
     load_universal,
+    merged_with_mirrored,
     shared_runner,
+    unmirrored,
 )
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -153,6 +157,53 @@ def test_the_universal_detector_finds_the_held_out_ghost_and_the_chain_reads_it(
         results = locator.locate(scene.image)
         read += any(r.result.ok and np.array_equal(r.result.payload, truth.payload) for r in results)
     assert found >= 5 and read >= 5
+
+
+def test_a_quad_found_in_the_mirrored_photo_comes_back_with_its_corners_in_their_roles() -> None:
+    quad = np.array([[100.0, 50.0], [180.0, 60.0], [170.0, 140.0], [90.0, 130.0]])  # TL, TR, BR, BL
+    in_mirror = np.array([[640 - x, y] for x, y in quad])[[1, 0, 3, 2]]  # the mirror's TL is the TR
+    np.testing.assert_allclose(unmirrored(in_mirror, 640), quad)
+
+
+def test_mirrored_peaks_merge_with_their_prints_and_add_the_prints_missed() -> None:
+    square = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]])
+    first, second = square + 50, square + 400
+    shifted = np.roll(first + 10, 1, 0)  # the same print, its corners listed from another one
+    merged = merged_with_mirrored([(first, 0.6)], [(shifted, 0.3), (second, 0.25)])
+    assert [score for _, score in merged] == [0.6, 0.25]
+    np.testing.assert_allclose(merged[0][0], first + 10 / 3)  # averaged by score, in the photo's order
+    np.testing.assert_allclose(merged[1][0], second)
+    assert merged_with_mirrored([(first, 0.6)], []) == [(first, 0.6)]
+
+
+def test_flip_testing_finds_the_same_prints_in_a_photo_and_in_its_mirror_image() -> None:
+    """Read mirrored too, the detector proposes in a photo's mirror image the mirror images of
+    what it proposes in the photo; read once, it does not quite (the network is not symmetric)."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    detector = Locator(model, detector="universal").detector
+    scene = SceneMaker(model, severity="hard", seed=7).make(drawings=2, distractors=1)
+    gray = scene.image.astype(np.float32).mean(-1) / 255
+    mirror = np.ascontiguousarray(gray[:, ::-1])
+    ink = np.array(detector.square, dtype=np.float64)
+
+    def squares(image: np.ndarray, mirrored: bool) -> list[tuple[np.ndarray, float]]:
+        out = []
+        for c in detector.detect(image):
+            to_image = cv2.getPerspectiveTransform(detector.frame.astype(np.float32), c.corners.astype(np.float32))
+            quad = project(to_image, ink)
+            out.append((unmirrored(quad, image.shape[1]) if mirrored else quad, c.score))
+        return sorted(out, key=lambda q: tuple(q[0].mean(0).round()))
+
+    def same(a: list, b: list) -> bool:
+        return len(a) == len(b) and all(
+            abs(sa - sb) < 1e-4 and min(np.abs(np.roll(qa, k, 0) - qb).max() for k in range(4)) < 1e-2
+            for (qa, sa), (qb, sb) in zip(a, b)
+        )
+
+    assert detector.flip_test and len(squares(gray, False)) >= 2
+    assert same(squares(gray, False), squares(mirror, True))
+    detector.flip_test = False
+    assert not same(squares(gray, False), squares(mirror, True))
 
 
 def test_the_network_is_loaded_once_per_process() -> None:
