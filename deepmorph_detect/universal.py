@@ -224,16 +224,15 @@ def merged_with_mirrored(
     the photo is that print, its quad the two averaged by score and its score the higher; the
     others are added. Best first."""
     merged = [(np.asarray(quad, dtype=np.float64), score) for quad, score in found]
-    taken = [False] * len(merged)
+    taken = [False] * len(found)  # the photo's peaks, each merged with one mirrored peak at most
     for quad, score in sorted(mirrored, key=lambda peak: -peak[1]):
         centre = quad.mean(0)
         near = [
-            i for i, (other, _) in enumerate(merged[: len(found)])
-            if not taken[i] and np.linalg.norm(other.mean(0) - centre) < SAME_PRINT * _side(other)
+            i for i in range(len(found))
+            if not taken[i] and np.linalg.norm(merged[i][0].mean(0) - centre) < SAME_PRINT * _side(merged[i][0])
         ]  # fmt: skip
         if not near:
             merged.append((quad, score))
-            taken.append(True)
             continue
         i = min(near, key=lambda k: np.linalg.norm(merged[k][0].mean(0) - centre))
         other, other_score = merged[i]
