@@ -8,11 +8,13 @@ drawing found twice is kept once. A detector's outline that aligns poorly in the
 an outline no flat print makes (:meth:`Aligner.bent`), is aligned again in flat light (shadows
 divided out), and the better alignment is kept. A drawing
 aligned but not read can be aligned again as a flat sheet, without perspective
-(:meth:`Aligner.as_flat_sheet`).
+(:meth:`Aligner.as_flat_sheet`), or from its detector's outline on the print's edges alone
+(:meth:`Aligner.on_edges`).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -21,6 +23,7 @@ import numpy as np
 from deepmorph_core.photo import flatten_illumination
 from deepmorph_core.protocols import Candidate
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
+from deepmorph_detect.edge_align import align_on_edges, edge_template
 from deepmorph_detect.refine import WIDE_SEARCH_MARGIN, Alignment, ImagePyramid, Template, refine, refine_affine
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
@@ -216,6 +219,22 @@ class Aligner:
         width = max(float(np.linalg.norm(before[1] - before[0])), 1.0)
         moved = float(np.linalg.norm(after - before, axis=1).mean())
         return again if moved >= SHEET_MOVE * width else None
+
+    @functools.cached_property
+    def edges(self) -> Template:
+        """The template's edges (:func:`~deepmorph_detect.edge_align.edge_template`), made when a
+        print first needs them."""
+        return edge_template(self.template)
+
+    def on_edges(self, gray: np.ndarray, cand: Candidate) -> Alignment | None:
+        """A detector's outline aligned again on the print's edges alone
+        (:func:`~deepmorph_detect.edge_align.align_on_edges`), where its outline can be a print;
+        else ``None``. For a print aligned but not read: a light that changes across the sheet as
+        much as the drawing's fills differ from its paper bends ECC's alignment."""
+        again = align_on_edges(gray, self.homography(cand.corners), cand.corners, self.edges, cand.sized)
+        if again is None or not plausible_outline(project(again.homography, self.frame_corners), self.frame_corners):
+            return None
+        return again
 
     def in_flat_light(self, gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:
         """The photo with shadows and light gradients divided out around a detector outline.

@@ -270,14 +270,17 @@ class Locator:
         return read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
 
     def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
-        """Each aligned drawing decoded (:meth:`decode_drawing`); one whose payload is not read
-        only when :meth:`reports_unread` says so."""
+        """Each aligned drawing decoded (:meth:`decode_drawing`), a detector's outline not read
+        there aligned again on the print's edges and decoded (:meth:`decode_on_edges`); one
+        whose payload is not read reported only when :meth:`reports_unread` says so."""
         results = []
         for aligned in found:
             cand, alignment = aligned.candidate, aligned.alignment
             located = self.decode_drawing(
                 gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft, blind=cand.blind
             )
+            if not located.result.ok and cand.homography is None and not self.aligned_too_narrow(alignment):
+                located = self.decode_on_edges(gray, aligned, cam, soft) or located
             located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
             refused = self.model.print_px is not None and located.result.ok and located.too_narrow
             if refused:  # trained for prints at least print_px wide: a narrower one is too small, never a payload
@@ -286,6 +289,22 @@ class Locator:
             if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[:2]):
                 results.append(located)
         return results
+
+    def decode_on_edges(self, gray: np.ndarray, aligned: Aligned, cam: Camera, soft: bool) -> Located | None:
+        """A detector's outline whose print :meth:`decode_drawing` did not read, aligned again from
+        that outline on the print's edges alone (:meth:`Aligner.on_edges
+        <deepmorph_detect.align.Aligner.on_edges>`: the slow light subtracted from the photo and
+        the template) and decoded there in the light it was decoded in before (its readings,
+        turns and checks as at any alignment); ``None`` where it aligns so below the bar or does
+        not read. The photo's own ECC fits one light to the whole print, and a colour drawing
+        whose fills differ little from its paper, under a light that falls off across the sheet
+        about as much, aligns there into a bent outline even from its true pose."""
+        cand = aligned.candidate
+        edged = self.aligner.on_edges(gray, cand)
+        if edged is None:
+            return None
+        located = self._decode_at(gray, aligned.pyramid, edged, cand.score, cam, cand.source, soft, cand.blind)
+        return located if located.result.ok else None
 
     def reports_unread(self, located: Located, candidate: Candidate, image_size: tuple[int, int]) -> bool:
         """Whether a drawing whose payload is not read is reported: with no payload to vouch for

@@ -427,6 +427,7 @@ def refine(
     accept: float | None = None,
     sized: bool = False,
     aim: float | None = None,
+    ink: bool = True,
 ) -> Alignment | None:
     """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
     template's levels.
@@ -457,6 +458,9 @@ def refine(
             side), not its turns (which found no print the corner orders and the ink starts
             missed, in 400 scenes of two drawings, and took about a quarter of the time spent on
             other drawings); the starts from the print's ink still follow.
+        ink: the wider searches end with the starts from the print's ink; ``False`` where the
+            pyramid shows no paper to find the ink on (the edges of
+            :mod:`~deepmorph_detect.edge_align`).
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -526,12 +530,13 @@ def refine(
     best = best_few(sweep, best)
     if good(best):
         return searched(best)
-    # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
-    # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
-    quad = project(homography, viewbox_corners(template.viewbox))
-    best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
-    if good(best):
-        return searched(best)
+    if ink:
+        # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
+        # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
+        quad = project(homography, viewbox_corners(template.viewbox))
+        best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
+        if good(best):
+            return searched(best)
     # short of the aim, a wider search still beats a quick path that was not accepted at all
     failed = quick is None or quick.correlation < accept
     return searched(best) if failed and best is not None and best.correlation >= accept + WIDE_SEARCH_MARGIN else quick

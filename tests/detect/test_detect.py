@@ -24,7 +24,7 @@ from deepmorph_core.codec import PayloadCodec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
-from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT
+from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT, Aligned
 from deepmorph_detect.camera import (
     Camera,
     homography_from_pose,
@@ -567,6 +567,9 @@ class DetectorUnread(Locator):
             located.result = replace(located.result, ok=False)
             located.morph_check = "failed"
         return located
+
+    def decode_on_edges(self, gray: np.ndarray, aligned: Aligned, cam: Camera, soft: bool) -> Located | None:
+        return None  # nor aligned on the print's edges
 
 
 def test_a_close_up_the_detector_aligns_but_does_not_read_is_read_from_the_whole_frame(

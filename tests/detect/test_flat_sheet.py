@@ -3,62 +3,30 @@ the print; an alignment without perspective stays on it."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.morphable import MorphableDrawing
-from deepmorph_core.photo import to_gray
-from deepmorph_core.protocols import Candidate
-from deepmorph_detect.align import BENT_OUTLINE, MIN_CORRELATION, WEAK_ALIGNMENT, Aligner, ink_thickness
+from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT, Aligner
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
-from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
-from deepmorph_detect.refine import LEVELS, ImagePyramid, Template, nearest_affine, refine_affine
+from deepmorph_detect.refine import ImagePyramid, Template, nearest_affine, refine_affine
 from tests.conftest import easy_print_aligned
+from tests.detect.colour_close_ups import close_up, colour_aligner, corner_error
 
 DATA = Path(__file__).parents[1] / "data"
 CRYSTAL = DATA / "flat-color-icons" / "crystal-oscillator.svg"
 PHOTO = DATA / "photos" / "shadow_across_colour_close_up.png"
 BENDING = DATA / "photos" / "shadow_bending_colour_close_up.png"
-VIEW_WIDTH = 192
 
 
 @pytest.fixture(scope="module")
 def crystal() -> tuple[Template, Aligner]:
-    """The unmorphed crystal oscillator's template and aligner, made as the photo chain makes
-    them for its model (``--move 0.5``)."""
-    md = MorphableDrawing.load(CRYSTAL, move=0.5)
-    unmorphed = md.to_svg(md.neutral_values()[0])
-    _, renderer = template_renderer(unmorphed, md.drawing.viewbox, LEVELS, md.channel)
-    template = Template.from_svg(unmorphed, md.drawing.viewbox, LEVELS, stretched_renderer(renderer, md.ink_level))
-    return template, Aligner(template, MIN_CORRELATION, ink_thickness(template, VIEW_WIDTH), VIEW_WIDTH)
-
-
-def _fixture(photo: Path) -> tuple[np.ndarray, np.ndarray, Candidate]:
-    """A fixture photo's gray, its print's true corners and the universal detector's proposal."""
-    fixture = json.loads(photo.with_suffix(".json").read_text())
-    proposal = fixture["candidate"]
-    candidate = Candidate(
-        corners=np.array(proposal["corners"]),
-        score=proposal["score"],
-        bbox=tuple(proposal["bbox"]),
-        source=proposal["source"],
-        sized=proposal["sized"],
-        blind=proposal["blind"],
-    )
-    return to_gray(cv2.imread(str(photo))), np.array(fixture["truth_corners"]), candidate
-
-
-def _corner_error(homography: np.ndarray, template: Template, truth: np.ndarray) -> float:
-    """Mean distance of the frame's corners from the truth, as a share of the frame's width."""
-    quad = project(homography, viewbox_corners(template.viewbox))
-    return float(np.linalg.norm(quad - truth, axis=1).mean() / np.linalg.norm(truth[1] - truth[0]))
+    """The unmorphed crystal oscillator's template and aligner."""
+    return colour_aligner(CRYSTAL)
 
 
 def test_the_nearest_affine_map_keeps_an_affine_one_and_flattens_a_perspective(crystal) -> None:
@@ -83,21 +51,21 @@ def test_a_close_up_a_shadow_bends_the_alignment_of_is_aligned_again_as_a_flat_s
     flat sheet, its corners are within 3 % of its width of the truth (the sheet is tilted a
     little: no affine map fits it closer) and it aligns better."""
     template, aligner = crystal
-    gray, truth, candidate = _fixture(PHOTO)
+    gray, truth, candidate = close_up(PHOTO)
     (aligned,) = aligner.verify(ImagePyramid(gray), [candidate], gray)
     assert aligned.alignment.correlation > 0.8
-    assert _corner_error(aligned.alignment.homography, template, truth) > 0.15
+    assert corner_error(aligned.alignment.homography, template, truth) > 0.15
     # bent: no flat print makes that outline; the truth and the flat sheet are ones
     assert aligner.bent(aligned.alignment.homography, gray.shape)
     sheet = aligner.as_flat_sheet(aligned.pyramid, aligned.alignment)
     assert sheet is not None
-    assert _corner_error(sheet.homography, template, truth) < 0.03
+    assert corner_error(sheet.homography, template, truth) < 0.03
     assert sheet.correlation > aligned.alignment.correlation
     assert not aligner.bent(sheet.homography, gray.shape)
     assert rigid_misfit(aligner.homography(truth), aligner.frame_corners, gray.shape[::-1]) < 0.002
     # aligned at the truth already: nothing moves far enough to be read again
     at_truth = refine_affine(aligned.pyramid, sheet.homography, template)
-    assert at_truth is not None and _corner_error(at_truth.homography, template, truth) < 0.03
+    assert at_truth is not None and corner_error(at_truth.homography, template, truth) < 0.03
     assert aligner.as_flat_sheet(aligned.pyramid, at_truth) is None
 
 
@@ -108,16 +76,16 @@ def test_an_alignment_no_flat_print_makes_is_aligned_again_in_flat_light(crystal
     (its ``rigid_misfit`` is over ``BENT_OUTLINE``). So it is aligned in flat light too, which
     lands within 4 % of the truth and correlates better."""
     template, aligner = crystal
-    gray, truth, candidate = _fixture(BENDING)
+    gray, truth, candidate = close_up(BENDING)
     pyramid = ImagePyramid(gray)
     (in_photo,) = aligner.verify(pyramid, [candidate])
     assert in_photo.alignment.correlation > WEAK_ALIGNMENT and not in_photo.alignment.searched
-    assert _corner_error(in_photo.alignment.homography, template, truth) > 0.3
+    assert corner_error(in_photo.alignment.homography, template, truth) > 0.3
     assert rigid_misfit(in_photo.alignment.homography, aligner.frame_corners, gray.shape[::-1]) > BENT_OUTLINE
     (aligned,) = aligner.verify(pyramid, [candidate], gray)
     assert aligned.pyramid is not pyramid  # kept from flat light
     assert aligned.alignment.correlation > in_photo.alignment.correlation
-    assert _corner_error(aligned.alignment.homography, template, truth) < 0.04
+    assert corner_error(aligned.alignment.homography, template, truth) < 0.04
     assert not aligner.bent(aligned.alignment.homography, gray.shape)
 
 

@@ -1,0 +1,53 @@
+"""Simulated colour close-ups kept as fixtures (``tests/data/photos``, each PNG with a JSON of
+the print's true corners and the universal detector's proposal), and the aligner the photo chain
+makes for a colour drawing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from deepmorph_core.morphable import MorphableDrawing
+from deepmorph_core.photo import to_gray
+from deepmorph_core.protocols import Candidate
+from deepmorph_detect.align import MIN_CORRELATION, Aligner, ink_thickness
+from deepmorph_detect.camera import project, viewbox_corners
+from deepmorph_detect.fastrender import stretched_renderer, template_renderer
+from deepmorph_detect.refine import LEVELS, Template
+
+#: The width of the rectified views the aligner sizes its flat light by.
+VIEW_WIDTH = 192
+
+
+def colour_aligner(svg: Path) -> tuple[Template, Aligner]:
+    """The unmorphed drawing's template and aligner, made as the photo chain makes them for its
+    model (``--move 0.5``)."""
+    md = MorphableDrawing.load(svg, move=0.5)
+    unmorphed = md.to_svg(md.neutral_values()[0])
+    _, renderer = template_renderer(unmorphed, md.drawing.viewbox, LEVELS, md.channel)
+    template = Template.from_svg(unmorphed, md.drawing.viewbox, LEVELS, stretched_renderer(renderer, md.ink_level))
+    return template, Aligner(template, MIN_CORRELATION, ink_thickness(template, VIEW_WIDTH), VIEW_WIDTH)
+
+
+def close_up(photo: Path) -> tuple[np.ndarray, np.ndarray, Candidate]:
+    """A fixture photo's gray, its print's true corners and the universal detector's proposal."""
+    fixture = json.loads(photo.with_suffix(".json").read_text())
+    proposal = fixture["candidate"]
+    candidate = Candidate(
+        corners=np.array(proposal["corners"]),
+        score=proposal["score"],
+        bbox=tuple(proposal["bbox"]),
+        source=proposal["source"],
+        sized=proposal["sized"],
+        blind=proposal["blind"],
+    )
+    return to_gray(cv2.imread(str(photo))), np.array(fixture["truth_corners"]), candidate
+
+
+def corner_error(homography: np.ndarray, template: Template, truth: np.ndarray) -> float:
+    """Mean distance of the frame's corners from the truth, as a share of the frame's width."""
+    quad = project(homography, viewbox_corners(template.viewbox))
+    return float(np.linalg.norm(quad - truth, axis=1).mean() / np.linalg.norm(truth[1] - truth[0]))
