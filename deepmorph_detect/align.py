@@ -22,7 +22,7 @@ import numpy as np
 
 from deepmorph_core.photo import flatten_illumination
 from deepmorph_core.protocols import Candidate
-from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
+from deepmorph_detect.camera import around_outline, outline_size, project, rigid_misfit, viewbox_corners
 from deepmorph_detect.edge_align import align_on_edges, edge_template
 from deepmorph_detect.refine import WIDE_SEARCH_MARGIN, Alignment, ImagePyramid, Template, refine, refine_affine
 
@@ -243,14 +243,10 @@ class Aligner:
         diverges. The light is divided out by ``flatten_illumination``, sized to the thickest
         ink feature at the outline's scale.
         """
-        quad = np.asarray(corners, dtype=np.float64)
-        size = max(np.linalg.norm(quad[1] - quad[0]), np.linalg.norm(quad[2] - quad[1]), 1.0)
-        h, w = gray.shape
-        x0, y0 = np.clip(np.floor(quad.min(0) - 0.3 * size), 0, [w, h]).astype(int)
-        x1, y1 = np.clip(np.ceil(quad.max(0) + 0.3 * size), 0, [w, h]).astype(int)
+        x0, y0, x1, y1 = around_outline(corners, gray.shape, 0.3)
         flat = gray.copy()
         if x1 - x0 >= 16 and y1 - y0 >= 16:
-            feature_px = self._ink_thickness * size / self._view_width
+            feature_px = self._ink_thickness * outline_size(corners) / self._view_width
             flat[y0:y1, x0:x1] = flatten_illumination(gray[y0:y1, x0:x1], max(feature_px, 1.0))
         return ImagePyramid(flat)
 

@@ -268,12 +268,32 @@ def project(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
     return h[:, :2] / h[:, 2:3]
 
 
+def outline_size(quad: np.ndarray) -> float:
+    """A ``(4, 2)`` outline's size in pixels: the longer of its first two sides, at least 1."""
+    q = np.asarray(quad, dtype=np.float64)
+    return max(float(np.linalg.norm(q[1] - q[0])), float(np.linalg.norm(q[2] - q[1])), 1.0)
+
+
+def around_outline(quad: np.ndarray, image_shape: tuple[int, ...], reach: float) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)``: the box around a ``(4, 2)`` outline reaching ``reach`` of its size
+    (:func:`outline_size`) beyond its bounds, in whole pixels, clipped to an image of
+    ``image_shape`` ``(h, w, ...)``: the region a search or a filter around a print works in."""
+    q = np.asarray(quad, dtype=np.float64)
+    margin = reach * outline_size(q)
+    h, w = image_shape[:2]
+    x0, y0 = np.clip(np.floor(q.min(0) - margin), 0, [w, h]).astype(int)
+    x1, y1 = np.clip(np.ceil(q.max(0) + margin), 0, [w, h]).astype(int)
+    return int(x0), int(y0), int(x1), int(y1)
+
+
 __all__ = [
     "DEFAULT_HFOV_DEG",
     "PHONE_FOV_RANGE_DEG",
     "Camera",
+    "around_outline",
     "homography_from_pose",
     "load_calibration",
+    "outline_size",
     "parse_camera",
     "project",
     "rigid_misfit",

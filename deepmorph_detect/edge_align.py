@@ -17,9 +17,12 @@ aligns, the edges alone, with less of the drawing to go on, have the narrower ba
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
+from deepmorph_detect.camera import around_outline, outline_size
 from deepmorph_detect.refine import Alignment, ImagePyramid, Template, refine
 
 #: The Gaussian subtracted from each image, its sigma as a share of the print's width (of the
@@ -49,14 +52,10 @@ def edge_template(template: Template) -> Template:
 def photo_edges(gray: np.ndarray, corners: np.ndarray) -> ImagePyramid:
     """The photo's edges around a detector's outline ``corners`` (``(4, 2)``): the region
     :data:`CONTEXT` of its size beyond it without its slow light, the rest 0."""
-    quad = np.asarray(corners, dtype=np.float64)
-    size = max(float(np.linalg.norm(quad[1] - quad[0])), float(np.linalg.norm(quad[2] - quad[1])), 1.0)
-    h, w = gray.shape
-    x0, y0 = np.clip(np.floor(quad.min(0) - CONTEXT * size), 0, [w, h]).astype(int)
-    x1, y1 = np.clip(np.ceil(quad.max(0) + CONTEXT * size), 0, [w, h]).astype(int)
-    edges = np.zeros((h, w), np.float32)
+    x0, y0, x1, y1 = around_outline(corners, gray.shape, CONTEXT)
+    edges = np.zeros(gray.shape, np.float32)
     if x1 > x0 and y1 > y0:
-        edges[y0:y1, x0:x1] = without_slow_light(gray[y0:y1, x0:x1], SLOW_LIGHT_SHARE * size)
+        edges[y0:y1, x0:x1] = without_slow_light(gray[y0:y1, x0:x1], SLOW_LIGHT_SHARE * outline_size(corners))
     return ImagePyramid(edges)
 
 
@@ -75,7 +74,7 @@ def align_on_edges(
     found = refine(photo_edges(gray, corners), start, edges, orders=4, accept=EDGE_ALIGNMENT, sized=sized, ink=False)
     if found is None or found.correlation < EDGE_ALIGNMENT:
         return None
-    return Alignment(found.homography, found.correlation, 0, found.searched)
+    return replace(found, width=0)
 
 
 __all__ = ["CONTEXT", "EDGE_ALIGNMENT", "SLOW_LIGHT_SHARE", "align_on_edges", "edge_template", "photo_edges",

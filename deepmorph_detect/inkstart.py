@@ -18,6 +18,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from deepmorph_detect.camera import around_outline
+
 INK_REACH = 1.3  # ink is looked for within the outline grown by this about its centre
 CONTEXT = 0.5  # the region thresholded reaches this many outline sizes beyond the outline
 MIN_INK_PIXELS = 30  # fewer ink pixels than this give no moments worth matching
@@ -45,10 +47,7 @@ def print_ink(gray: np.ndarray, quad: np.ndarray) -> np.ndarray | None:
     outline in the photo ``gray``) roughly covers; ``None`` when no paper or too little ink is
     found there."""
     quad = np.asarray(quad, dtype=np.float64)
-    size = max(float(np.linalg.norm(quad[1] - quad[0])), float(np.linalg.norm(quad[2] - quad[1])), 1.0)
-    h, w = gray.shape
-    x0, y0 = np.clip(np.floor(quad.min(0) - CONTEXT * size), 0, [w, h]).astype(int)
-    x1, y1 = np.clip(np.ceil(quad.max(0) + CONTEXT * size), 0, [w, h]).astype(int)
+    x0, y0, x1, y1 = around_outline(quad, gray.shape, CONTEXT)
     if x1 - x0 < MIN_REGION or y1 - y0 < MIN_REGION:
         return None
     region = gray[y0:y1, x0:x1]
