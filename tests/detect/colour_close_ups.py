@@ -32,11 +32,8 @@ def colour_aligner(svg: Path) -> tuple[Template, Aligner]:
     return template, Aligner(template, MIN_CORRELATION, ink_thickness(template, VIEW_WIDTH), VIEW_WIDTH)
 
 
-def close_up(photo: Path) -> tuple[np.ndarray, np.ndarray, Candidate]:
-    """A fixture photo's gray, its print's true corners and the universal detector's proposal."""
-    fixture = json.loads(photo.with_suffix(".json").read_text())
-    proposal = fixture["candidate"]
-    candidate = Candidate(
+def _candidate(proposal: dict) -> Candidate:
+    return Candidate(
         corners=np.array(proposal["corners"]),
         score=proposal["score"],
         bbox=tuple(proposal["bbox"]),
@@ -44,7 +41,20 @@ def close_up(photo: Path) -> tuple[np.ndarray, np.ndarray, Candidate]:
         sized=proposal["sized"],
         blind=proposal["blind"],
     )
-    return to_gray(cv2.imread(str(photo))), np.array(fixture["truth_corners"]), candidate
+
+
+def close_up(photo: Path) -> tuple[np.ndarray, np.ndarray, Candidate]:
+    """A fixture photo's gray, its print's true corners and the universal detector's proposal."""
+    fixture = json.loads(photo.with_suffix(".json").read_text())
+    return to_gray(cv2.imread(str(photo))), np.array(fixture["truth_corners"]), _candidate(fixture["candidate"])
+
+
+def close_up_proposals(photo: Path) -> tuple[np.ndarray, np.ndarray, list[Candidate]]:
+    """A fixture photo's gray, its print's true corners and every proposal of the universal
+    detector, in its order."""
+    fixture = json.loads(photo.with_suffix(".json").read_text())
+    candidates = [_candidate(proposal) for proposal in fixture["candidates"]]
+    return to_gray(cv2.imread(str(photo))), np.array(fixture["truth_corners"]), candidates
 
 
 def corner_error(homography: np.ndarray, template: Template, truth: np.ndarray) -> float:

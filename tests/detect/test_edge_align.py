@@ -12,22 +12,14 @@ import pytest
 
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.protocols import Candidate
-from deepmorph_detect.align import Aligner
 from deepmorph_detect.edge_align import EDGE_ALIGNMENT, photo_edges, without_slow_light
 from deepmorph_detect.locate import Locator
-from deepmorph_detect.refine import ImagePyramid, Template
+from deepmorph_detect.refine import ImagePyramid
 from tests.conftest import easy_print_aligned
-from tests.detect.colour_close_ups import close_up, colour_aligner, corner_error
+from tests.detect.colour_close_ups import close_up, corner_error
 
 DATA = Path(__file__).parents[1] / "data"
-HEART = DATA / "fluent-emoji-flat" / "pink-heart.svg"
 PHOTO = DATA / "photos" / "light_falling_across_colour_close_up.png"
-
-
-@pytest.fixture(scope="module")
-def heart() -> tuple[Template, Aligner]:
-    """The unmorphed pink heart's template and aligner."""
-    return colour_aligner(HEART)
 
 
 def test_the_slow_light_goes_and_the_edges_stay() -> None:

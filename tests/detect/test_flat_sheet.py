@@ -10,23 +10,16 @@ import numpy as np
 import pytest
 
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT, Aligner
+from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
-from deepmorph_detect.refine import ImagePyramid, Template, nearest_affine, refine_affine
+from deepmorph_detect.refine import ImagePyramid, nearest_affine, refine_affine
 from tests.conftest import easy_print_aligned
-from tests.detect.colour_close_ups import close_up, colour_aligner, corner_error
+from tests.detect.colour_close_ups import close_up, corner_error
 
 DATA = Path(__file__).parents[1] / "data"
-CRYSTAL = DATA / "flat-color-icons" / "crystal-oscillator.svg"
 PHOTO = DATA / "photos" / "shadow_across_colour_close_up.png"
 BENDING = DATA / "photos" / "shadow_bending_colour_close_up.png"
-
-
-@pytest.fixture(scope="module")
-def crystal() -> tuple[Template, Aligner]:
-    """The unmorphed crystal oscillator's template and aligner."""
-    return colour_aligner(CRYSTAL)
 
 
 def test_the_nearest_affine_map_keeps_an_affine_one_and_flattens_a_perspective(crystal) -> None:
