@@ -16,6 +16,14 @@ A close-up that is not read is:
 * **narrower**: a print narrower than a ``--pixels`` model reads, which the simulator makes now
   and then (no pose of the asked size fitted the frame) and the chain rightly refuses as too
   small (``validate_close_ups`` does not count them either).
+
+``--at-truth`` also reads each missed close-up at the pose the simulator photographed it at
+(``CloseUp.homography``), by the chain's own reading from an alignment (every look, turn, light
+and check; :meth:`Locator.decode_drawing <deepmorph_detect.locate.Locator.decode_drawing>`), and
+counts the misses that read there (*read at the truth*: the chain's alignment is to blame) apart
+from those that do not (the reading and its checks are). With it goes the chain's alignment
+error: the mean distance of its best alignment's frame corners from the truth, as a share of
+the frame's width.
 """
 
 from __future__ import annotations
@@ -46,8 +54,35 @@ def _reasons(check: Any) -> tuple[str, ...]:
     return broken_rules(bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation)
 
 
-def classify(model: Any, samples: int, seed: int, severity: str, detector: str) -> tuple[Counter, Counter]:
-    """Counts of :data:`KINDS` over ``samples`` close-ups, and of the withdrawn right words' reasons."""
+def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:
+    """Whether ``shot`` reads its payload at the simulator's pose, by the chain's reading from an
+    alignment; and the chain's best alignment's corner error (``None``: none aligned)."""
+    from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.refine import LEVELS, Alignment, correlation, warp_to_template
+
+    gray, camera, pyramid = locator.frame(shot.photo, None)
+    template = locator.template
+    width = LEVELS[-1]
+    rho = correlation(template.images[width], warp_to_template(pyramid, shot.homography, template, width))
+    located = locator.decode_drawing(gray, pyramid, Alignment(shot.homography, rho), 1.0, camera, "truth", True, True)
+    read = bool(located.result.ok and np.array_equal(located.result.payload, shot.payload))
+    frame = viewbox_corners(template.viewbox)
+    true_quad = project(shot.homography, frame)
+    aligned = locator.alignments(shot.photo)
+    if not aligned:
+        return read, None
+    best = max(aligned, key=lambda a: a.alignment.correlation).alignment.homography
+    error = np.linalg.norm(project(best, frame) - true_quad, axis=1).mean() / np.linalg.norm(
+        true_quad[1] - true_quad[0]
+    )
+    return read, float(error)
+
+
+def classify(
+    model: Any, samples: int, seed: int, severity: str, detector: str, at_truth: bool = False
+) -> tuple[Counter, Counter, list[dict[str, Any]]]:
+    """Counts of :data:`KINDS` over ``samples`` close-ups, of the withdrawn right words' reasons,
+    and (``at_truth``) each miss read again at the simulator's pose (:func:`read_at_truth`)."""
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.photo_validation import close_ups
 
@@ -65,7 +100,8 @@ def classify(model: Any, samples: int, seed: int, severity: str, detector: str) 
     locator.checker.check = recorded
     kinds: Counter = Counter()
     reasons: Counter = Counter()
-    for shot in close_ups(model, samples, seed, severity):
+    misses: list[dict[str, Any]] = []
+    for index, shot in enumerate(close_ups(model, samples, seed, severity)):
         truth[:] = [shot.payload]
         attempts.clear()
         found = [f for f in locator.locate(shot.photo) if f.result.ok]
@@ -84,7 +120,17 @@ def classify(model: Any, samples: int, seed: int, severity: str, detector: str) 
         else:
             kind = "no word" if locator.aligns(shot.photo) else "not aligned"
         kinds[kind] += 1
-    return kinds, reasons
+        if at_truth and kind not in ("read", "narrower"):
+            read, error = read_at_truth(locator, shot)
+            misses.append({"close_up": index, "kind": kind, "read_at_truth": read,
+                           "alignment_error": None if error is None else round(error, 4)})  # fmt: skip
+    return kinds, reasons, misses
+
+
+def _median(values: list[float | None]) -> str:
+    """The median of the known values, as a table cell ("-": none)."""
+    known = [v for v in values if v is not None]
+    return f"{float(np.median(known)):.3f}" if known else "-"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -94,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--detector", default="universal")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--at-truth", action="store_true", help="also read each miss at the simulator's pose")
     p.add_argument("--out", type=Path, default=RESULTS / "close_up_failures.json")
     args = p.parse_args(argv)
     set_threads(args.threads)
@@ -106,9 +153,12 @@ def main(argv: list[str] | None = None) -> int:
     for path in args.models:
         model = DeepMorphModel.load(path).eval()
         for severity, seed in (("medium", args.seed), ("hard", args.seed + 1)):
-            kinds, reasons = classify(model, args.close_ups, seed, severity, args.detector)
+            kinds, reasons, misses = classify(model, args.close_ups, seed, severity, args.detector, args.at_truth)
             rows.append({"model": path.stem, "severity": severity, **{k: kinds[k] for k in KINDS},
                          "withdrawn_because": {r: reasons[r] for r in reasons_in_order if reasons[r]}})  # fmt: skip
+            if args.at_truth:
+                rows[-1]["misses"] = misses
+                rows[-1]["read_at_truth"] = sum(m["read_at_truth"] for m in misses)
             print(f"{path.stem} {severity}: {dict(kinds)}", flush=True)
     headers = ["model", "severity", *KINDS, "withdrawn because"]
     body = [
@@ -122,6 +172,18 @@ def main(argv: list[str] | None = None) -> int:
     ]
     print(f"\nClose-ups of {args.close_ups} per model and severity, {args.detector} detector:")
     print(table(headers, body))
+    if args.at_truth:
+        print("\nMisses read at the simulator's pose (the chain's alignment to blame), and the chain's")
+        print("alignment error (its best alignment's corners from the truth, share of the frame's width):")
+        headers = ["model", "severity", "misses", "read at the truth", "error median, read there", "not read"]
+        at_truth = []
+        for r in rows:
+            there = [m["alignment_error"] for m in r["misses"] if m["read_at_truth"]]
+            not_there = [m["alignment_error"] for m in r["misses"] if not m["read_at_truth"]]
+            at_truth.append(
+                [r["model"], r["severity"], len(r["misses"]), r["read_at_truth"], _median(there), _median(not_there)]
+            )
+        print(table(headers, at_truth))
     write_json(args.out, {"benchmark": "close_up_failures", "environment": environment(), "rows": rows,
                           "wall_s": round(time.perf_counter() - start, 1)})  # fmt: skip
     print(f"\nwrote {args.out}")

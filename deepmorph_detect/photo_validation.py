@@ -55,13 +55,16 @@ def printed(
 
 @dataclass(frozen=True)
 class CloseUp:
-    """One close-up of :func:`close_ups`: the photo, the payload and code bits it shows, and the
-    print's width in it (:func:`~deepmorph_detect.results.across_px`)."""
+    """One close-up of :func:`close_ups`: the photo, the payload and code bits it shows, the
+    print's width in it (:func:`~deepmorph_detect.results.across_px`), and the pose the simulator
+    photographed it at (``homography``: SVG units -> photo pixels, what a perfect alignment
+    finds)."""
 
     photo: np.ndarray
     payload: np.ndarray
     code: np.ndarray
     width_px: float
+    homography: np.ndarray
 
     def narrower_than_read(self, model: DeepMorphModel) -> bool:
         """Whether the print is narrower than ``model`` was trained to read (``print_px``), so
@@ -106,7 +109,10 @@ def close_ups(
         photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added)
         height, width = art.shape[:2]
         frame = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64)  # the art's pixels
-        yield CloseUp(photo, payload, code, across_px(art_to_photo, frame))
+        x, y, w, _ = md.drawing.viewbox  # the art is the viewBox rendered `width` pixels wide
+        scale = width / w
+        svg_to_art = np.array([[scale, 0.0, -x * scale], [0.0, scale, -y * scale], [0.0, 0.0, 1.0]])
+        yield CloseUp(photo, payload, code, across_px(art_to_photo, frame), art_to_photo @ svg_to_art)
 
 
 def validate_close_ups(  # noqa: PLR0913

@@ -184,3 +184,32 @@ def test_close_ups_narrower_than_a_model_reads_are_not_counted_unless_wrong(monk
 
     monkeypatch.setattr(Locator, "locate", misread)
     assert validation.validate_close_ups(model, 4, 0, "easy").wrong == 4
+
+
+def test_a_close_up_carries_the_pose_it_was_photographed_at() -> None:
+    """``CloseUp.homography`` is the simulator's pose of the print. There the photo correlates
+    with the unmorphed drawing (0.67-0.81 on easy ghost close-ups: the print is morphed), a
+    twentieth of the print's width to the side it does not (0.15-0.25), and the chain, aligning
+    the photo on its own, ends within 8 % of the print's width of it (2-7 %: it takes part of the
+    morph for the pose)."""
+    from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.locate import Locator
+    from deepmorph_detect.photo_validation import close_ups
+    from deepmorph_detect.refine import LEVELS, correlation, warp_to_template
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    locator = Locator(model)
+    template, width = locator.template, LEVELS[-1]
+    frame = viewbox_corners(template.viewbox)
+    for shot in close_ups(model, 3, 0, "easy"):
+        _, _, pyramid = locator.frame(shot.photo, None)
+        truth = project(shot.homography, frame)
+        across = float(np.linalg.norm(truth[1] - truth[0]))
+        aside = np.array([[1.0, 0.0, 0.05 * across], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ shot.homography
+        at_truth, beside = (
+            correlation(template.images[width], warp_to_template(pyramid, H, template, width))
+            for H in (shot.homography, aside)
+        )
+        assert at_truth > 0.6 and beside < at_truth / 2
+        (aligned,) = locator.alignments(shot.photo)
+        assert np.linalg.norm(project(aligned.alignment.homography, frame) - truth, axis=1).mean() < 0.08 * across
