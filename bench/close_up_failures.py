@@ -57,25 +57,24 @@ def _reasons(check: Any) -> tuple[str, ...]:
 def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:
     """Whether ``shot`` reads its payload at the simulator's pose, by the chain's reading from an
     alignment; and the chain's best alignment's corner error (``None``: none aligned)."""
+    from dataclasses import replace
+
     from deepmorph_detect.camera import project, viewbox_corners
-    from deepmorph_detect.refine import LEVELS, Alignment, correlation, warp_to_template
+    from deepmorph_detect.metrics import corner_error
+    from deepmorph_detect.refine import LEVELS, aligned_at
 
     gray, camera, pyramid = locator.frame(shot.photo, None)
-    template = locator.template
-    width = LEVELS[-1]
-    rho = correlation(template.images[width], warp_to_template(pyramid, shot.homography, template, width))
-    located = locator.decode_drawing(gray, pyramid, Alignment(shot.homography, rho), 1.0, camera, "truth", True, True)
+    # reached at no level of ECC (width 0): the morph check aligns the unmorphed drawing afresh
+    truth = replace(aligned_at(pyramid, shot.homography, locator.template, LEVELS[-1]), width=0)
+    located = locator.decode_drawing(gray, pyramid, truth, 1.0, camera, "truth", True, True)
     read = bool(located.result.ok and np.array_equal(located.result.payload, shot.payload))
-    frame = viewbox_corners(template.viewbox)
-    true_quad = project(shot.homography, frame)
     aligned = locator.alignments(shot.photo)
     if not aligned:
         return read, None
+    frame = viewbox_corners(locator.template.viewbox)
+    true_quad = project(shot.homography, frame)
     best = max(aligned, key=lambda a: a.alignment.correlation).alignment.homography
-    error = np.linalg.norm(project(best, frame) - true_quad, axis=1).mean() / np.linalg.norm(
-        true_quad[1] - true_quad[0]
-    )
-    return read, float(error)
+    return read, corner_error(project(best, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
 
 
 def classify(

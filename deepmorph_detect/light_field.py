@@ -26,7 +26,7 @@ import numpy as np
 
 from deepmorph_core.registration import motion_images
 from deepmorph_detect.icalign import inverse3
-from deepmorph_detect.refine import Alignment, ImagePyramid, Template, correlation, warp_to_template
+from deepmorph_detect.refine import Alignment, ImagePyramid, Template, aligned_at, warp_to_template
 
 LIGHT_GRID = 8  # knots across the frame (each way) of the alignment's light fields
 ITERATIONS = 15  # Gauss-Newton updates at most
@@ -95,8 +95,7 @@ def align_in_light_field(
         H = _aligned(pyramid, H, template, width, knots, iterations)
         if H is None:
             return None
-    rho = correlation(warp_to_template(pyramid, H, template, width), template.images[width])
-    return Alignment(H, rho, width)
+    return aligned_at(pyramid, H, template, width)
 
 
 #: (template width, light grid) of :func:`realign_in_light_field`'s steps, coarse to fine: from a

@@ -25,6 +25,7 @@ from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg, render_svg_rgb
 from deepmorph_core.severity import VALIDATION_SEVERITY
 from deepmorph_detect.locate import Locator
+from deepmorph_detect.refine import pixels_to_svg_units
 from deepmorph_detect.results import across_px
 from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_placed, colour_print, model_added_steps
 
@@ -109,9 +110,7 @@ def close_ups(
         photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added)
         height, width = art.shape[:2]
         frame = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64)  # the art's pixels
-        x, y, w, _ = md.drawing.viewbox  # the art is the viewBox rendered `width` pixels wide
-        scale = width / w
-        svg_to_art = np.array([[scale, 0.0, -x * scale], [0.0, scale, -y * scale], [0.0, 0.0, 1.0]])
+        svg_to_art = np.linalg.inv(pixels_to_svg_units(md.drawing.viewbox, width))  # the viewBox rendered
         yield CloseUp(photo, payload, code, across_px(art_to_photo, frame), art_to_photo @ svg_to_art)
 
 

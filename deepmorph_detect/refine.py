@@ -206,9 +206,15 @@ class Template:
 
     def to_svg_units(self, width: int) -> np.ndarray:
         """``(3, 3)`` map from template pixels (at ``width``) to SVG units."""
-        x, y, vw, _ = self.viewbox
-        s = vw / width
-        return np.array([[s, 0, x], [0, s, y], [0, 0, 1]], dtype=np.float64)
+        return pixels_to_svg_units(self.viewbox, width)
+
+
+def pixels_to_svg_units(viewbox: tuple[float, float, float, float], width: int) -> np.ndarray:
+    """``(3, 3)`` map from the pixels of the viewBox rendered ``width`` pixels wide (a template
+    level, a render of the drawing) to SVG units."""
+    x, y, vw, _ = viewbox
+    s = vw / width
+    return np.array([[s, 0, x], [0, s, y], [0, 0, 1]], dtype=np.float64)
 
 
 @dataclass
@@ -323,6 +329,13 @@ def _coarse_steps(
         H, crop = starts[i]
         fast[i] = _ecc_step(pyramid, H, template, width, iterations, smooth, crop, wide_basin=True)
     return fast
+
+
+def aligned_at(pyramid: ImagePyramid, homography: np.ndarray, template: Template, width: int) -> Alignment:
+    """``homography`` (SVG units -> image pixels) as it is, with no ECC step: the photo's
+    correlation there with the template at ``width`` (ECC's own measure)."""
+    H = np.asarray(homography, np.float64)
+    return Alignment(H, correlation(warp_to_template(pyramid, H, template, width), template.images[width]), width)
 
 
 def refine_at(
@@ -584,11 +597,13 @@ __all__ = [
     "Alignment",
     "ImagePyramid",
     "Template",
+    "aligned_at",
     "corner_orders",
     "nearest_affine",
     "refine_affine",
     "correlation",
     "outline_sweep",
+    "pixels_to_svg_units",
     "quarter_turn",
     "refine",
     "refine_at",

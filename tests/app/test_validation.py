@@ -195,7 +195,7 @@ def test_a_close_up_carries_the_pose_it_was_photographed_at() -> None:
     from deepmorph_detect.camera import project, viewbox_corners
     from deepmorph_detect.locate import Locator
     from deepmorph_detect.photo_validation import close_ups
-    from deepmorph_detect.refine import LEVELS, correlation, warp_to_template
+    from deepmorph_detect.refine import LEVELS, aligned_at
 
     model = DeepMorphModel.load(BUNDLED_MODEL)
     locator = Locator(model)
@@ -206,10 +206,7 @@ def test_a_close_up_carries_the_pose_it_was_photographed_at() -> None:
         truth = project(shot.homography, frame)
         across = float(np.linalg.norm(truth[1] - truth[0]))
         aside = np.array([[1.0, 0.0, 0.05 * across], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ shot.homography
-        at_truth, beside = (
-            correlation(template.images[width], warp_to_template(pyramid, H, template, width))
-            for H in (shot.homography, aside)
-        )
+        at_truth, beside = (aligned_at(pyramid, H, template, width).correlation for H in (shot.homography, aside))
         assert at_truth > 0.6 and beside < at_truth / 2
         (aligned,) = locator.alignments(shot.photo)
         assert np.linalg.norm(project(aligned.alignment.homography, frame) - truth, axis=1).mean() < 0.08 * across
