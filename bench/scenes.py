@@ -68,7 +68,7 @@ def main() -> None:
     for _ in range(args.sequences):
         scene = fmaker.make(drawings=1, frames=5)
         truth = scene.placements[0].payload
-        fuser = FrameFuser(model.codec, locator.check_payload)
+        fuser = FrameFuser(model.codec, locator.check_payload, locator.refuses_reading)
         for k, frame in enumerate(scene.frames):
             dets = locator.locate(frame, camera=scene.camera)
             fusion["frames"] += 1

@@ -11,17 +11,19 @@ on the last frame the drawing was seen in.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from deepmorph_core.codec import DecodeResult, PayloadCodec
 from deepmorph_detect.check import PayloadCheck
-from deepmorph_detect.results import Located
+from deepmorph_detect.results import Located, refused_result
 from deepmorph_detect.synthesis import BIT_FIELDS
 
 MorphCheck = Callable[[np.ndarray, np.ndarray, DecodeResult], PayloadCheck]
+#: Whether a payload read at a detection is refused for the print's width (``Locator.refuses_reading``).
+SizeRule = Callable[[Located], bool]
 
 LOGIT_CLIP = 6.0  # no single frame may be more than ~99.75 % sure of a bit
 MATCH_DISTANCE = 0.6  # centres within this share of the drawing's size belong to one track
@@ -56,11 +58,16 @@ class FrameFuser:
         codec: the model's payload codec.
         check: the morph check (``Locator.check_payload``) run on a fused payload that passes
             the CRC; without it, the CRC alone decides ``ok``.
+        refuses: the size rule (``Locator.refuses_reading``) asked of a fused payload that
+            passed, at the track's last detection: a print too narrow for its model's readings
+            (a ``--pixels`` model's narrower prints) gives no payload fused either, only
+            ``too_small``.
     """
 
-    def __init__(self, codec: PayloadCodec, check: MorphCheck | None = None) -> None:
+    def __init__(self, codec: PayloadCodec, check: MorphCheck | None = None, refuses: SizeRule | None = None) -> None:
         self.codec = codec
         self.check = check
+        self.refuses = refuses
         self.tracks: list[Track] = []
         self.frames = 0
 
@@ -95,6 +102,11 @@ class FrameFuser:
             checked = PayloadCheck(fused, None, "not run")
             if self.check is not None and tr.image is not None and tr.last.homography is not None:
                 checked = self.check(tr.image, tr.last.homography, fused)
+            if self.refuses is not None and checked.result.ok:
+                at_last = replace(tr.last, result=checked.result)
+                if self.refuses(at_last):
+                    checked = replace(checked, result=refused_result(checked.result))
+                    entry["too_small"] = replace(at_last, result=checked.result).to_json()["too_small"]
             entry["morph_check"] = checked.status
             for key in ("morph_fit", *BIT_FIELDS):
                 entry.pop(key, None)  # the last frame's own check, not the fused payload's
@@ -110,4 +122,4 @@ class FrameFuser:
         return out
 
 
-__all__ = ["FrameFuser", "MorphCheck", "Track"]
+__all__ = ["FrameFuser", "MorphCheck", "SizeRule", "Track"]

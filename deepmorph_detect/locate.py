@@ -51,7 +51,7 @@ from deepmorph_detect.propose import (
 )
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
-from deepmorph_detect.results import Located, across_px, measure_width
+from deepmorph_detect.results import Located, across_px, measure_width, refused_result
 from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
 
@@ -282,10 +282,9 @@ class Locator:
             if not located.result.ok and cand.homography is None and not self.aligned_too_narrow(alignment):
                 located = self.decode_on_edges(gray, aligned, cam, soft) or located
             located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
-            refused = self.model.print_px is not None and located.result.ok and located.too_narrow
-            if refused:  # trained for prints at least print_px wide: a narrower one is too small, never a payload
-                read = located.result
-                located.result = replace(read, payload=np.zeros_like(read.payload), ok=False, corrected_bits=-1)
+            refused = self.refuses_reading(located)
+            if refused:  # a reading not vouched for at its print's size: too small, never a payload
+                located.result = refused_result(located.result)
             if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[:2]):
                 results.append(located)
         return results
@@ -336,6 +335,11 @@ class Locator:
             if not located.too_small:
                 bar = UNREAD_BLIND_CORRELATION
         return located.correlation >= bar
+
+    def refuses_reading(self, located: Located) -> bool:
+        """Whether the payload read at ``located`` (its own, or one fused over frames) is refused
+        for the print's width in the photo (:func:`refuses_narrow_reading`, by this model)."""
+        return refuses_narrow_reading(located, self.model.print_px, self.model.drawing.colour)
 
     def aligned_too_narrow(self, alignment: Alignment) -> bool:
         """Whether ``alignment`` puts a print trained for a smallest width (``print_px``) in the
@@ -576,6 +580,24 @@ class Locator:
         return f"Locator({self.model.meta.drawing_name!r}, detector={detector!r}, renderer={self.renderer_name!r})"
 
 
+def refuses_narrow_reading(located: Located, trained_px: int | None, colour: bool) -> bool:
+    """Whether the payload read from a print narrower than its model reads well
+    (:attr:`Located.too_narrow`) is refused, the print reported too small instead.
+
+    * A model trained for prints ``trained_px`` wide (``train --pixels``): always. It was never
+      validated on narrower ones.
+    * A ``colour`` drawing: where its reading needed corrections. Narrower than the decoder's
+      frame, a colour print's edges (fainter than black ink's) leave readings whose corrections
+      the code lends to noise, and the per-bit check cannot tell them apart: in hard 640x480
+      scenes, three wrong payloads came from such prints (62-82 px, 1-2 corrections), and right
+      words from prints that narrow deviate as far (up to 0.94) as those wrong ones (0.68-0.85).
+      Black ink reads there without a wrong payload (``bench/print_pixels.py``).
+    """
+    if not (located.result.ok and located.too_narrow):
+        return False
+    return trained_px is not None or (colour and located.result.corrected_bits > 0)
+
+
 def _read_too_small(located: Located) -> bool:
     """Whether ``located`` was read, and its payload passed every check, but is refused as too
     small: the drawing is found, and a whole image framed by its ink would not find it again."""
@@ -609,4 +631,5 @@ __all__ = [
     "BLIND_READ_CORRELATION",
     "Locator",
     "detector_for",
+    "refuses_narrow_reading",
 ]

@@ -119,7 +119,7 @@ class SequenceReader:
 
         self.camera = camera
         self.soft = soft
-        self._fuser = FrameFuser(locator.model.codec, locator.check_payload)
+        self._fuser = FrameFuser(locator.model.codec, locator.check_payload, locator.refuses_reading)
         self._follow = SequenceLocator(locator)
         self.last: tuple[np.ndarray, list[Located]] | None = None
 

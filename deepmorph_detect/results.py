@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
 import numpy as np
 
+from deepmorph_core.codec import DecodeResult
 from deepmorph_core.model import Detection
 from deepmorph_detect.camera import Camera, project
 from deepmorph_detect.check import MorphFit
@@ -193,3 +194,9 @@ class Located(Detection):
         if self.pose is not None:
             out["pose"] = self.pose.to_json()
         return out
+
+
+def refused_result(read: DecodeResult) -> DecodeResult:
+    """``read`` refused for the print's size: no payload, not ok, so the print is reported
+    :attr:`Located.too_small` (``Locator.refuses_reading``)."""
+    return replace(read, payload=np.zeros_like(read.payload), ok=False, corrected_bits=-1)

@@ -224,3 +224,50 @@ def test_a_print_aligned_too_narrow_is_read_by_its_first_looks_alone(locator, mo
     assert not trained_wider.aligned_too_narrow(aligned.alignment)
     trained_wider.decode_drawing(gray, pyramid, aligned.alignment, 1.0, cam, "detector", True)
     assert asked[1] is False and "flat sheet" in later
+
+
+def test_a_colour_print_narrower_than_the_frame_keeps_a_payload_only_read_without_corrections(locator) -> None:
+    """Narrower than the decoder's frame, a colour print's reading that needed corrections is
+    refused (too small), one without is kept; black ink keeps both, and a model trained for
+    wider prints refuses any narrower reading. As wide as the frame or wider, nothing is refused."""
+    from deepmorph_detect.locate import refuses_narrow_reading
+
+    def read(width: float, corrected: int, ok: bool = True) -> Located:
+        corners = np.array([[0, 0], [width, 0], [width, width], [0, width]], np.float64) + 40.0
+        H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
+        result = DecodeResult(np.ones(5, np.uint8), ok, corrected if ok else -1, 0.95)
+        return Located(result, np.full(5, 0.5, np.float32), corners=corners, homography=H, needs_px=96.0)
+
+    narrow, wide = 62.0, 120.0
+    assert read(narrow, 1).too_narrow and not read(wide, 1).too_narrow
+    assert refuses_narrow_reading(read(narrow, 1), None, colour=True)
+    assert refuses_narrow_reading(read(narrow, 2), None, colour=True)
+    assert not refuses_narrow_reading(read(narrow, 0), None, colour=True)
+    assert not refuses_narrow_reading(read(narrow, 2), None, colour=False)
+    assert not refuses_narrow_reading(read(wide, 2), None, colour=True)
+    assert refuses_narrow_reading(read(narrow, 0), 150, colour=False)
+    assert not refuses_narrow_reading(read(narrow, 0, ok=False), None, colour=True)  # nothing read, nothing refused
+
+
+def test_a_payload_fused_over_frames_of_a_print_too_narrow_is_refused_too() -> None:
+    """Fused over the frames of a sequence, the readings of a print narrower than its model was
+    trained for (the ghost, told it was trained for prints 150 px wide) give no payload either:
+    the sequence's entry says too small. At its width, the same frames fuse to the payload."""
+    from deepmorph_detect.reading import SequenceReader
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    rng = np.random.default_rng(3)
+    payload = rng.integers(0, 2, model.codec.spec.payload_bits).astype(np.uint8)
+    art = render_svg(model.encode(payload), 400)
+    frames = [close_up_photo(art, "easy", rng, size=160) for _ in range(3)]
+    entries = {}
+    for trained_px in (None, 150):
+        model.meta.train["print_px"] = trained_px
+        reader = SequenceReader(Locator(model))
+        for i, frame in enumerate(frames):
+            reader.add(f"frame{i}", frame)
+        (entries[trained_px],) = reader.fused()
+    assert entries[None]["ok"] and entries[None]["payload"]["bits"] == "".join(map(str, payload))
+    refused = entries[150]
+    assert not refused["ok"] and refused["frames"] == 3
+    assert refused["too_small"]["needs_px"] == 150.0 and 96 < refused["too_small"]["width_px"] < 150
