@@ -705,3 +705,21 @@ def test_a_cast_shadow_moves_the_bits_evidence_less_once_its_light_is_divided_ou
         assert not synthesis.evidence(ImagePyramid(photo), H, face.codec.encode(_near_payloads(payload)[k])).agrees
     assert all(np.less(lit_shift, unlit_shift)), (lit_shift, unlit_shift)
     assert np.mean(lit_shift) < 0.85 * np.mean(unlit_shift), (lit_shift, unlit_shift)
+
+
+def test_a_colour_reading_the_code_corrected_must_show_its_morph_beyond_noise(
+    locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reading that needed corrections must gain REPAIRED_COLOUR_MORPH_GAIN over the unmorphed
+    drawing where the drawing is in colour (faint edges let a repaired wrong word fit as well as
+    no morph at all); black ink, and any reading without corrections, only more than nothing."""
+    from deepmorph_detect.check import MIN_MORPH_GAIN, REPAIRED_COLOUR_MORPH_GAIN
+
+    checker = locator.checker
+    bits = np.zeros(locator.model.codec.spec.payload_bits, np.uint8)
+    repaired, clean = DecodeResult(bits, True, 1, 0.9), DecodeResult(bits, True, 0, 0.99)
+    assert not locator.model.drawing.colour
+    assert checker.least_gain(repaired) == checker.least_gain(clean) == MIN_MORPH_GAIN
+    monkeypatch.setattr(type(locator.model.drawing), "colour", property(lambda self: True))
+    assert checker.least_gain(repaired) == REPAIRED_COLOUR_MORPH_GAIN > MIN_MORPH_GAIN
+    assert checker.least_gain(clean) == MIN_MORPH_GAIN
