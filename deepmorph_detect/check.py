@@ -341,7 +341,7 @@ class PayloadChecker:
         :data:`MIN_MORPH_GAIN`: a colour drawing's reading that needed corrections,
         :data:`REPAIRED_COLOUR_MORPH_GAIN`. Fits aligned in a grid of light are not held to it:
         there a right word under a cast shadow gains less (``tests/detect/test_light_field.py``)."""
-        repaired = self.model.drawing.colour and result.corrected_bits > 0
+        repaired = result.corrected_bits > 0 and self.model.drawing.colour  # colour walks the palette: asked last
         return REPAIRED_COLOUR_MORPH_GAIN if repaired else MIN_MORPH_GAIN
 
     def rival_deviation(

@@ -102,11 +102,9 @@ class FrameFuser:
             checked = PayloadCheck(fused, None, "not run")
             if self.check is not None and tr.image is not None and tr.last.homography is not None:
                 checked = self.check(tr.image, tr.last.homography, fused)
-            if self.refuses is not None and checked.result.ok:
-                at_last = replace(tr.last, result=checked.result)
-                if self.refuses(at_last):
-                    checked = replace(checked, result=refused_result(checked.result))
-                    entry["too_small"] = replace(at_last, result=checked.result).to_json()["too_small"]
+            if self.refuses is not None and checked.result.ok and self.refuses(replace(tr.last, result=checked.result)):
+                checked = replace(checked, result=refused_result(checked.result))
+                entry["too_small"] = tr.last.size_json()  # the print's width, whatever was read there
             entry["morph_check"] = checked.status
             for key in ("morph_fit", *BIT_FIELDS):
                 entry.pop(key, None)  # the last frame's own check, not the fused payload's

@@ -145,6 +145,10 @@ class Located(Detection):
         width = self.width_px
         return self.needs_px is not None and width is not None and width < self.needs_px
 
+    def size_json(self) -> dict[str, Any]:
+        """The print's width in the photo and the width its model needs (JSON's ``too_small``)."""
+        return {"width_px": round(float(self.width_px or 0.0), 1), "needs_px": self.needs_px}
+
     @property
     def too_small(self) -> bool:
         """Whether the payload is not read and the print is narrower than :attr:`needs_px`: the
@@ -186,7 +190,7 @@ class Located(Detection):
             out["corners"] = np.round(self.corners, 2).tolist()
             out["width_px"] = round(float(self.width_px or 0.0), 1)
         if self.too_small:
-            out["too_small"] = {"width_px": round(float(self.width_px or 0.0), 1), "needs_px": self.needs_px}
+            out["too_small"] = self.size_json()
         if self.homography is not None:
             inv = np.linalg.inv(self.homography)
             out["homography"] = (inv / inv[2, 2]).round(8).tolist()  # image -> drawing (SVG units)
