@@ -51,7 +51,7 @@ from deepmorph_detect.propose import (
 )
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR, Reader, Reading
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
-from deepmorph_detect.results import Located, across_px, measure_width, refused_result
+from deepmorph_detect.results import Located, across_px, along_tilt_px, measure_width, refused_result
 from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
 
@@ -98,6 +98,12 @@ BLIND_READ_CORRELATION = 0.7
 #: small whatever it reads, and the later looks took 50-400 ms of a 1280x720 frame. The share
 #: leaves room for the alignment's width to differ from the payload's morph fit's.
 NARROW_SHARE = 0.97
+#: A colour print narrower than this share of the decoder's frame along any direction keeps no
+#: reading at all, not even one without corrections (:func:`refuses_narrow_reading`): in hard
+#: 640x480 scenes a bar chart's print 26 px along its tilt gave a wrong payload read without
+#: corrections, confident enough to skip the per-bit rules; below half the frame, 1 % of the
+#: right readings of four colour models (62 of 5761 in 7000 scenes)
+COLOUR_FLOOR_SHARE = 0.5
 
 
 #: The detector of a bundle that stores none of its own (``universal``: shipped, for any drawing).
@@ -282,6 +288,7 @@ class Locator:
             if not located.result.ok and cand.homography is None and not self.aligned_too_narrow(alignment):
                 located = self.decode_on_edges(gray, aligned, cam, soft) or located
             located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
+            located.needs_every_way = self.needs_every_way
             refused = self.refuses_reading(located)
             if refused:  # a reading not vouched for at its print's size: too small, never a payload
                 located.result = refused_result(located.result)
@@ -341,14 +348,33 @@ class Locator:
         for the print's width in the photo (:func:`refuses_narrow_reading`, by this model)."""
         return refuses_narrow_reading(located, self.model.print_px, self.model.drawing.colour)
 
+    @property
+    def needs_every_way(self) -> bool:
+        """Whether a print's width counts along its tilt too (:attr:`Located.needs_every_way`): a
+        colour drawing's (:func:`refuses_narrow_reading`). A ``--pixels`` model's width is the
+        head-on one it was trained and validated for."""
+        return self.model.print_px is None and self.model.drawing.colour
+
+    def keeps_only_uncorrected(self, homography: np.ndarray) -> bool:
+        """Whether a print at ``homography`` keeps only a reading without corrections
+        (:func:`refuses_narrow_reading`): a colour print narrower than the decoder's frame along
+        any direction."""
+        return self.needs_every_way and along_tilt_px(homography, self.frame_corners) < self.model.smallest_print_px
+
     def aligned_too_narrow(self, alignment: Alignment) -> bool:
-        """Whether ``alignment`` puts a print trained for a smallest width (``print_px``) in the
-        photo at under :data:`NARROW_SHARE` of that width: it is too small whatever it reads, so
-        only its first looks are tried, enough to tell that it is the drawing."""
+        """Whether ``alignment`` puts a print in the photo too narrow to keep any reading
+        (:func:`refuses_narrow_reading`), by :data:`NARROW_SHARE` of the width: one trained for a
+        smallest width (``print_px``) at under that width, a colour one at under
+        :data:`COLOUR_FLOOR_SHARE` of the decoder's frame along its tilt. It is too small
+        whatever it reads, so only its first looks are tried, enough to tell that it is the
+        drawing."""
         needs = self.model.print_px
-        if needs is None:
+        if needs is not None:
+            return across_px(alignment.homography, self.frame_corners) < NARROW_SHARE * needs
+        if not self.needs_every_way:
             return False
-        return across_px(alignment.homography, self.frame_corners) < NARROW_SHARE * needs
+        floor = COLOUR_FLOOR_SHARE * self.model.smallest_print_px
+        return along_tilt_px(alignment.homography, self.frame_corners) < NARROW_SHARE * floor
 
     def shown_whole(self, homography: np.ndarray, image_size: tuple[int, int]) -> bool:
         """Whether ``homography`` puts the drawing in the photo of ``image_size`` ``(height,
@@ -533,10 +559,18 @@ class Locator:
         # a reading asked only whether it beats another: the first looks are enough
         weakly_blind = blind and alignment.correlation < BLIND_READ_CORRELATION
         first_only = first_only or weakly_blind or stronger_than is not None
+        # a print whose readings with corrections are refused (keeps_only_uncorrected): a passing
+        # one is kept aside while the looks go on for one without; without such a one, it is
+        # what is returned, and refused as too small
+        only_uncorrected = self.keeps_only_uncorrected(H)
+        aside: tuple[np.ndarray, PayloadCheck, np.ndarray] | None = None
         for reading, bitwise in self.reader.looks(pyramid, H, views, readings, soft, first_only):
             readings.append(reading)
             if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
                 continue
+            repaired = only_uncorrected and reading.result.corrected_bits > 0
+            if repaired and aside is not None:
+                continue  # refused too were it to pass
             attempt = self.checker.check(
                 pyramid,
                 H,
@@ -548,11 +582,16 @@ class Locator:
                 relit_from=relit_from,
                 in_shadow=in_shadow,
             )
+            if attempt.status == "passed" and repaired:
+                aside = (attempt.fit.homography, attempt, reading.probabilities)
+                continue
             if checked is None or attempt.status == "passed":
                 checked, probs = attempt, reading.probabilities
             if attempt.status == "passed":
                 H = attempt.fit.homography
                 break
+        if aside is not None and (checked is None or checked.status != "passed"):
+            return aside
         if checked is None:  # none passed the CRC (and beat ``stronger_than``): report the most confident
             if readings:
                 best = max(readings, key=lambda r: r.result.confidence)
@@ -586,16 +625,22 @@ def refuses_narrow_reading(located: Located, trained_px: int | None, colour: boo
 
     * A model trained for prints ``trained_px`` wide (``train --pixels``): always. It was never
       validated on narrower ones.
-    * A ``colour`` drawing: where its reading needed corrections. Narrower than the decoder's
-      frame, a colour print's edges (fainter than black ink's) leave readings whose corrections
-      the code lends to noise, and the per-bit check cannot tell them apart: in hard 640x480
-      scenes, three wrong payloads came from such prints (62-82 px, 1-2 corrections), and right
-      words from prints that narrow deviate as far (up to 0.94) as those wrong ones (0.68-0.85).
-      Black ink reads there without a wrong payload (``bench/print_pixels.py``).
+    * A ``colour`` drawing: where its reading needed corrections, and the print is narrower than
+      the decoder's frame along any direction (:attr:`Located.needs_every_way`: a tilt
+      foreshortens it along one); and any reading, where the print is narrower than
+      :data:`COLOUR_FLOOR_SHARE` of the frame so. There a colour print's edges (fainter than
+      black ink's) leave readings whose corrections the code lends to noise, and the per-bit
+      check cannot tell them apart. In 7000 hard 640x480 scenes of four colour models all but
+      one of the wrong payloads came from such prints (57-135 px wide head-on, 22-83 px along
+      their tilt), read with 1-5 corrections but one (26 px along its tilt, none). Right words
+      from prints that narrow deviate as far (up to 0.94) as the wrong ones (0.30-1.00). Black
+      ink reads there without a wrong payload (``bench/print_pixels.py``).
     """
     if not (located.result.ok and located.too_narrow):
         return False
-    return trained_px is not None or (colour and located.result.corrected_bits > 0)
+    if trained_px is not None or not colour:
+        return trained_px is not None
+    return located.result.corrected_bits > 0 or located.along_tilt_px < COLOUR_FLOOR_SHARE * located.needs_px
 
 
 def _read_too_small(located: Located) -> bool:
@@ -627,6 +672,7 @@ __all__ = [
     "TURN_TIE_MARGIN",
     "FILLS_FRAME",
     "NARROW_SHARE",
+    "COLOUR_FLOOR_SHARE",
     "INK_OUTSIDE",
     "BLIND_READ_CORRELATION",
     "Locator",

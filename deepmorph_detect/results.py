@@ -22,6 +22,19 @@ def measure_width(corners: np.ndarray) -> float:
     return float((np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / 2)
 
 
+def _centre_stretches(homography: np.ndarray, frame: np.ndarray) -> np.ndarray | None:
+    """``(2,)`` how far ``homography`` stretches the print at its frame's centre, largest first
+    (the singular values of its Jacobian there); ``None`` on the map's horizon."""
+    H = np.asarray(homography, dtype=np.float64)
+    cx, cy = np.asarray(frame, dtype=np.float64).mean(axis=0)
+    x, y, w = H @ np.array([cx, cy, 1.0])
+    with np.errstate(all="ignore"):
+        jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
+        if not np.isfinite(jacobian).all():
+            return None
+        return np.linalg.svd(jacobian, compute_uv=False)
+
+
 def across_px(homography: np.ndarray, frame: np.ndarray) -> float:
     """A print's width in a photo as the project means it everywhere (``train --pixels``,
     ``capacity --print-mm --distance-cm``, the photo simulator): its width seen head-on at its
@@ -34,17 +47,28 @@ def across_px(homography: np.ndarray, frame: np.ndarray) -> float:
     the vertical axis and not by one about the horizontal axis: a close-up 201 px wide head-on
     and tilted 15° measured 196.5 px. A centre on the map's horizon has no such stretch: there
     the edges as seen are all there is."""
-    H = np.asarray(homography, dtype=np.float64)
     frame = np.asarray(frame, dtype=np.float64)
-    cx, cy = frame.mean(axis=0)
-    x, y, w = H @ np.array([cx, cy, 1.0])
-    with np.errstate(all="ignore"):
-        jacobian = (H[:2, :2] * w - np.outer([x, y], H[2, :2])) / w**2
-        if np.isfinite(jacobian).all():
-            across = float(np.linalg.svd(jacobian, compute_uv=False)[0] * measure_width(frame))
-            if math.isfinite(across):
-                return across
-        return measure_width(project(H, frame))
+    stretches = _centre_stretches(homography, frame)
+    if stretches is not None and math.isfinite(across := float(stretches[0] * measure_width(frame))):
+        return across
+    return measure_width(project(homography, frame))
+
+
+def along_tilt_px(homography: np.ndarray, frame: np.ndarray) -> float:
+    """A print's width in a photo along its tilt: the width it would have if it were shortened
+    every way as much as along the direction its tilt foreshortens most (the smallest stretch
+    the homography makes at the drawing's centre), so the fewest photo pixels any direction of
+    it gets. Head-on it is :func:`across_px`; a heart 135 px across seen nearly edge-on gets
+    26 px. A centre on the map's horizon: the shorter of the frame's width and height as seen,
+    the height taken at the frame's aspect."""
+    frame = np.asarray(frame, dtype=np.float64)
+    width = measure_width(frame)
+    stretches = _centre_stretches(homography, frame)
+    if stretches is not None and math.isfinite(along := float(stretches[1] * width)):
+        return along
+    seen = project(homography, frame)
+    height = measure_width(frame[[1, 2, 3, 0]])  # the mean of the left and right edges
+    return min(measure_width(seen), measure_width(seen[[1, 2, 3, 0]]) * width / max(height, 1e-12))
 
 
 #: The side of :meth:`Pose.cube` in drawing widths.
@@ -124,30 +148,54 @@ class Located(Detection):
     morph_check: str = "not run"
     # the narrowest print (photo pixels) its model reads well: the decoder's frame width
     needs_px: float | None = None
+    # whether needs_px holds along every direction of the print, its most foreshortened one too
+    # (a colour drawing's: Locator.decode_each), not only across it head-on
+    needs_every_way: bool = False
 
     @property
     def width_px(self) -> float | None:
         """The print's width in the photo, seen head-on at its distance (:func:`across_px`; the
         mean of its frame's top and bottom edges where no homography is known)."""
-        if self.corners is None:
-            return None
-        if self.homography is None:
-            return measure_width(self.corners)
-        try:  # the frame in SVG units, from where the homography put it
-            frame = project(np.linalg.inv(self.homography), self.corners)
-        except np.linalg.LinAlgError:  # a degenerate map: the edges as seen are all there is
-            return measure_width(self.corners)
+        frame = self._frame()
+        if frame is None:
+            return None if self.corners is None else measure_width(self.corners)
         return across_px(self.homography, frame)
 
     @property
+    def along_tilt_px(self) -> float | None:
+        """The print's width in the photo along its tilt (:func:`along_tilt_px`): what its most
+        foreshortened direction gets; the width as seen where no homography is known."""
+        frame = self._frame()
+        if frame is None:
+            return None if self.corners is None else measure_width(self.corners)
+        return along_tilt_px(self.homography, frame)
+
+    def _frame(self) -> np.ndarray | None:
+        """The print's frame in SVG units, from where the homography put its corners; ``None``
+        without corners and homography, or where the map is degenerate."""
+        if self.corners is None or self.homography is None:
+            return None
+        try:
+            return project(np.linalg.inv(self.homography), self.corners)
+        except np.linalg.LinAlgError:  # a degenerate map: the edges as seen are all there is
+            return None
+
+    @property
     def too_narrow(self) -> bool:
-        """Whether the print is narrower in the photo than :attr:`needs_px`."""
-        width = self.width_px
-        return self.needs_px is not None and width is not None and width < self.needs_px
+        """Whether the print is narrower in the photo than :attr:`needs_px`: its width seen
+        head-on, or, where :attr:`needs_every_way`, its width along its tilt."""
+        if self.needs_px is None:
+            return False
+        width = self.along_tilt_px if self.needs_every_way else self.width_px
+        return width is not None and width < self.needs_px
 
     def size_json(self) -> dict[str, Any]:
-        """The print's width in the photo and the width its model needs (JSON's ``too_small``)."""
-        return {"width_px": round(float(self.width_px or 0.0), 1), "needs_px": self.needs_px}
+        """The print's width in the photo and the width its model needs (JSON's ``too_small``);
+        where :attr:`needs_every_way`, also its width along its tilt."""
+        out: dict[str, Any] = {"width_px": round(float(self.width_px or 0.0), 1), "needs_px": self.needs_px}
+        if self.needs_every_way:
+            out["along_tilt_px"] = round(float(self.along_tilt_px or 0.0), 1)
+        return out
 
     @property
     def too_small(self) -> bool:
@@ -198,6 +246,15 @@ class Located(Detection):
         if self.pose is not None:
             out["pose"] = self.pose.to_json()
         return out
+
+
+def too_small_reason(size: dict[str, Any]) -> str:
+    """Why a print is not read, in words, from its ``too_small`` entry (:meth:`Located.size_json`):
+    too small across, or seen so steeply that its tilt leaves it too few pixels."""
+    across, needs, along = size["width_px"], size["needs_px"], size.get("along_tilt_px")
+    if along is not None and across >= needs:
+        return f"seen too steeply to read ({along:.0f} px along its tilt, {across:.0f} px across; needs {needs:.0f})"
+    return f"too small to read ({across:.0f} px across, needs {needs:.0f})"
 
 
 def refused_result(read: DecodeResult) -> DecodeResult:

@@ -201,6 +201,7 @@ def decode(
 
 
 def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
+    from deepmorph_detect.results import too_small_reason
     from deepmorph_detect.synthesis import disagreement_in
 
     if as_json:
@@ -213,8 +214,7 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
         for d in r["detections"]:
             status = "ok" if d["ok"] else "NOT VERIFIED (integrity check failed)"
             if "too_small" in d:
-                across, needs = d["too_small"]["width_px"], d["too_small"]["needs_px"]
-                status = f"NOT READ: too small to read ({across:.0f} px across, needs {needs:.0f})"
+                status = f"NOT READ: {too_small_reason(d['too_small'])}"
             elif d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
             elif d.get("morph_check") == "contradicted":

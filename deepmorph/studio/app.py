@@ -757,10 +757,16 @@ def read_photo(
         small = [d["too_small"] for d in found if "too_small" in d]
         if small and len(small) == len(found):
             widest = max(small, key=lambda t: t["width_px"])
-            note = (
-                f"the print is {widest['width_px']:.0f} pixels wide in the image, too small to read "
-                f"(needs {widest['needs_px']:.0f}): move closer"
-            )
+            if widest["width_px"] >= widest["needs_px"]:  # wide enough head-on: seen too steeply
+                note = (
+                    f"the print is seen too steeply: {widest['along_tilt_px']:.0f} pixels along its tilt "
+                    f"(needs {widest['needs_px']:.0f}): face it squarely"
+                )
+            else:
+                note = (
+                    f"the print is {widest['width_px']:.0f} pixels wide in the image, too small to read "
+                    f"(needs {widest['needs_px']:.0f}): move closer"
+                )
         else:
             note = "a drawing was found but not read: hold it steadier, in even light"
     return {"width": width, "height": height, "detections": found, "note": note}

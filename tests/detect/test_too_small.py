@@ -249,6 +249,76 @@ def test_a_colour_print_narrower_than_the_frame_keeps_a_payload_only_read_withou
     assert not refuses_narrow_reading(read(narrow, 0, ok=False), None, colour=True)  # nothing read, nothing refused
 
 
+def test_a_colour_print_seen_steeply_is_as_narrow_as_its_tilt_leaves_it(locator) -> None:
+    """A print wide enough head-on but foreshortened by its tilt to fewer pixels than the decoder's
+    frame along one direction: where its width counts every way (a colour drawing's,
+    ``needs_every_way``), it is too narrow there, its corrected reading is refused (any reading
+    under half the frame), and it is reported seen too steeply; a black-and-white one counts its
+    head-on width, as before."""
+    from deepmorph_detect.locate import refuses_narrow_reading
+    from deepmorph_detect.results import too_small_reason
+
+    def read(across: float, along: float, corrected: int, every_way: bool) -> Located:
+        corners = np.array([[0, 0], [across, 0], [across, along], [0, along]], np.float64) + 40.0
+        H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
+        result = DecodeResult(np.ones(5, np.uint8), True, corrected, 0.95)
+        return Located(result, np.full(5, 0.5, np.float32), corners=corners, homography=H, needs_px=96.0,
+                       needs_every_way=every_way)  # fmt: skip
+
+    steep = read(135.0, 26.0, 1, every_way=True)
+    assert steep.width_px == pytest.approx(135.0) and steep.along_tilt_px == pytest.approx(26.0)
+    assert steep.too_narrow and refuses_narrow_reading(steep, None, colour=True)
+    assert not refuses_narrow_reading(read(135.0, 60.0, 0, every_way=True), None, colour=True)
+    # under half the frame along its tilt (COLOUR_FLOOR_SHARE), even a reading without corrections
+    assert refuses_narrow_reading(read(135.0, 26.0, 0, every_way=True), None, colour=True)
+    assert not refuses_narrow_reading(read(135.0, 26.0, 0, every_way=True), None, colour=False)
+    assert not read(135.0, 26.0, 1, every_way=False).too_narrow  # black ink: its head-on width
+    assert not read(135.0, 110.0, 3, every_way=True).too_narrow  # tilted, still wide enough every way
+    size = steep.size_json()
+    assert size == {"width_px": 135.0, "needs_px": 96.0, "along_tilt_px": 26.0}
+    assert too_small_reason(size) == "seen too steeply to read (26 px along its tilt, 135 px across; needs 96)"
+    small = read(80.0, 60.0, 1, every_way=True).size_json()
+    assert too_small_reason(small) == "too small to read (80 px across, needs 96)"
+    assert "along_tilt_px" not in read(80.0, 60.0, 1, every_way=False).size_json()
+
+
+def test_a_print_keeping_only_uncorrected_readings_looks_on_for_one(locator, monkeypatch) -> None:
+    """Where a reading with corrections would be refused for the print's size
+    (``keeps_only_uncorrected``), a passing one is kept aside and the looks go on: a later
+    reading without corrections wins; without one, the reading kept aside is returned (and
+    refused as too small), and the corrected readings after it are not checked."""
+    from deepmorph_detect.check import MorphFit, PayloadCheck
+    from deepmorph_detect.read import Reading
+
+    rng = np.random.default_rng(3)
+    payload = np.zeros(locator.model.codec.spec.payload_bits, np.uint8)
+    photo = close_up_photo(render_svg(locator.model.encode(payload), 400), "easy", rng, size=160)
+    gray, _, pyramid, (aligned,) = locator._proposed(photo, None)
+    alignment = aligned.alignment
+    probs = np.full(locator.model.codec.spec.code_bits, 0.9, np.float32)
+
+    def reading(corrected: int) -> Reading:
+        return Reading(DecodeResult(payload, True, corrected, 0.9), probs)
+
+    checked: list[int] = []
+
+    def passes(pyramid, H, result, *args, **kwargs) -> PayloadCheck:
+        checked.append(result.corrected_bits)
+        return PayloadCheck(result, MorphFit(H, 0.95, 0.94), "passed")
+
+    monkeypatch.setattr(locator.checker, "check", passes)
+    monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H: True)
+    for looks, kept, asked in (([2, 1, 0], 0, [2, 0]), ([2, 1], 2, [2])):
+        checked.clear()
+        monkeypatch.setattr(locator.reader, "looks", lambda *a, seq=looks, **k: ((reading(c), None) for c in seq))
+        _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False)
+        assert verdict.status == "passed" and verdict.result.corrected_bits == kept and checked == asked
+    monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H: False)  # wide enough: the first passing wins
+    checked.clear()
+    _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False)
+    assert verdict.result.corrected_bits == 2 and checked == [2]
+
+
 def test_a_payload_fused_over_frames_of_a_print_too_narrow_is_refused_too() -> None:
     """Fused over the frames of a sequence, the readings of a print narrower than its model was
     trained for (the ghost, told it was trained for prints 150 px wide) give no payload either:
