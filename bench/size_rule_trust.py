@@ -76,11 +76,20 @@ def readings(model_path: Path, scenes: int, seed: int, severity: str, frame: tup
                     "deviation": None if bits is None else round(float(bits.deviation), 3),
                     "kept": {
                         "none": True,
-                        "head-on": not refuses_narrow_reading(replace(det, needs_every_way=False), trained_px, colour),
+                        "head-on": not refused_head_on(replace(det, needs_every_way=False), trained_px, colour),
                         "every way": not refuses_narrow_reading(det, trained_px, colour),
                     },
                 })  # fmt: skip
     return rows
+
+
+def refused_head_on(located: Any, trained_px: int | None, colour: bool) -> bool:
+    """The size rule before it asked the tilt: a reading of a print narrower head-on than its
+    model needs refused where the model was trained for a width, or is in colour and the
+    reading needed corrections; no floor."""
+    if not (located.result.ok and located.too_narrow):
+        return False
+    return trained_px is not None or (colour and located.result.corrected_bits > 0)
 
 
 def counted(rows: list[dict[str, Any]], rule: str) -> dict[str, int]:
