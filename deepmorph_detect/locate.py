@@ -638,8 +638,10 @@ def refuses_narrow_reading(located: Located, trained_px: int | None, colour: boo
     """
     if not (located.result.ok and located.too_narrow):
         return False
-    if trained_px is not None or not colour:
-        return trained_px is not None
+    if trained_px is not None:
+        return True
+    if not colour:
+        return False
     return located.result.corrected_bits > 0 or located.along_tilt_px < COLOUR_FLOOR_SHARE * located.needs_px
 
 

@@ -248,11 +248,19 @@ class Located(Detection):
         return out
 
 
+def seen_too_steeply(size: dict[str, Any]) -> bool:
+    """Whether a print's ``too_small`` entry (:meth:`Located.size_json`) says it is wide enough
+    head-on and too narrow only along its tilt."""
+    return "along_tilt_px" in size and size["width_px"] >= size["needs_px"]
+
+
 def too_small_reason(size: dict[str, Any]) -> str:
     """Why a print is not read, in words, from its ``too_small`` entry (:meth:`Located.size_json`):
-    too small across, or seen so steeply that its tilt leaves it too few pixels."""
-    across, needs, along = size["width_px"], size["needs_px"], size.get("along_tilt_px")
-    if along is not None and across >= needs:
+    too small across, or seen so steeply that its tilt leaves it too few pixels
+    (:func:`seen_too_steeply`)."""
+    across, needs = size["width_px"], size["needs_px"]
+    if seen_too_steeply(size):
+        along = size["along_tilt_px"]
         return f"seen too steeply to read ({along:.0f} px along its tilt, {across:.0f} px across; needs {needs:.0f})"
     return f"too small to read ({across:.0f} px across, needs {needs:.0f})"
 

@@ -726,6 +726,7 @@ def read_photo(
     reader as ``deepmorph decode`` (a temporary file: size, pixel and format checks)."""
     from deepmorph.registry import detection_lookup
     from deepmorph_core.image_io import read_image_bgr
+    from deepmorph_detect.results import seen_too_steeply
 
     m = studio.model(model_id)
     look_up = detection_lookup(studio.registry(), m, missing_ok=True)
@@ -757,7 +758,7 @@ def read_photo(
         small = [d["too_small"] for d in found if "too_small" in d]
         if small and len(small) == len(found):
             widest = max(small, key=lambda t: t["width_px"])
-            if widest["width_px"] >= widest["needs_px"]:  # wide enough head-on: seen too steeply
+            if seen_too_steeply(widest):
                 note = (
                     f"the print is seen too steeply: {widest['along_tilt_px']:.0f} pixels along its tilt "
                     f"(needs {widest['needs_px']:.0f}): face it squarely"

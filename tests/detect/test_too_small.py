@@ -226,6 +226,18 @@ def test_a_print_aligned_too_narrow_is_read_by_its_first_looks_alone(locator, mo
     assert asked[1] is False and "flat sheet" in later
 
 
+def located_print(
+    locator: Locator, across: float, along: float, corrected: int, ok: bool = True, every_way: bool = False
+) -> Located:
+    """A reading of a print seen ``across`` px wide and ``along`` px high (a tilt about its
+    horizontal axis foreshortens it so), needing 96 px, read with ``corrected`` corrections."""
+    corners = np.array([[0, 0], [across, 0], [across, along], [0, along]], np.float64) + 40.0
+    H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
+    result = DecodeResult(np.ones(5, np.uint8), ok, corrected if ok else -1, 0.95)
+    return Located(result, np.full(5, 0.5, np.float32), corners=corners, homography=H, needs_px=96.0,
+                   needs_every_way=every_way)  # fmt: skip
+
+
 def test_a_colour_print_narrower_than_the_frame_keeps_a_payload_only_read_without_corrections(locator) -> None:
     """Narrower than the decoder's frame, a colour print's reading that needed corrections is
     refused (too small), one without is kept; black ink keeps both, and a model trained for
@@ -233,10 +245,7 @@ def test_a_colour_print_narrower_than_the_frame_keeps_a_payload_only_read_withou
     from deepmorph_detect.locate import refuses_narrow_reading
 
     def read(width: float, corrected: int, ok: bool = True) -> Located:
-        corners = np.array([[0, 0], [width, 0], [width, width], [0, width]], np.float64) + 40.0
-        H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
-        result = DecodeResult(np.ones(5, np.uint8), ok, corrected if ok else -1, 0.95)
-        return Located(result, np.full(5, 0.5, np.float32), corners=corners, homography=H, needs_px=96.0)
+        return located_print(locator, width, width, corrected, ok=ok)
 
     narrow, wide = 62.0, 120.0
     assert read(narrow, 1).too_narrow and not read(wide, 1).too_narrow
@@ -259,11 +268,7 @@ def test_a_colour_print_seen_steeply_is_as_narrow_as_its_tilt_leaves_it(locator)
     from deepmorph_detect.results import too_small_reason
 
     def read(across: float, along: float, corrected: int, every_way: bool) -> Located:
-        corners = np.array([[0, 0], [across, 0], [across, along], [0, along]], np.float64) + 40.0
-        H = cv2.getPerspectiveTransform(locator.frame_corners.astype(np.float32), corners.astype(np.float32))
-        result = DecodeResult(np.ones(5, np.uint8), True, corrected, 0.95)
-        return Located(result, np.full(5, 0.5, np.float32), corners=corners, homography=H, needs_px=96.0,
-                       needs_every_way=every_way)  # fmt: skip
+        return located_print(locator, across, along, corrected, every_way=every_way)
 
     steep = read(135.0, 26.0, 1, every_way=True)
     assert steep.width_px == pytest.approx(135.0) and steep.along_tilt_px == pytest.approx(26.0)
