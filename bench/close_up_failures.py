@@ -51,7 +51,7 @@ def _reasons(check: Any) -> tuple[str, ...]:
     if check.status == "failed" or check.bits is None:
         return ("morph fit",)
     bits = check.bits
-    return broken_rules(bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation)
+    return broken_rules(bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation, bits.rival_margin)
 
 
 def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:

@@ -106,6 +106,7 @@ BIT_FIELDS = (
     "weakest_bits_support",
     "bits_deviation",
     "nearest_rival_deviation",
+    "rival_margin",
 )
 
 
@@ -130,6 +131,9 @@ class BitEvidence:
             evidence adding up above 0; :meth:`PayloadChecker.rival_deviation
             <deepmorph_detect.check.PayloadChecker.rival_deviation>`); ``None`` where it was not
             asked or the photo shows this word's bits there.
+        rival_margin: how many times :attr:`deviation` the rival's must reach for the word to
+            pass: 1, or more where the photo cannot tell near words apart as well
+            (:data:`~deepmorph_detect.check.RELIT_RIVAL_MARGIN`).
     """
 
     code: np.ndarray
@@ -138,6 +142,7 @@ class BitEvidence:
     blur_px: float
     unlit: np.ndarray | None = None
     rival_deviation: float | None = None
+    rival_margin: float = 1.0
 
     @property
     def contradicted(self) -> int:
@@ -174,7 +179,7 @@ class BitEvidence:
         :data:`MIN_WEAKEST_SUM`), its morph explaining the photo where its bits act
         (:attr:`deviation` at most :data:`MAX_DEVIATION`), and its nearest rival word, whose bits
         the photo shows where the two differ, not explaining the photo better
-        (:attr:`rival_deviation` below :attr:`deviation`)."""
+        (:attr:`rival_deviation` below :attr:`rival_margin` times :attr:`deviation`)."""
         return not self.reason
 
     def to_json(self) -> dict[str, Any]:
@@ -186,12 +191,16 @@ class BitEvidence:
         }
         if self.rival_deviation is not None:
             fields["nearest_rival_deviation"] = round(self.rival_deviation, 3)
+            if self.rival_margin != 1.0:
+                fields["rival_margin"] = self.rival_margin
         return fields
 
     @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
-        return disagreement(self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation)
+        return disagreement(
+            self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin
+        )
 
 
 #: The per-bit check's rules (:attr:`BitEvidence.agrees`), by name, in the order they are asked.
@@ -199,24 +208,34 @@ BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival")
 
 
 def broken_rules(
-    contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None
+    contradicted: int,
+    weakest_sum: float,
+    deviation: float,
+    rival_deviation: float | None = None,
+    rival_margin: float = 1.0,
 ) -> tuple[str, ...]:
     """The :data:`BIT_RULES` a code word breaks (empty when it agrees): too many bits shown
     flipped, its weakest bits barely shown, a photo its morph does not explain, or a photo that
-    the nearest rival word explains better, its bits shown where the two differ
-    (``rival_deviation``)."""
+    the nearest rival word explains better, or not ``rival_margin`` times worse, its bits shown
+    where the two differ (``rival_deviation``)."""
     broken = (
         contradicted > MAX_CONTRADICTED,
         weakest_sum < MIN_WEAKEST_SUM,
         deviation > MAX_DEVIATION,
-        rival_deviation is not None and rival_deviation < deviation,
+        rival_deviation is not None and rival_deviation < rival_margin * deviation,
     )
     return tuple(rule for rule, hit in zip(BIT_RULES, broken) if hit)
 
 
-def disagreement(contradicted: int, weakest_sum: float, deviation: float, rival_deviation: float | None = None) -> str:
+def disagreement(
+    contradicted: int,
+    weakest_sum: float,
+    deviation: float,
+    rival_deviation: float | None = None,
+    rival_margin: float = 1.0,
+) -> str:
     """The first of :func:`broken_rules` a code word breaks, in words (empty when none)."""
-    first = next(iter(broken_rules(contradicted, weakest_sum, deviation, rival_deviation)), "")
+    first = next(iter(broken_rules(contradicted, weakest_sum, deviation, rival_deviation, rival_margin)), "")
     if first == "bits flipped":
         return f"the photo shows {contradicted} of its code bits flipped"
     if first == "weakest bits":
@@ -228,6 +247,11 @@ def disagreement(contradicted: int, weakest_sum: float, deviation: float, rival_
         return (
             f"its morph does not explain the photo where its bits act "
             f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
+        )
+    if first == "rival" and rival_margin != 1.0:
+        return (
+            f"the nearest other code word explains the photo nearly as well, its bits shown where the two "
+            f"differ (deviation {rival_deviation:.2f} against {deviation:.2f}; {rival_margin:g} times needed)"
         )
     if first == "rival":
         return (
@@ -241,7 +265,7 @@ def disagreement_in(fields: dict[str, Any]) -> str:
     """:func:`disagreement` from a detection's JSON fields (:meth:`BitEvidence.to_json`)."""
     return disagreement(
         fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"],
-        fields.get("nearest_rival_deviation"),
+        fields.get("nearest_rival_deviation"), fields.get("rival_margin", 1.0),
     )  # fmt: skip
 
 

@@ -328,6 +328,19 @@ def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     worse = checker.check(image, np.eye(3), read)
     assert worse.status == "passed" and worse.bits.rival_deviation == pytest.approx(0.8)
     assert disagreement_in(worse.bits.to_json()) == ""
+    # in a photo relit from the drawing's own template, a word read with corrections must leave
+    # its rival RELIT_RIVAL_MARGIN times as much unexplained: 1.08 times is enough elsewhere only
+    photo_shows(1.0 + 0.65 * wobble)
+    assert checker.check(image, np.eye(3), read).status == "passed"
+    relit = checker.check(image, np.eye(3), read, relit_from=0.76)
+    assert relit.status == "contradicted" and relit.bits.rival_margin == check_module.RELIT_RIVAL_MARGIN == 1.15
+    reason = (
+        "the nearest other code word explains the photo nearly as well, its bits shown where the two differ "
+        "(deviation 0.65 against 0.60; 1.15 times needed)"
+    )
+    assert relit.bits.reason == reason and disagreement_in(relit.bits.to_json()) == reason
+    uncorrected = checker.check(image, np.eye(3), replace(read, corrected_bits=0), relit_from=0.76)
+    assert uncorrected.status == "passed" and "rival_margin" not in uncorrected.bits.to_json()
     # explaining the rest better, but the photo shows the word's bits where the two differ
     shows_word = np.where(differ, -1.0, 1.0).astype(np.float32)
     photo_shows(shows_word)

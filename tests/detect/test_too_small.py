@@ -324,6 +324,38 @@ def test_a_print_keeping_only_uncorrected_readings_looks_on_for_one(locator, mon
     assert verdict.result.corrected_bits == 2 and checked == [2]
 
 
+def test_a_colour_print_too_narrow_for_its_frame_is_not_read_again_in_its_templates_light(locator, monkeypatch) -> None:
+    """A print not read is aligned and read again in the light its template shows, unless its
+    readings with corrections would be refused for its size (``keeps_only_uncorrected``: a colour
+    print narrower than the decoder's frame along its tilt, where that light takes up the morph's
+    edges); the grid of light is tried either way. Black ink is always lit so."""
+    import deepmorph_detect.locate as locate_module
+
+    rng = np.random.default_rng(3)
+    payload = np.zeros(locator.model.codec.spec.payload_bits, np.uint8)
+    photo = close_up_photo(render_svg(locator.model.encode(payload), 400), "easy", rng, size=160)
+    gray, _, pyramid, (aligned,) = locator._proposed(photo, None)
+    cam = locator.frame(photo, None)[1]
+    tried: list[str] = []
+
+    def unread(*args, **kwargs) -> tuple:
+        result = DecodeResult(np.zeros_like(payload), False, -1, 0.5)
+        return aligned.alignment.homography, locate_module.PayloadCheck(result, None, "not run"), np.full(8, 0.5)
+
+    monkeypatch.setattr(locator, "_read_and_check", unread)
+    monkeypatch.setattr(locator.aligner, "as_flat_sheet", lambda *a, **k: None)
+    monkeypatch.setattr(locator.light, "align", lambda *a, **k: tried.append("template's light"))
+    monkeypatch.setattr(locate_module, "realign_in_light_field", lambda *a, **k: tried.append("grid of light"))
+    assert aligned.alignment.correlation >= locate_module.BLIND_READ_CORRELATION
+    assert locator.relights(aligned.alignment)  # black ink
+    for narrow, expected in ((False, ["template's light", "grid of light"]), (True, ["grid of light"])):
+        tried.clear()
+        monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H, narrow=narrow: narrow)
+        assert locator.relights(aligned.alignment) is not narrow
+        found = locator.decode_drawing(gray, pyramid, aligned.alignment, 1.0, cam, "detector", True)
+        assert not found.result.ok and tried == expected
+
+
 def test_a_payload_fused_over_frames_of_a_print_too_narrow_is_refused_too() -> None:
     """Fused over the frames of a sequence, the readings of a print narrower than its model was
     trained for (the ghost, told it was trained for prints 150 px wide) give no payload either:
