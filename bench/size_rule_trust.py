@@ -89,18 +89,21 @@ def readings(
     model = DeepMorphModel.load(model_path)
     shipped = Locator(model, detector="universal")
     read_in = traced(shipped)
-    free = Locator(model, detector="universal")
-    free.refuses_reading = lambda located: False  # every reading seen; the rules asked below
-    free.keeps_only_uncorrected = lambda homography: False
-    if model.print_px is None:  # nor a colour print under the floor read by its first looks alone
-        free.aligned_too_narrow = lambda alignment: False
+    chains: list[tuple[str, Any]] = [("shipped", shipped)]
+    if free_too:
+        free = Locator(model, detector="universal")
+        free.refuses_reading = lambda located: False  # every reading seen; the rules asked below
+        free.keeps_only_uncorrected = lambda homography: False
+        if model.print_px is None:  # nor a colour print under the floor read by its first looks alone
+            free.aligned_too_narrow = lambda alignment: False
+        chains.insert(0, ("free", free))
     trained_px, colour = model.print_px, model.drawing.colour
     maker = SceneMaker(model, frame, severity, seed=seed)
     rows = []
     for i in range(scenes):
         scene = maker.make(drawings=1 + i % 2, distractors=1, aruco=i % 2 == 0)
         drawings = [p for p in scene.placements if p.kind == "drawing"]
-        for chain, locator in (("free", free), ("shipped", shipped)) if free_too else (("shipped", shipped),):
+        for chain, locator in chains:
             read_in.clear()
             for det, _, right in matched_detections(locator.locate(scene.image), drawings):
                 if not det.result.ok:
@@ -140,15 +143,17 @@ def refused_head_on(located: Any, trained_px: int | None, colour: bool) -> bool:
 def counted(rows: list[dict[str, Any]], rule: str) -> dict[str, int]:
     """Right and wrong payloads kept under ``rule`` (:data:`RULES`)."""
     if rule == "as shipped":
-        kept = [r for r in rows if r["chain"] == "shipped"]
-    else:
-        kept = [r for r in rows if r["chain"] == "free" and r["kept"][rule]]
-    return {"right": sum(r["right"] for r in kept), "wrong": sum(not r["right"] for r in kept)}
+        return _right_and_wrong([r for r in rows if r["chain"] == "shipped"])
+    return _right_and_wrong([r for r in rows if r["chain"] == "free" and r["kept"][rule]])
 
 
 def counted_in(rows: list[dict[str, Any]], where: str) -> dict[str, int]:
     """Right and wrong payloads the shipped chain read in the photo ``where`` (:data:`READ_IN`)."""
-    kept = [r for r in rows if r["chain"] == "shipped" and r["read_in"] == where]
+    return _right_and_wrong([r for r in rows if r["chain"] == "shipped" and r["read_in"] == where])
+
+
+def _right_and_wrong(kept: list[dict[str, Any]]) -> dict[str, int]:
+    """How many of the readings ``kept`` are right and how many wrong."""
     return {"right": sum(r["right"] for r in kept), "wrong": sum(not r["right"] for r in kept)}
 
 
