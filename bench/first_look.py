@@ -88,8 +88,9 @@ def main() -> None:
             for _ in range(args.samples):
                 code = rng.integers(0, 2, model.codec.spec.code_bits).astype(np.uint8)
                 values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-                art = printed(model, md.to_svg(values), colours, rng, art_px)
-                photo, art_to_image = close_up_placed(art, args.severity, rng, photo_px, extra=model_added_steps(model))
+                art, paper = printed(model, md.to_svg(values), colours, rng, art_px)
+                added = model_added_steps(model)
+                photo, art_to_image = close_up_placed(art, args.severity, rng, photo_px, extra=added, paper=paper)
                 svg_to_art = art.shape[1] / viewbox[2]
                 truth = art_to_image @ np.array(
                     [[svg_to_art, 0, -viewbox[0] * svg_to_art], [0, svg_to_art, -viewbox[1] * svg_to_art], [0, 0, 1]]

@@ -27,7 +27,7 @@ from deepmorph_core.severity import VALIDATION_SEVERITY
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.refine import pixels_to_svg_units
 from deepmorph_detect.results import across_px
-from deepmorph_detect.scenes import CLOSE_UP_SIZE, close_up_placed, colour_print, model_added_steps
+from deepmorph_detect.scenes import CLOSE_UP_SIZE, Art, close_up_placed, colour_print, model_added_steps
 
 PRINT_PX = 400  # the code's render, before it is printed and photographed
 #: The close-up photo's width: its drawing spans 60-80 % of it, 144-192 camera pixels.
@@ -42,15 +42,15 @@ def photo_for_print(print_px: float) -> int:
 
 def printed(
     model: DeepMorphModel, svg: str, colours: AugmentPipeline | None, rng: np.random.Generator, width: int = PRINT_PX
-) -> np.ndarray:
-    """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white: a colour
-    drawing rendered in colour and put through the colour corruptions of the capture (ink,
-    paper, white balance, chroma: the registered ``colour`` plugins) before it becomes the
-    luminance the camera simulation works on (``(H, W, 3)`` RGB for a model read in another
-    channel, photographed in colour: :func:`~deepmorph_detect.scenes.colour_print`); a
-    black-and-white one rendered as it is."""
+) -> Art:
+    """A code's print as the photo simulator takes it, ``(H, W)`` float, 1 = white, and its
+    paper: a colour drawing rendered in colour and put through the colour corruptions of the
+    capture (ink, paper, white balance, chroma: the registered ``colour`` plugins) before it
+    becomes the luminance the camera simulation works on (``(H, W, 3)`` RGB for a model read in
+    another channel, photographed in colour: :func:`~deepmorph_detect.scenes.colour_print`); a
+    black-and-white one rendered as it is, on white paper."""
     if colours is None:
-        return render_svg(svg, width)
+        return render_svg(svg, width), 1.0
     return colour_print(render_svg_rgb(svg, width), colours, rng)
 
 
@@ -106,8 +106,8 @@ def close_ups(
     high = round(CLOSE_UP_SIZE[1] * photo_px)
     for code, payload in zip(codes, payloads):
         values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
-        art = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
-        photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added)
+        art, paper = printed(model, model.drawing.to_svg(values), colours, rng, max(PRINT_PX, 2 * high))
+        photo, art_to_photo = close_up_placed(art, severity, rng, size=photo_px, extra=added, paper=paper)
         height, width = art.shape[:2]
         frame = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64)  # the art's pixels
         svg_to_art = np.linalg.inv(pixels_to_svg_units(md.drawing.viewbox, width))  # the viewBox rendered

@@ -45,6 +45,9 @@ if TYPE_CHECKING:
 
 DISTRACTOR_DIR = Path(__file__).parent / "data" / "distractors"
 ARUCO_DICT = cv2.aruco.DICT_6X6_250
+#: A print's art (1 = white; gray ``(H, W)`` or RGB ``(H, W, 3)``) and its paper, which the
+#: sheet's margin takes (gray, or RGB for RGB art; 1: white): :func:`colour_print`.
+Art = tuple[np.ndarray, float | np.ndarray]
 
 
 @dataclass
@@ -204,10 +207,10 @@ class SceneMaker:
         model's; a subclass may choose among several."""
         return self.viewbox
 
-    def _drawing_art(self, width: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """The drawing chosen last, printed ``width`` pixels wide: its art (1 = white), its
-        payload bits, and the corners (SVG units; TL, TR, BR, BL) its truth names: here a fresh
-        payload morph and its viewBox's corners."""
+    def _drawing_art(self, width: int) -> tuple[Art, np.ndarray | None, np.ndarray]:
+        """The drawing chosen last, printed ``width`` pixels wide: its art (1 = white) and paper
+        (:meth:`_render`), its payload bits, and the corners (SVG units; TL, TR, BR, BL) its truth
+        names: here a fresh payload morph and its viewBox's corners."""
         idx, payload = self._payload()
         if idx >= 0 and idx not in self._svg_cache:
             self._svg_cache[idx] = self.model.encode(payload)
@@ -221,9 +224,10 @@ class SceneMaker:
         bits = self.model.codec.spec.payload_bits
         return -1, self.rng.integers(0, 2, bits).astype(np.uint8)
 
-    def _render(self, key: str, svg: str, width: int, cache: bool, colour: bool = False) -> np.ndarray:
-        """The print's luminance ``(H, W)``; a colour code (``colour``, for a colour model) put
-        through the colour plugins afresh each time it is printed."""
+    def _render(self, key: str, svg: str, width: int, cache: bool, colour: bool = False) -> Art:
+        """The print's luminance ``(H, W)`` and its paper (1: white); a colour code (``colour``,
+        for a colour model) put through the colour plugins afresh each time it is printed
+        (:func:`colour_print`)."""
         in_colour = colour and self._colours is not None
         if cache and (key, width) in self._render_cache:
             img = self._render_cache[(key, width)]
@@ -231,7 +235,7 @@ class SceneMaker:
             img = render_svg_rgb(svg, width) if in_colour else render_svg(svg, width)
             if cache:
                 self._render_cache[(key, width)] = img
-        return colour_print(img, self._colours, self.rng) if in_colour else img
+        return colour_print(img, self._colours, self.rng) if in_colour else (img, 1.0)
 
     # -- making ---------------------------------------------------------------------------
 
@@ -278,17 +282,17 @@ class SceneMaker:
             rw = int(np.clip(2 ** math.ceil(math.log2(max(width_px * 1.2, 32))), 32, 1024))
             payload, label, corners_src = None, "", None
             if kind == "drawing":
-                art, payload, corners_src = self._drawing_art(rw)
+                (art, paper), payload, corners_src = self._drawing_art(rw)
             elif kind == "distractor":
                 icons = distractor_svgs()
                 label, svg = icons[int(rng.integers(len(icons)))]
-                art = self._render(label, svg.replace("currentColor", "#000"), rw, True)
+                art, paper = self._render(label, svg.replace("currentColor", "#000"), rw, True)
             else:
-                art, label = _marker_art(kind, rw, rng, qr)
+                (art, label), paper = _marker_art(kind, rw, rng, qr), 1.0
             ah, aw = art.shape[:2]
             # art pixels -> frame units -> image pixels
             art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
-            _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng)
+            _print_and_place(img, art, plane @ art_to_frame, margin, aw, rng, paper)
             if kind == "drawing":  # truth in SVG units (drawing -> pose frame -> pixels)
                 truth = plane @ viewbox_to_frame(viewbox)
             elif kind == "distractor":  # truth in the icon's art pixels
@@ -377,21 +381,35 @@ def _pose(
 #: a third as much as a scene's prints, turned at most the severity's ``spin_deg``.
 CLOSE_UP_SIZE = (0.6, 0.8)
 CLOSE_UP_TILT_SHARE = 1 / 3
+#: White rows a colour print's paper is read from (:func:`colour_print`).
+PAPER_STRIP = 2
 
 
-def colour_print(rgb: np.ndarray, colours: AugmentPipeline, rng: np.random.Generator) -> np.ndarray:
+def colour_print(rgb: np.ndarray, colours: AugmentPipeline, rng: np.random.Generator) -> Art:
     """A colour render ``(H, W, 3)`` as the camera simulation takes it: through the colour
     stage of ``colours`` (the registered ``colour`` plugins: ink, paper, white balance, chroma),
     then luminance ``(H, W)``, 1 = white. A model read in another channel
     (``colours.channel``) keeps its print in colour, ``(H, W, 3)`` RGB: its photo is taken in
     colour, the detector reads its luminance and the rest that channel, as in a real photo.
-    The draws come from ``rng``."""
-    image = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1), dtype=np.float32))[None]
+    The draws come from ``rng``.
+
+    Also returns the paper's value after the same draws (gray, or ``(3,)`` RGB): the
+    whole sheet is that paper, so the print's margin takes it (:func:`_print_and_place`). A
+    sheet left white around tinted or white-balanced art shows the art's square as an edge no
+    real print has, which alignment and framing then follow."""
+    h = rgb.shape[0]
+    # white rows below the art, whole 2x2 blocks of their own for the chroma subsampling (whose
+    # upsampling blends the first of them with the art's last block)
+    strip = PAPER_STRIP + h % 2
+    padded = np.concatenate([rgb, np.ones((strip, *rgb.shape[1:]), rgb.dtype)], 0)
+    image = torch.from_numpy(np.ascontiguousarray(padded.transpose(2, 0, 1), dtype=np.float32))[None]
     generator = torch.Generator().manual_seed(int(rng.integers(2**62)))
     with torch.no_grad():
         if not is_luma(colours.channel):
-            return colours.colour_stage(image, generator)[0].clamp(0.0, 1.0).numpy().transpose(1, 2, 0)
-        return colours.colour_only(image, generator)[0, 0].numpy()
+            out = colours.colour_stage(image, generator)[0].clamp(0.0, 1.0).numpy().transpose(1, 2, 0)
+        else:
+            out = colours.colour_only(image, generator)[0, 0].numpy()
+    return np.ascontiguousarray(out[:h]), out[-1].mean(0)  # the last row's chroma is the paper's alone
 
 
 def close_up_photo(
@@ -401,9 +419,10 @@ def close_up_photo(
     size: int = 240,
     desk: float | None = None,
     extra: list[AugmentationSpec] | None = None,
+    paper: float | np.ndarray = 1.0,
 ) -> np.ndarray:
     """:func:`close_up_placed`'s photo alone."""
-    return close_up_placed(art, severity, rng, size, desk, extra)[0]
+    return close_up_placed(art, severity, rng, size, desk, extra, paper)[0]
 
 
 def close_up_placed(
@@ -413,6 +432,7 @@ def close_up_placed(
     size: int = 240,
     desk: float | None = None,
     extra: list[AugmentationSpec] | None = None,
+    paper: float | np.ndarray = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A photo in which one print fills most of the frame: a scan or a close phone photo.
 
@@ -421,7 +441,7 @@ def close_up_placed(
     filling the frame (:data:`CLOSE_UP_SIZE`), barely turned, over a plain desk. The photo is
     ``size`` pixels of the camera (blur, motion and noise in those pixels): a small ``size``
     is a print seen small, as far away. ``extra`` capture steps (:func:`model_added_steps`)
-    join the severity's.
+    join the severity's. ``paper``: the art's paper, the whole sheet's (:func:`colour_print`).
 
     Returns:
         ``(size, size, 3)`` uint8 BGR photo, and the ``(3, 3)`` homography from ``art``'s pixels
@@ -442,7 +462,7 @@ def close_up_placed(
     img = np.full((size, size, 3), tone, np.float32)
     art_to_frame = np.array([[1 / aw, 0, -0.5], [0, 1 / aw, -ah / (2 * aw)], [0, 0, 1]])
     art_to_image = plane @ art_to_frame
-    _print_and_place(img, np.asarray(art, np.float32), art_to_image, margin, aw, rng)
+    _print_and_place(img, np.asarray(art, np.float32), art_to_image, margin, aw, rng, paper)
     capture = capture_pipeline(severity, 1.0, extra) if extra else _plain_capture(severity)
     return _photograph(img, capture, rng), art_to_image
 
@@ -505,18 +525,27 @@ def _marker_art(kind: str, width: int, rng: np.random.Generator, qr: str | None)
 
 
 def _print_and_place(
-    img: np.ndarray, art: np.ndarray, art_to_image: np.ndarray, margin: float, art_width: int, rng: np.random.Generator
+    img: np.ndarray,
+    art: np.ndarray,
+    art_to_image: np.ndarray,
+    margin: float,
+    art_width: int,
+    rng: np.random.Generator,
+    paper: float | np.ndarray = 1.0,
 ) -> None:
     """Print ``art`` (1 = white; gray ``(h, w)`` or RGB ``(h, w, 3)``) on a sheet with
     ``margin`` (share of the art width) and composite the sheet into ``img`` (BGR) through
-    ``art_to_image``."""
+    ``art_to_image``. ``paper``: the art's paper (gray, or RGB for RGB art), which the margin
+    takes too (:func:`colour_print`)."""
     H, W = img.shape[:2]
     m = int(round(margin * art_width))
     ah, aw = art.shape[:2]
     paper_tone = rng.uniform(0.85, 1.0) * rng.uniform(0.94, 1.0, 3).astype(np.float32)
     ink_tone = rng.uniform(0.0, 0.15)
-    sheet = np.ones((ah + 2 * m, aw + 2 * m) + art.shape[2:], np.float32)
-    sheet[m : m + ah, m : m + aw] = art if art.ndim == 2 else art[..., ::-1]  # RGB art into the BGR photo
+    bgr = art.ndim == 3  # RGB art into the BGR photo
+    sheet = np.empty((ah + 2 * m, aw + 2 * m) + art.shape[2:], np.float32)
+    sheet[...] = np.asarray(paper, np.float32)[::-1] if bgr else paper
+    sheet[m : m + ah, m : m + aw] = art[..., ::-1] if bgr else art
     shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
     # the tones are affine in the sheet's value, so averaging before tinting is the same
     sheet, M = _captured_scale(sheet, art_to_image @ shift)

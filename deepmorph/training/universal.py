@@ -51,7 +51,7 @@ from deepmorph_core.svg.reader import viewbox_of
 from deepmorph_core.svg.secure import SvgError, parse_svg_bytes, read_svg_bytes
 from deepmorph_detect.centrenet import detector_graph
 from deepmorph_detect.network import INPUT_SIZE
-from deepmorph_detect.scenes import Scene, SceneMaker
+from deepmorph_detect.scenes import Art, Scene, SceneMaker
 from deepmorph_detect.universal import (
     INK_LEVEL,
     INK_RENDER_WIDTH,
@@ -177,7 +177,7 @@ class PoolSceneMaker(SceneMaker):
         self._chosen = group[int(self.rng.integers(len(group)))]
         return self._chosen.viewbox
 
-    def _drawing_art(self, width: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    def _drawing_art(self, width: int) -> tuple[Art, np.ndarray | None, np.ndarray]:
         chosen = self._chosen
         assert chosen is not None
         svg = chosen.svg

@@ -109,14 +109,14 @@ def test_a_model_read_in_another_channel_is_photographed_in_colour(yellow_bundle
     model = DeepMorphModel.load(yellow_bundle)
     rng = np.random.default_rng(2)
     colours = build_pipeline("medium", PRINT_PX, colour=True, channel=model.drawing.channel)
-    art = printed(model, model.encode(np.array([1, 0, 0, 1], np.uint8)), colours, rng, 200)
-    assert art.shape == (200, 200, 3)
-    photo = close_up_photo(art, "medium", rng, 160).astype(np.float32)
+    art, paper = printed(model, model.encode(np.array([1, 0, 0, 1], np.uint8)), colours, rng, 200)
+    assert art.shape == (200, 200, 3) and paper.shape == (3,)
+    photo = close_up_photo(art, "medium", rng, 160, paper=paper).astype(np.float32)
     assert np.abs(photo[..., 0] - photo[..., 2]).max() > 60  # blue and red differ where the print is yellow
     scene = SceneMaker(model, (320, 240), "easy", seed=3).make(drawings=1, distractors=0)
     assert np.abs(scene.image[..., 0].astype(np.float32) - scene.image[..., 2]).max() > 60
     luma_colours = build_pipeline("medium", PRINT_PX, colour=True)
-    assert printed(model, model.encode(np.array([1, 0, 0, 1], np.uint8)), luma_colours, rng, 200).ndim == 2
+    assert printed(model, model.encode(np.array([1, 0, 0, 1], np.uint8)), luma_colours, rng, 200)[0].ndim == 2
 
 
 def test_a_bundle_with_impossible_channel_weights_is_one_clear_error(tmp_path: Path) -> None:

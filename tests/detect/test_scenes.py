@@ -113,3 +113,29 @@ def test_a_print_seen_small_loses_detail_as_in_a_camera(ghost_render) -> None:
         return total / 20
 
     assert sharpness(64) < 0.8 * sharpness(400)
+
+
+@pytest.mark.parametrize("channel", ["luminance", "blue"])
+def test_a_colour_print_has_one_paper_over_its_whole_sheet(channel: str) -> None:
+    """Tinted paper, white balance and a colour cast change the print's paper; the sheet around
+    the art is the same paper, so the art's square shows no edge in the photo (a white margin
+    around this tint steps by 0.1 there)."""
+    from deepmorph_core.corruption import AugmentPipeline
+    from deepmorph_core.reading_channel import CHANNELS
+    from deepmorph_detect.scenes import _print_and_place, colour_print
+
+    steps = [
+        {"name": "paper_tint", "params": {"grey": [0.25, 0.25], "warmth": [0.1, 0.1]}},
+        {"name": "white_balance", "params": {"temperature": [0.15, 0.15], "tint": 0.0, "cast": [0.03, 0.03]}},
+    ]
+    colours = AugmentPipeline({"steps": steps}, channel=CHANNELS[channel])
+    rgb = np.ones((41, 40, 3), np.float32)  # an odd height: the paper's rows are whole chroma blocks still
+    rgb[15:25, 15:25] = (0.9, 0.2, 0.1)  # a red square of ink
+    art, paper = colour_print(rgb, colours, np.random.default_rng(0))
+    assert np.allclose(art[0, 0], paper, atol=1e-5) and np.allclose(art[-1, -1], paper, atol=1e-5)
+    assert np.abs(np.asarray(paper) - 1.0).max() > 0.05  # the paper is not white
+    img = np.zeros((120, 120, 3), np.float32)
+    art_to_image = np.array([[2.0, 0, 20], [0, 2.0, 20], [0, 0, 1]])
+    _print_and_place(img, art, art_to_image, 0.25, 40, np.random.default_rng(1), paper)
+    across_the_edge = img[60, 5:38]  # from the margin into the art, short of the ink
+    assert np.abs(np.diff(across_the_edge, axis=0)).max() < 1e-3
