@@ -72,6 +72,12 @@ SHADOW_GRID = 4
 # aligned 7 % off); of 17 right corrected words so lit in 8000 hard scenes of four colour models,
 # 2 beat theirs by less (1.11x, 1.13x; a later look read one of them again), the rest by 1.20x or more
 RELIT_RIVAL_MARGIN = 1.15
+# a reading in such a photo that needed more corrections than this is not checked there at all
+# (:meth:`Locator._read_and_check <deepmorph_detect.locate.Locator._read_and_check>`): a crystal
+# oscillator's wrong word, read there with 4 corrections (confidence 0.86, its morph's gain 0.0005,
+# its nearest rival not shown), passed every rule in hard scenes; of 127 right words read there in
+# 11,000 hard scenes of four colour models (seeds 8-12), 2 needed 4 and none more
+RELIT_MAX_CORRECTIONS = 3
 
 
 def is_weak(result: DecodeResult) -> bool:
@@ -402,6 +408,6 @@ class PayloadChecker:
 
 
 __all__ = ["CHECK_BELOW_CONFIDENCE", "DRAWING_LIKE_ALIGNMENT", "MIN_MORPH_GAIN", "MORPH_WIDTH",
-           "RELIT_RIVAL_MARGIN", "RIVAL_BITS_FIRST_SHARE", "SHADOW_GRID", "TRUSTED_MORPH_FIT",
+           "RELIT_MAX_CORRECTIONS", "RELIT_RIVAL_MARGIN", "RIVAL_BITS_FIRST_SHARE", "SHADOW_GRID", "TRUSTED_MORPH_FIT",
            "WHOLE_FRAME_TRUSTED_FIT", "MorphFit", "MorphTemplates", "PayloadCheck", "PayloadChecker",
            "is_weak"]  # fmt: skip

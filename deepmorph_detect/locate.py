@@ -38,7 +38,7 @@ from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Candidate, Detector
 from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
 from deepmorph_detect.camera import Camera, project
-from deepmorph_detect.check import MorphTemplates, PayloadCheck, PayloadChecker, is_weak
+from deepmorph_detect.check import RELIT_MAX_CORRECTIONS, MorphTemplates, PayloadCheck, PayloadChecker, is_weak
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.light_field import realign_in_light_field
 from deepmorph_detect.pose import Placer
@@ -553,7 +553,9 @@ class Locator:
         place the drawing by (the passed payload's morph fit, else the alignment's), the
         verdict, and the code bits' probabilities. ``relit_from``: in a photo lit by the
         template's light, the alignment in the photo itself (:meth:`PayloadChecker.check
-        <deepmorph_detect.check.PayloadChecker.check>`). ``stronger_than``: only readings
+        <deepmorph_detect.check.PayloadChecker.check>`); a reading there that needed more than
+        :data:`~deepmorph_detect.check.RELIT_MAX_CORRECTIONS` corrections is not checked and
+        counts as not read. ``stronger_than``: only readings
         stronger than this one are checked (and can pass); the others count as not read.
         ``in_shadow``: checked in the shadow's light alone (:meth:`_decode_at`). ``first_only``:
         the first looks alone."""
@@ -580,6 +582,8 @@ class Locator:
             readings.append(reading)
             if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
                 continue
+            if relit_from is not None and reading.result.corrected_bits > RELIT_MAX_CORRECTIONS:
+                continue  # repaired too far to vouch for in a light read off the drawing itself
             repaired = only_uncorrected and reading.result.corrected_bits > 0
             if repaired and aside is not None:
                 continue  # refused too were it to pass

@@ -287,11 +287,10 @@ def test_a_colour_print_seen_steeply_is_as_narrow_as_its_tilt_leaves_it(locator)
     assert "along_tilt_px" not in read(80.0, 60.0, 1, every_way=False).size_json()
 
 
-def test_a_print_keeping_only_uncorrected_readings_looks_on_for_one(locator, monkeypatch) -> None:
-    """Where a reading with corrections would be refused for the print's size
-    (``keeps_only_uncorrected``), a passing one is kept aside and the looks go on: a later
-    reading without corrections wins; without one, the reading kept aside is returned (and
-    refused as too small), and the corrected readings after it are not checked."""
+def _read_with_every_check_passing(locator, monkeypatch, corrections: list[int], confidence: float = 0.9) -> tuple:
+    """A print of payload 0 in an easy close-up, aligned; its looks give a reading of payload 0
+    with each of ``corrections`` in turn, and every reading checked passes. Returns the photo's
+    gray, pyramid and alignment, and the list the corrections of each checked reading go to."""
     from deepmorph_detect.check import MorphFit, PayloadCheck
     from deepmorph_detect.read import Reading
 
@@ -299,29 +298,57 @@ def test_a_print_keeping_only_uncorrected_readings_looks_on_for_one(locator, mon
     payload = np.zeros(locator.model.codec.spec.payload_bits, np.uint8)
     photo = close_up_photo(render_svg(locator.model.encode(payload), 400), "easy", rng, size=160)
     gray, _, pyramid, (aligned,) = locator._proposed(photo, None)
-    alignment = aligned.alignment
     probs = np.full(locator.model.codec.spec.code_bits, 0.9, np.float32)
-
-    def reading(corrected: int) -> Reading:
-        return Reading(DecodeResult(payload, True, corrected, 0.9), probs)
-
     checked: list[int] = []
 
     def passes(pyramid, H, result, *args, **kwargs) -> PayloadCheck:
         checked.append(result.corrected_bits)
         return PayloadCheck(result, MorphFit(H, 0.95, 0.94), "passed")
 
+    def looks(*args, **kwargs):
+        return ((Reading(DecodeResult(payload, True, c, confidence), probs), None) for c in list(corrections))
+
     monkeypatch.setattr(locator.checker, "check", passes)
+    monkeypatch.setattr(locator.reader, "looks", looks)
+    return gray, pyramid, aligned.alignment, checked
+
+
+def test_a_print_keeping_only_uncorrected_readings_looks_on_for_one(locator, monkeypatch) -> None:
+    """Where a reading with corrections would be refused for the print's size
+    (``keeps_only_uncorrected``), a passing one is kept aside and the looks go on: a later
+    reading without corrections wins; without one, the reading kept aside is returned (and
+    refused as too small), and the corrected readings after it are not checked."""
+    corrections: list[int] = []
+    gray, pyramid, alignment, checked = _read_with_every_check_passing(locator, monkeypatch, corrections)
     monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H: True)
     for looks, kept, asked in (([2, 1, 0], 0, [2, 0]), ([2, 1], 2, [2])):
         checked.clear()
-        monkeypatch.setattr(locator.reader, "looks", lambda *a, seq=looks, **k: ((reading(c), None) for c in seq))
+        corrections[:] = looks
         _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False)
         assert verdict.status == "passed" and verdict.result.corrected_bits == kept and checked == asked
     monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H: False)  # wide enough: the first passing wins
     checked.clear()
     _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False)
     assert verdict.result.corrected_bits == 2 and checked == [2]
+
+
+def test_a_reading_repaired_too_far_is_not_vouched_for_in_its_templates_light(locator, monkeypatch) -> None:
+    """In a photo lit by the drawing's own template a reading that needed more than
+    ``RELIT_MAX_CORRECTIONS`` corrections is not checked and counts as not read (a wrong word
+    with 4 passed every rule there); in the photo itself the check decides, as before."""
+    from deepmorph_detect.check import RELIT_MAX_CORRECTIONS
+
+    looks = [RELIT_MAX_CORRECTIONS + 1, RELIT_MAX_CORRECTIONS]
+    corrections = list(looks)
+    gray, pyramid, alignment, checked = _read_with_every_check_passing(locator, monkeypatch, corrections, 0.86)
+    monkeypatch.setattr(locator, "keeps_only_uncorrected", lambda H: False)
+    for relit_from, asked in ((0.9, looks[1:]), (None, looks[:1])):
+        checked.clear()
+        _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False, relit_from)
+        assert verdict.status == "passed" and verdict.result.corrected_bits == asked[0] and checked == asked
+    corrections.pop()  # relit, only the reading repaired too far: not read
+    _, verdict, _ = locator._read_and_check(gray, pyramid, alignment, "detector", True, False, 0.9)
+    assert not verdict.result.ok and verdict.status == "not run"
 
 
 def test_a_colour_print_too_narrow_for_its_frame_is_not_read_again_in_its_templates_light(locator, monkeypatch) -> None:
