@@ -544,7 +544,7 @@ def _print_and_place(
     ink_tone = rng.uniform(0.0, 0.15)
     bgr = art.ndim == 3  # RGB art into the BGR photo
     sheet = np.empty((ah + 2 * m, aw + 2 * m) + art.shape[2:], np.float32)
-    sheet[...] = np.asarray(paper, np.float32)[::-1] if bgr else paper
+    sheet[...] = np.broadcast_to(np.asarray(paper, np.float32), (3,))[::-1] if bgr else paper
     sheet[m : m + ah, m : m + aw] = art[..., ::-1] if bgr else art
     shift = np.array([[1, 0, -m], [0, 1, -m], [0, 0, 1]], dtype=np.float64)  # sheet px -> art px
     # the tones are affine in the sheet's value, so averaging before tinting is the same

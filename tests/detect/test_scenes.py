@@ -139,3 +139,5 @@ def test_a_colour_print_has_one_paper_over_its_whole_sheet(channel: str) -> None
     _print_and_place(img, art, art_to_image, 0.25, 40, np.random.default_rng(1), paper)
     across_the_edge = img[60, 5:38]  # from the margin into the art, short of the ink
     assert np.abs(np.diff(across_the_edge, axis=0)).max() < 1e-3
+    # art without a paper of its own (a render as it is) is printed on white, in colour too
+    assert close_up_photo(rgb, "easy", np.random.default_rng(2), 64).shape == (64, 64, 3)
