@@ -600,11 +600,14 @@ def _photograph(img: np.ndarray, capture: AugmentPipeline, rng: np.random.Genera
 
 __all__ = [
     "CLOSE_UP_SIZE",
+    "PAPER_STRIP",
+    "Art",
     "Placement",
     "Scene",
     "SceneMaker",
     "close_up_photo",
     "close_up_placed",
+    "colour_print",
     "distractor_svgs",
     "model_added_steps",
 ]
