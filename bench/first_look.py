@@ -80,6 +80,7 @@ def main() -> None:
         viewbox = model.drawing.drawing.viewbox
         md = model.drawing
         colours = build_pipeline(args.severity, PRINT_PX, colour=True, channel=md.channel) if md.colour else None
+        added = model_added_steps(model)
         for width in args.widths:
             rng = np.random.default_rng(args.seed + width)
             photo_px = photo_for_print(width)
@@ -89,7 +90,6 @@ def main() -> None:
                 code = rng.integers(0, 2, model.codec.spec.code_bits).astype(np.uint8)
                 values = model.morph_values(torch.from_numpy(code.astype(np.float32))[None])[0]
                 art, paper = printed(model, md.to_svg(values), colours, rng, art_px)
-                added = model_added_steps(model)
                 photo, art_to_image = close_up_placed(art, args.severity, rng, photo_px, extra=added, paper=paper)
                 svg_to_art = art.shape[1] / viewbox[2]
                 truth = art_to_image @ np.array(

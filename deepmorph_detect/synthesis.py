@@ -248,15 +248,11 @@ def disagreement(
             f"its morph does not explain the photo where its bits act "
             f"(deviation {deviation:.2f}, at most {MAX_DEVIATION})"
         )
-    if first == "rival" and rival_margin != 1.0:
-        return (
-            f"the nearest other code word explains the photo nearly as well, its bits shown where the two "
-            f"differ (deviation {rival_deviation:.2f} against {deviation:.2f}; {rival_margin:g} times needed)"
-        )
     if first == "rival":
+        how, needed = ("better", "") if rival_margin == 1.0 else ("nearly as well", f"; {rival_margin:g} times needed")
         return (
-            f"the nearest other code word explains the photo better, its bits shown where the two differ "
-            f"(deviation {rival_deviation:.2f} against {deviation:.2f})"
+            f"the nearest other code word explains the photo {how}, its bits shown where the two differ "
+            f"(deviation {rival_deviation:.2f} against {deviation:.2f}{needed})"
         )
     return ""
 
