@@ -38,6 +38,13 @@ def make_svg(body: str, root: str = 'viewBox="0 0 24 24"', style: str = "") -> b
     ).encode()
 
 
+def table_text(output: str) -> str:
+    """The words of a command's table (``deepmorph info``) in order, without its rules and cell
+    borders: a cell's text wrapped over lines reads as one phrase, whatever width the console
+    took (rich fixes it from ``COLUMNS`` when the command line is first imported)."""
+    return " ".join(word for word in output.split() if word.strip("│┃┌┐└┘├┤┬┴┼─━"))
+
+
 def shaken_clip(image: np.ndarray, count: int, rng: np.random.Generator, folder: Path, video: Path) -> None:
     """``count`` frames of the same photo (BGR uint8), shaken by up to 3 pixels each way and with
     fresh sensor noise, as of a print held in front of a camera: written as the new folder

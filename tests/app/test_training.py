@@ -25,7 +25,7 @@ from deepmorph_core.networks import Encoder, spread_weights
 from deepmorph_core.payload import random_payloads
 from deepmorph_core.render import render_svg
 from deepmorph_detect.locate import Locator
-from tests.conftest import make_svg
+from tests.conftest import make_svg, table_text
 
 app = application()  # the command line's own commands and every installed plugin's
 
@@ -695,7 +695,7 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     assert model.registered and model.meta.train["registered"] is True
     info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
     assert info["smallest_print_px"] == 200 and info["train"]["print_px"] == 200
-    shown = " ".join(runner.invoke(app, ["info", str(out)], env={"COLUMNS": "200"}).stdout.split())
+    shown = table_text(runner.invoke(app, ["info", str(out)]).stdout)
     assert "200 px across in a photo (trained for prints that wide, --pixels)" in shown
     # a frame of its own: a 64-px frame of prints 128 px wide blurs by half the preset
     own = tmp_path / "own.dmm"
