@@ -29,6 +29,7 @@ from deepmorph_core.codec import choose_codec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
 from tests.app.test_training import FAST, TINY, _interrupt_at
+from tests.conftest import table_text
 
 #: Full corruption from the first step at ``hard``, a short window: an untrained decoder reads
 #: almost no code word of the first windows, so an auto-sized code is shrunk at step 20.
@@ -117,7 +118,7 @@ def test_an_auto_code_that_does_not_read_is_shrunk_and_a_given_one_is_not(tiny_s
     assert model.codec.spec.payload_bits == last.payload_bits[1] and model.codec.spec.code_bits == last.code_bits[1]
     assert model.encoder.linear.weight.shape[1] == model.decoder.head[-1].out_features == last.code_bits[1]
     assert any(f"{first.payload_bits[0]}-bit payload read" in w and "training went on with" in w for w in warnings)
-    shown = " ".join(CliRunner().invoke(application(), ["info", str(auto)]).stdout.split())
+    shown = table_text(CliRunner().invoke(application(), ["info", str(auto)]).stdout)
     assert f"sized by training: {first.payload_bits[0]} -> " in shown, shown
 
     resumed = tmp_path / "resumed.dmm"  # interrupted after the first shrink, with a window half full
@@ -196,7 +197,7 @@ def test_an_auto_code_that_reads_too_few_renders_is_shrunk_when_training_ends(ti
     assert rec.step == last.step + 20 and model.codec.spec.code_bits == last.code_bits[1]
     assert model.encoder.linear.weight.shape[1] == model.decoder.head[-1].out_features == last.code_bits[1]
     assert any("of fresh renders when training ended at step 30" in w for w in warnings), warnings
-    shown = " ".join(CliRunner().invoke(application(), ["info", str(auto)]).stdout.split())
+    shown = table_text(CliRunner().invoke(application(), ["info", str(auto)]).stdout)
     assert f"{first.payload_bits[0]} -> {first.payload_bits[1]} at step 30 (it read" in shown, shown
 
     resumed = tmp_path / "resumed.dmm"  # interrupted in the steps after the first check

@@ -20,6 +20,7 @@ from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig
 from tests.app.test_training import TINY
+from tests.conftest import table_text
 
 app = application()
 CUDA = torch.cuda.is_available()
@@ -85,7 +86,7 @@ def test_bundles_from_before_the_record_say_not_recorded(tiny: Path, tmp_path: P
     info = json.loads(CliRunner().invoke(app, ["info", str(out), "--json"]).stdout)
     assert info["trained_on"]["world_size"] == "not recorded" and info["record"]["global_batch"] is None
     text = CliRunner().invoke(app, ["info", str(out)]).output
-    assert "world size not recorded" in " ".join(text.split())
+    assert "world size not recorded" in table_text(text)
 
 
 def test_the_channels_last_decoder_computes_what_the_default_layout_does() -> None:

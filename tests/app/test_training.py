@@ -221,7 +221,7 @@ def test_cli_spatial_transformer_flag_reaches_the_bundle(tiny_svg: Path, tmp_pat
         assert model.meta.decoder.spatial_transformer is expected and (model.decoder.align is not None) is expected
         info = json.loads(runner.invoke(app, ["info", str(out), "--json"]).stdout)
         assert info["decoder"]["spatial_transformer"] is expected
-        shown = " ".join(runner.invoke(app, ["info", str(out)]).stdout.split())
+        shown = table_text(runner.invoke(app, ["info", str(out)]).stdout)
         assert ("spatial transformer, then CNN" in shown) is expected, shown
 
 
@@ -256,7 +256,7 @@ def test_early_stop_ends_where_the_full_corruption_batches_read_and_is_the_plann
     assert model.meta.train["steps"] == 40
     assert model.meta.train["registered"] is False and not model.registered  # no --pixels: framed by ink alone
     assert [line["step"] for line in map(json.loads, summary.log.read_text().splitlines())][-1] == 30
-    shown = " ".join(runner.invoke(app, ["info", str(early)]).stdout.split())
+    shown = table_text(runner.invoke(app, ["info", str(early)]).stdout)
     assert "30/30 steps" in shown and "finished early" in shown, shown
 
     resumed = tmp_path / "resumed.dmm"  # five full-corruption reads in its window when interrupted
@@ -306,7 +306,7 @@ def test_a_stalled_cnn_gets_the_least_squares_readout(tiny_svg: Path, tmp_path: 
         accuracy[readout] = soft_bit_accuracy(model)
     assert accuracy[True] > 0.95 and accuracy[True] - accuracy[False] > 0.1, accuracy
     res = runner.invoke(app, ["info", str(tmp_path / "rTrue.dmm")])
-    assert "linear readout" in " ".join(res.stdout.split())
+    assert "linear readout" in table_text(res.stdout)
 
 
 def test_a_cnn_that_learns_trains_as_without_the_readout(
