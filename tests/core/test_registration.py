@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 import torch
 
+from deepmorph_core import registration
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.registration import UnmorphedRegistration, warp
+from deepmorph_core.registration import ITERATIONS, UnmorphedRegistration, warp
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +47,29 @@ def test_a_known_homography_is_undone(template: torch.Tensor) -> None:
     # each image is registered on its own: one at a time gives the same homographies
     one = torch.cat([registration.homographies(seen[i : i + 1]) for i in range(2)])
     assert torch.allclose(one, found, atol=1e-9)
+
+
+def test_an_image_stops_once_its_steps_settle(
+    ghost: DeepMorphModel, template: torch.Tensor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Morphed renders (what training registers) take fewer than all the steps, and their views
+    are those all the steps give, within a third of one 8-bit gray level."""
+    bits = torch.from_numpy(np.random.default_rng(3).integers(0, 2, (8, ghost.codec.spec.code_bits)).astype(np.float32))
+    renders = ghost.framed(ghost.real_renders(ghost.morph_values(bits)))
+    warped: list[int] = []
+
+    def counted(images: torch.Tensor, homographies: torch.Tensor) -> torch.Tensor:
+        warped.append(images.shape[0])
+        return warp(images, homographies)
+
+    monkeypatch.setattr(registration, "warp", counted)
+    settled = UnmorphedRegistration(template)(renders)
+    settled_warps = sum(warped[:-1])  # the last warp is the view itself
+    warped.clear()
+    monkeypatch.setattr(registration, "SETTLED", 0.0)
+    every_step = UnmorphedRegistration(template)(renders)
+    assert sum(warped[:-1]) == ITERATIONS * len(renders) > settled_warps
+    assert float((settled - every_step).abs().max()) < 1.5 / 255
 
 
 def test_registration_is_the_identity_on_the_drawing_itself(template: torch.Tensor) -> None:
