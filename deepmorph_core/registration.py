@@ -16,11 +16,11 @@ The registration is inverse-compositional Lucas-Kanade over the same eight homog
 parameters as the chain's ECC (:func:`motion_images`), on both images
 blurred by :data:`BLUR_SIGMA` px, batched, the images warped in float32 and each step's 8x8 solve
 in float64: the template's Jacobian and Hessian are computed once, and the steps stop once they
-settle (:data:`SETTLED`). A batch of 32 takes about 39 ms of a 190-200 ms ``train --pixels 200``
-step of ``cloud-snow`` on 2 threads (warped in float64, eight steps always: 63-70 ms of 218-232). On resvg
-renders of ``battery-charging`` its views differ from the chain's ECC views by 0.018 mean
-absolute gray, where the chain's own view at the true homography differs by 0.017 (resampling
-alone) and the unregistered render by 0.032.
+settle (:data:`SETTLED`). A batch of 32 takes about 39 ms of a 190-200 ms
+``train --pixels 200`` step of ``cloud-snow`` on 2 threads (warped in float64, eight steps
+always: 63-70 ms of 218-232). On resvg renders of ``battery-charging`` its views differ from the
+chain's ECC views by 0.018 mean absolute gray, where the chain's own view at the true homography
+differs by 0.017 (resampling alone) and the unregistered render by 0.032.
 kornia's :class:`~kornia.geometry.transform.ImageRegistrator` fits one homography per call by
 gradient descent: on the ghost seen through a 2-degree turn, shear and tilt it took 3.1 s and
 left the view 0.043 mean gray from the drawing, this Gauss-Newton 13 ms and 0.024 (1 thread). So
@@ -106,9 +106,10 @@ class UnmorphedRegistration(nn.Module):
             H = torch.eye(3, dtype=torch.float64, device=images.device).repeat(images.shape[0], 1, 1)
             moving = torch.arange(images.shape[0], device=images.device)
             for _ in range(ITERATIONS):
-                error = warp(seen[moving], H[moving]).flatten(1) - self.template
+                current = H[moving]
+                error = warp(seen[moving], current).flatten(1) - self.template
                 step = (error @ self.steepest.T).double() @ self.inverse_hessian.T
-                moved = H[moving] @ torch.linalg.inv(_homography(step))
+                moved = current @ torch.linalg.inv(_homography(step))
                 H[moving] = moved / moved[:, 2:3, 2:3]
                 # each image stops once its own step settles: its homography is the one it gets alone
                 moving = moving[step.abs().amax(1) >= SETTLED]
