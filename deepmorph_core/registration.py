@@ -16,15 +16,14 @@ The registration is inverse-compositional Lucas-Kanade over the same eight homog
 parameters as the chain's ECC (:func:`motion_images`), on both images
 blurred by :data:`BLUR_SIGMA` px, batched, the images warped in float32 and each step's 8x8 solve
 in float64: the template's Jacobian and Hessian are computed once, and the steps stop once they
-settle (:data:`SETTLED`). A batch of 32 takes about 39 ms of a 190-200 ms
-``train --pixels 200`` step of ``cloud-snow`` on 2 threads (warped in float64, eight steps
-always: 63-70 ms of 218-232). On resvg renders of ``battery-charging`` its views differ from the
+settle (:data:`SETTLED`). Registering 32 renders of ``cloud-snow`` and the gradient back through
+the view take 15-25 ms on 2 threads. On resvg renders of ``battery-charging`` its views differ from the
 chain's ECC views by 0.018 mean absolute gray, where the chain's own view at the true homography
 differs by 0.017 (resampling alone) and the unregistered render by 0.032.
 kornia's :class:`~kornia.geometry.transform.ImageRegistrator` fits one homography per call by
 gradient descent: on the ghost seen through a 2-degree turn, shear and tilt it took 3.1 s and
 left the view 0.043 mean gray from the drawing, this Gauss-Newton 13 ms and 0.024 (1 thread). So
-this is written here, from kornia's blur and warp.
+this is written here, from kornia's blur and a warp of its own (:func:`sampling_grid`).
 """
 
 from __future__ import annotations
@@ -32,8 +31,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 from kornia.filters import gaussian_blur2d
-from kornia.geometry.transform import homography_warp
 from torch import Tensor, nn
+from torch.nn import functional as F
 
 from deepmorph_core.luminance import LUMA_WEIGHTS, Channel, to_channel
 
@@ -76,12 +75,31 @@ def _homography(params: Tensor) -> Tensor:
     return flat.view(-1, 3, 3) + torch.diag(params.new_tensor([1.0, 1.0, 0.0]))
 
 
+def sampling_grid(homographies: Tensor, height: int, width: int) -> Tensor:
+    """``(B, H, W, 2)``: where ``homographies`` ``(B, 3, 3)`` take each point of a ``height`` x
+    ``width`` frame, in unit coordinates (the corner pixels' centres at -1 and 1), as
+    :func:`~torch.nn.functional.grid_sample` reads them with ``align_corners=True``, in the
+    homographies' dtype. Each coordinate is three broadcast multiply-adds of the frame's x and y:
+    kornia's ``homography_warp`` builds the same grid as a batched matrix product with an inner
+    dimension of 3, which MKL runs slowly: a registration's forward and backward of 32 96-px
+    renders took 1.8-2.3x as long with it (2 threads), for views within 2e-5 gray of these."""
+    rows = homographies.reshape(-1, 9, 1, 1)
+    x = torch.linspace(-1.0, 1.0, width, dtype=rows.dtype, device=rows.device).view(1, 1, width)
+    y = torch.linspace(-1.0, 1.0, height, dtype=rows.dtype, device=rows.device).view(1, height, 1)
+    u = rows[:, 0] * x + rows[:, 1] * y + rows[:, 2]
+    v = rows[:, 3] * x + rows[:, 4] * y + rows[:, 5]
+    z = rows[:, 6] * x + rows[:, 7] * y + rows[:, 8]
+    # a point sent to infinity stays where it is (kornia's rule)
+    scale = torch.where(z.abs() > 1e-8, 1.0 / z, torch.ones_like(z))
+    return torch.stack([u * scale, v * scale], -1)
+
+
 def warp(images: Tensor, homographies: Tensor) -> Tensor:
     """``(B, C, H, W)`` images sampled at ``homographies`` ``(B, 3, 3)`` of each frame point (unit
-    coordinates): the view a rectification by that homography makes. Differentiable in
+    coordinates), bilinear: the view a rectification by that homography makes. Differentiable in
     ``images``; the nearest edge pixel (paper, in a framed render) where it looks outside."""
-    h, w = images.shape[-2:]
-    return homography_warp(images, homographies.to(images.dtype), (h, w), align_corners=True, padding_mode="border")
+    grid = sampling_grid(homographies.to(images.dtype), *images.shape[-2:])
+    return F.grid_sample(images, grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
 class UnmorphedRegistration(nn.Module):
@@ -122,4 +140,4 @@ class UnmorphedRegistration(nn.Module):
         return warp(images, self.homographies(images))
 
 
-__all__ = ["BLUR_SIGMA", "ITERATIONS", "SETTLED", "UnmorphedRegistration", "motion_images", "warp"]
+__all__ = ["BLUR_SIGMA", "ITERATIONS", "SETTLED", "UnmorphedRegistration", "motion_images", "sampling_grid", "warp"]
