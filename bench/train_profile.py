@@ -6,6 +6,8 @@ with :class:`~deepmorph.training.codec.TrainConfig`'s defaults (batch 32, 96 px,
 a quarter of each batch drawn by resvg). Steps are timed at the end of the curriculum's ramp
 (full ``medium`` corruption), in stage 1 (decoder alone: the morphs carry no gradient) and in
 stage 2 (encoder too: the gradient runs back through the corruption and the soft rasterizer).
+``--pixels N`` profiles ``train --pixels N`` instead: the capture in the camera's pixels, and each
+render registered onto the unmorphed drawing (its own part).
 
 Each part is timed where it runs: forward calls are wrapped; backward is split by gradient
 hooks on the decoder's input and on the soft raster's output (the autograd engine runs on
@@ -13,6 +15,7 @@ the one thread in order, so the hooks fire between the parts). ``other`` is the 
 in any part (bit draws, loss, metrics, the learning-rate schedule).
 
     .venv/bin/python bench/train_profile.py                       # table + bench/results/train_profile.json
+    .venv/bin/python bench/train_profile.py --pixels 200 --out bench/results/train_profile_pixels200.json
     .venv/bin/python bench/train_profile.py --steps 20 --drawing path/to/icon.svg --move 0.48
 """
 
@@ -38,6 +41,7 @@ PARTS = (
     "soft raster fwd",
     "real renders (resvg)",
     "framing + ink stretch",
+    "registration (--pixels)",
     "corruption fwd",
     "decoder fwd",
     "decoder bwd",
@@ -100,16 +104,17 @@ class Timer:
 
 
 def instrument(run: Any, timer: Timer) -> None:
-    """Wrap the run's parts (its instance attributes, and the framing functions train.py calls)."""
-    import deepmorph.training.codec as train_module
-
+    """Wrap the run's parts (its instance attributes). The framing's time is the model's
+    ``framed`` less the registration inside it."""
     model = run.model
     model.encoder.forward = timer.wrap("encoder fwd", model.encoder.forward)
     run.raster.forward = timer.wrap("soft raster fwd", run.raster.forward, hook="raster_out")
     run.raster.render_rgb = timer.wrap("soft raster fwd", run.raster.render_rgb, hook="raster_out")
     model.real_renders = timer.wrap("real renders (resvg)", model.real_renders)
-    for name in ("frame_renders", "stretch_ink"):
-        setattr(train_module, name, timer.wrap("framing + ink stretch", getattr(train_module, name)))
+    model.framed = timer.wrap("framing + ink stretch", model.framed)
+    if model.registered:
+        registration = model.registration(run.device)
+        registration.forward = timer.wrap("registration (--pixels)", registration.forward)
     for augment in run._augments.values():
         augment.forward = timer.wrap("corruption fwd", augment.forward)
     decoder_forward = timer.wrap("decoder fwd", model.decoder.forward)
@@ -150,6 +155,7 @@ def time_steps(run: Any, timer: Timer, steps: int) -> dict[str, float]:
     finally:
         torch.Tensor.backward = original_backward  # type: ignore[method-assign]
     parts = dict(timer.seconds)
+    parts["framing + ink stretch"] = parts.get("framing + ink stretch", 0.0) - parts.get("registration (--pixels)", 0.0)
     parts["decoder bwd"] = backward["decoder"]
     parts["corruption + framing bwd"] = backward["corruption"]
     parts["soft raster + encoder bwd"] = backward["raster"]
@@ -167,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=30, help="steps timed in each stage")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--pixels", type=int, default=None, help="profile train --pixels N")
     ap.add_argument("--out", type=Path, default=RESULTS / "train_profile.json")
     args = ap.parse_args(argv)
     threads = set_threads(args.threads)
@@ -183,7 +190,11 @@ def main(argv: list[str] | None = None) -> int:
     defaults = TrainConfig()
     with tempfile.TemporaryDirectory() as tmp:
         model, config, _ = open_model(
-            svg, Path(tmp) / "m.dmm", "auto", bounds={"move": move}, train={"threads": threads, "seed": args.seed}
+            svg,
+            Path(tmp) / "m.dmm",
+            "auto",
+            bounds={"move": move},
+            train={"threads": threads, "seed": args.seed, **({"print_px": args.pixels} if args.pixels else {})},
         )
         run = CodecRun(model, config, Path(tmp) / "m.dmm")
         timer = Timer()
@@ -212,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{svg.name}: {model.meta.n_variables} variables, {model.codec.spec.payload_bits} payload / "
         f"{model.codec.spec.code_bits} code bits, batch {config.batch}, {config.width} px, "
-        f"{config.severity}, real-render share {config.hard_fraction}; {threads} thread(s), {args.steps} steps each"
+        f"{config.severity}{f', prints {config.print_px} px' if config.print_px else ''}, real-render share "
+        f"{config.hard_fraction}; {threads} thread(s), {args.steps} steps each"
     )
     print(table(("part", "stage 1 ms", "stage 1 %", "stage 2 ms", "stage 2 %"), rows))
     print(
@@ -236,7 +248,9 @@ def main(argv: list[str] | None = None) -> int:
             "n_variables": model.meta.n_variables if n_variables is None else n_variables,
             "payload_bits": model.codec.spec.payload_bits,
             "code_bits": model.codec.spec.code_bits,
-            "config": {k: getattr(config, k) for k in ("batch", "width", "severity", "hard_fraction", "steps")},
+            "config": {
+                k: getattr(config, k) for k in ("batch", "width", "print_px", "severity", "hard_fraction", "steps")
+            },
             "default_config": defaults.batch == config.batch and defaults.width == config.width,
             "steps_timed": args.steps,
             "stage1_s": stage1,
