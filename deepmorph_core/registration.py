@@ -16,10 +16,10 @@ The registration is inverse-compositional Lucas-Kanade over the same eight homog
 parameters as the chain's ECC (:func:`motion_images`), on both images
 blurred by :data:`BLUR_SIGMA` px, batched, the images warped in float32 and each step's 8x8 solve
 in float64: the template's Jacobian and Hessian are computed once, and the steps stop once they
-settle (:data:`SETTLED`). Registering 32 renders of ``cloud-snow`` and the gradient back through
-the view take 15-25 ms on 2 threads. On resvg renders of ``battery-charging`` its views differ from the
-chain's ECC views by 0.018 mean absolute gray, where the chain's own view at the true homography
-differs by 0.017 (resampling alone) and the unregistered render by 0.032.
+settle (:data:`SETTLED`). Registering 32 renders of ``cloud-snow`` and the gradient back
+through the view take 15-25 ms on 2 threads. On resvg renders of ``battery-charging`` its views
+differ from the chain's ECC views by 0.018 mean absolute gray, where the chain's own view at the
+true homography differs by 0.017 (resampling alone) and the unregistered render by 0.032.
 kornia's :class:`~kornia.geometry.transform.ImageRegistrator` fits one homography per call by
 gradient descent: on the ghost seen through a 2-degree turn, shear and tilt it took 3.1 s and
 left the view 0.043 mean gray from the drawing, this Gauss-Newton 13 ms and 0.024 (1 thread). So
