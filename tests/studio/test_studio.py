@@ -804,6 +804,13 @@ def _download(page, selector: str, path: Path) -> Path:  # noqa: ANN001
     return path
 
 
+def _type_payloads_as(page, form: str) -> None:  # noqa: ANN001
+    """Choose how the Print tab's payload is typed, once the previews and downloads the steps
+    before it started have finished (each may show or hide the red bar above the form)."""
+    page.wait_for_load_state("networkidle")
+    page.check(f"#print-form input[name=payload_as][value={form}]")
+
+
 def _reads(image) -> list[tuple[str, bool]]:  # noqa: ANN001 - a gray uint8 array
     """What the bundled ghost reads in a code's image, given a white margin."""
     import numpy as np
@@ -844,7 +851,7 @@ def test_a_payload_typed_as_a_number_or_hex_or_picked_from_the_registry(page, se
     drawn = page.input_value("#print-payload")
 
     # a number: the payload above is shown as one, and a number typed is printed
-    page.check("#print-form input[name=payload_as][value=number]")
+    _type_payloads_as(page, "number")
     assert page.input_value("#print-payload") == str(int(drawn, 16))
     page.click("#print-random")
     page.wait_for_function("(v) => /^[0-9]+$/.test(document.querySelector('#print-payload').value) && "
@@ -868,7 +875,7 @@ def test_a_payload_typed_as_a_number_or_hex_or_picked_from_the_registry(page, se
 
     # hex: the number shown in hex; the 0x may be left out
     page.fill("#print-payload", "10597059")
-    page.check("#print-form input[name=payload_as][value=hex]")
+    _type_payloads_as(page, "hex")
     assert page.input_value("#print-payload") == "0xA1B2C3"
     page.fill("#print-payload", "5A3C96")
     svg = _download(page, "#print-svg", tmp_path / "hex.svg")
@@ -876,7 +883,7 @@ def test_a_payload_typed_as_a_number_or_hex_or_picked_from_the_registry(page, se
     assert _svg_reads(svg) == [("0x5A3C96", True)]
 
     # a registry entry, picked by what it stands for
-    page.check("#print-form input[name=payload_as][value=registry]")
+    _type_payloads_as(page, "registry")
     page.wait_for_selector("#print-entry-field:not([hidden])")
     assert page.is_hidden("#print-payload-field")
     labels = page.eval_on_selector_all("#print-entry option", "os => os.map(o => o.textContent)")
