@@ -251,7 +251,8 @@ def main(argv: list[str] | None = None) -> int:
             "config": {
                 k: getattr(config, k) for k in ("batch", "width", "print_px", "severity", "hard_fraction", "steps")
             },
-            "default_config": defaults.batch == config.batch and defaults.width == config.width,
+            "default_config": (defaults.batch, defaults.width, defaults.print_px)
+            == (config.batch, config.width, config.print_px),
             "steps_timed": args.steps,
             "stage1_s": stage1,
             "stage2_s": stage2,
