@@ -596,7 +596,10 @@ function sheetRequest(format, preview = false, quiet = false) {
 let sheetShown = null;
 async function sheetPreview() {
   const img = $("#sheet-preview");
-  if (!chosenPayload().payload && $("#sheet-form").mode.value === "range") return;
+  const f = $("#sheet-form");
+  // nothing to show yet: no payload to count from, or a list still to be typed
+  if (f.mode.value === "range" && !chosenPayload().payload) return;
+  if (f.mode.value === "list" && !f.lines.value.trim()) return;
   try {
     const blob = await newest("sheet", () => sheetRequest("svg", true, true));
     if (blob === null) return;
