@@ -81,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--unrelated", type=int, default=1000, help="unrelated images for false accepts (0: none)")
     p.add_argument("--icons", type=Path, default=None, help="a folder of other drawings for the unrelated images")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--print-px", type=float, default=None,
+                   help="close-ups with the drawing about this many camera pixels wide (default: 144-192 px "
+                        "in 240-px photos, or as wide as a --pixels model was trained for)")  # fmt: skip
     p.add_argument("--detector", help="the detector (default: the model's, else universal; none: whole images)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--out", default=str(RESULTS / "colour_reading.json"))
@@ -113,9 +116,9 @@ def main(argv: list[str] | None = None) -> int:
         det = args.detector
         close = hard = None
         if args.close_ups:
-            close = validate_close_ups(model.eval(), args.close_ups, args.seed, "medium", detector=det)
+            close = validate_close_ups(model.eval(), args.close_ups, args.seed, "medium", args.print_px, det)
         if args.hard:
-            hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard", detector=det)
+            hard = validate_close_ups(model.eval(), args.hard, args.seed + 1, "hard", args.print_px, det)
         locator = Locator(model, detector=det)
         accepts = sum(bool(found.result.ok) for _, image in unrelated for found in locator.locate(image))
         rows.append(
@@ -123,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                 "drawing": meta.drawing_name,
                 "variables": colour.n_variables,
                 "payload_bits": model.codec.spec.payload_bits,
+                "print_px": model.print_px,
                 "predicted_colour": predict(colour).payload_bits,
                 "predicted_flattened": predict(flat).payload_bits,
                 "renders": None if renders is None else renders.read / renders.samples,
@@ -147,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
                 "drawing",
                 "N_v",
                 "bits",
+                "px",
                 "pred.",
                 "pred. b/w",
                 "renders",
@@ -166,6 +171,7 @@ def main(argv: list[str] | None = None) -> int:
                     r["drawing"],
                     r["variables"],
                     r["payload_bits"],
+                    r["print_px"] or 96,
                     r["predicted_colour"],
                     r["predicted_flattened"],
                     r["renders"],

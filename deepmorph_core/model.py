@@ -340,14 +340,15 @@ class DeepMorphModel:
         ``(k, N_v)`` morph values at the decoder's width."""
         return self.drawing.render_real(values, self.width, rgb=rgb).to(values.device)
 
-    def framed(self, renders: Tensor) -> Tensor:
+    def framed(self, renders: Tensor, registered: bool | None = None) -> Tensor:
         """Clean renders ``(B, C, h, w)`` (paper white) as the decoder meets them before the
         capture's corruption, as training and validation frame theirs: ink stretched as photos
         are, framed by their ink (:func:`~deepmorph_core.framing.frame_renders`), and for a
         :attr:`registered` model registered onto the unmorphed drawing and framed again, as the
-        photo chain's view is. ``(B, C, H, W)``."""
+        photo chain's view is. ``registered``: whether to register, where not as the model
+        says (training's clean first rung does not). ``(B, C, H, W)``."""
         framed = self._framed_by_ink(stretch_ink(renders, self.drawing.ink_level))
-        if not self.registered:
+        if not (self.registered if registered is None else registered):
             return framed
         return self._framed_by_ink(self.registration(framed.device)(framed))
 

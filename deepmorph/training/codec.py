@@ -322,7 +322,7 @@ class CodecRun:
                 images = self.raster.render_rgb(soft) if self.colour else 1.0 - self.raster(soft)
         if k:
             images = torch.cat([self.model.real_renders(values[:k], rgb=self.colour), images], 0)
-        images = self.model.framed(images)
+        images = self.model.framed(images, self.registered and not self._clean_rung())
         small = round(self.cfg.small_prints * bits.shape[0])
         if not small:
             return self.augment_now()(images, generator=self.gen)
@@ -347,6 +347,14 @@ class CodecRun:
         shrunk = F.interpolate(images, size=(small_h, small_w), mode="area")
         captured = self._small_augments[key](shrunk, generator=self.gen)
         return F.interpolate(captured, size=(h, w), mode="bilinear", align_corners=False).clamp(0.0, 1.0)
+
+    def _clean_rung(self) -> bool:
+        """Whether the curriculum is on its clean first rung (no corruption) on the way to a
+        corrupted one. A registered model's renders are registered from the next rung on: on the
+        clean rung the decoder first learns the code's moves, which registering onto the
+        unmorphed drawing partly takes up (on faint colour edges it then learnt nothing: bit
+        accuracy stayed at chance; ``docs/design-notes.md``)."""
+        return self._rung() == LADDER[0] and self.cfg.severity != LADDER[0]
 
     def augment_now(self) -> nn.Module:
         """The corruption of the curriculum's current rung: none, easy, ... up to ``severity``."""

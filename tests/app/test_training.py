@@ -716,3 +716,32 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     wide = predict(MorphableDrawing.load(tiny_svg), print_px=200)
     assert DeepMorphModel.load(planned).codec.spec == wide.codec
     assert wide.payload_bits > predict(MorphableDrawing.load(tiny_svg)).payload_bits
+
+
+def test_a_registered_model_learns_its_code_unregistered_on_the_clean_rung(tiny_svg: Path, tmp_path: Path) -> None:
+    """``--pixels`` registers training renders onto the unmorphed drawing, but not on the
+    curriculum's clean first rung: there the decoder first learns the code's moves, which the
+    registration partly takes up (faint colour edges then learnt nothing at all). From the next
+    rung on, every render is registered, as the photo chain's view is; without ``--pixels``
+    none is."""
+    from deepmorph.training.codec import CodecRun, open_model
+
+    def asked(print_px: int | None) -> list[tuple[str, bool]]:
+        train = {"threads": 1, "steps": 100, "batch": 4} | ({"print_px": print_px} if print_px else {})
+        out = tmp_path / f"{print_px}.dmm"
+        model, config, _ = open_model(
+            tiny_svg, out, 4, None, None, None, train, False, True, False, lambda text: None, None
+        )
+        run = CodecRun(model, config, out)
+        seen: list[bool] = []
+        framed = model.framed
+        model.framed = lambda renders, registered=None: seen.append(bool(registered)) or framed(renders, registered)
+        rungs = []
+        for step in (0, 99):  # the ladder's first rung, then its last
+            run.record.step = step
+            run.images(torch.zeros(4, model.codec.spec.code_bits), False)
+            rungs.append(run._rung())
+        return list(zip(rungs, seen))
+
+    assert asked(200) == [("none", False), ("medium", True)]
+    assert asked(None) == [("none", False), ("medium", False)]
