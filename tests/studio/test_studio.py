@@ -806,7 +806,9 @@ def _download(page, selector: str, path: Path) -> Path:  # noqa: ANN001
 
 def _type_payloads_as(page, form: str) -> None:  # noqa: ANN001
     """Choose how the Print tab's payload is typed, once the previews and downloads the steps
-    before it started have finished (each may show or hide the red bar above the form)."""
+    before it started have finished. Their answers showed or hid the red bar, which used to move
+    the form under the pointer; the bar now keeps its line (``studio.css``), and the wait keeps
+    the switch apart from answers still in flight all the same."""
     page.wait_for_load_state("networkidle")
     page.check(f"#print-form input[name=payload_as][value={form}]")
 
