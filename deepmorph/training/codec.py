@@ -70,6 +70,7 @@ from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
+from deepmorph_core.heap import keep_freed_memory
 from deepmorph_core.luminance import Channel
 from deepmorph_core.model import DeepMorphModel, check_trainable
 from deepmorph_core.morphable import MorphableDrawing, bound_defaults
@@ -190,6 +191,8 @@ class CodecRun:
         self.mine = rank_shards(self.shards, self.world)
         if config.threads:
             use_threads(config.threads)
+        if self.device.type == "cpu":
+            keep_freed_memory()  # each step reuses the last one's pages (deepmorph_core/heap.py)
         model.encoder.to(self.device)
         model.decoder.to(self.device)
         # on the CPU, convolutions run channels-last: the decoder's full-resolution layers (one

@@ -30,6 +30,7 @@ from deepmorph_core.bundle import DetectorMeta, TrainingRecord
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
+from deepmorph_core.heap import keep_freed_memory
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_core.threads import use_threads
@@ -210,6 +211,7 @@ class DetectorRun:
         self.cfg, self.out = config, Path(out)
         if config.threads:
             use_threads(config.threads)
+        keep_freed_memory()  # each step reuses the last one's pages (deepmorph_core/heap.py)
         torch.manual_seed(config.seed)
         self.net = DetectorNet(config.width)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
