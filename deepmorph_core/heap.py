@@ -5,8 +5,8 @@ batch of decoder activations at 96 px is tens of megabytes). glibc's allocator s
 above its mmap threshold (128 KiB, rising to at most 32 MiB) with fresh ``mmap`` calls and
 returns them with ``munmap``, and trims the heap's top whenever 128 KiB are free there; either
 way the next step touches new pages, and the kernel zero-fills each one on a page fault. Kept
-in the heap, a ``--pixels 200`` stage-2 step on one thread took 0.86x as long
-(``docs/design-notes.md``, *Speed*).
+in the heap, a ``--pixels 200`` stage-2 step on one thread took 0.86x as long, and on two the
+same (``docs/design-notes.md``, *Speed*).
 
 :func:`keep_freed_memory` sets three of glibc's ``mallopt`` parameters for the whole process:
 blocks up to 1 GiB come from the heap, a freed heap top is kept, and the heap grows 256 MiB at a
