@@ -36,13 +36,14 @@ print(json.dumps({"kept": kept, "again": keep_freed_memory() if kept else None, 
 # project measures on, which backs some of them with huge pages)
 FRESH_AT_LEAST = 5 * (64 // 2)
 
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="mallopt is glibc's")
+
 
 def probe(mode: str) -> dict:
     out = subprocess.run([sys.executable, "-c", PROBE, mode], capture_output=True, text=True, check=True)
     return json.loads(out.stdout)
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="mallopt is glibc's")
 def test_a_freed_block_is_reused_without_page_faults() -> None:
     got = probe("kept")
     if not got["kept"]:
@@ -52,7 +53,6 @@ def test_a_freed_block_is_reused_without_page_faults() -> None:
     assert got["faults"] < FRESH_AT_LEAST // 8
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="mallopt is glibc's")
 def test_without_it_a_freed_block_comes_back_as_fresh_pages() -> None:
     """The test above can fail: by default glibc hands such a block back to the kernel."""
     got = probe("default")
