@@ -736,3 +736,43 @@ def test_a_colour_reading_the_code_corrected_must_show_its_morph_beyond_noise(
     monkeypatch.setattr(type(locator.model.drawing), "colour", property(lambda self: True))
     assert checker.least_gain(repaired) == REPAIRED_COLOUR_MORPH_GAIN > MIN_MORPH_GAIN
     assert checker.least_gain(clean) == MIN_MORPH_GAIN
+
+
+@pytest.mark.parametrize(
+    ("whole_frame", "corrected", "aligned", "colour", "passes"),
+    [
+        (True, 2, 0.675, False, False),  # a frame filled by another icon: refused whatever its bits show
+        (True, 2, 0.85, False, True),  # a frame-filling print of the drawing
+        (True, 0, 0.675, False, True),  # read without corrections: the bits decide
+        (False, 2, 0.675, False, True),  # a proposed print: the bits decide
+        (True, 2, 0.675, True, True),  # colour drawings are not held to it
+    ],
+)
+def test_a_repaired_whole_frame_reading_of_another_drawing_is_refused(
+    model: DeepMorphModel,
+    locator: Locator,
+    monkeypatch: pytest.MonkeyPatch,
+    whole_frame: bool,
+    corrected: int,
+    aligned: float,
+    colour: bool,
+    passes: bool,
+) -> None:
+    """A whole-frame reading the code corrected passes only where the unmorphed drawing aligned to
+    the photo at WHOLE_FRAME_REPAIRED_ALIGNMENT or better, even when its bits are all shown: a
+    photo of another icon filling the frame passed a chip's bit check so at 0.675."""
+    from deepmorph_detect.check import WHOLE_FRAME_REPAIRED_ALIGNMENT
+
+    assert aligned == 0.85 or aligned < WHOLE_FRAME_REPAIRED_ALIGNMENT <= 0.85
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(31))[0]
+    code = model.codec.encode(payload)
+    shown = BitEvidence(code, np.ones(len(code), np.float32), 0.9, 1.0)
+    monkeypatch.setattr(type(model.drawing), "colour", property(lambda self: colour))
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), aligned + 0.04, aligned))
+    monkeypatch.setattr(checker.synthesis, "evidence", lambda *args, **kwargs: shown)
+    monkeypatch.setattr(checker, "rival_deviation", lambda *args, **kwargs: None)
+    image = np.full((64, 64), 0.8, np.float32)
+    checked = checker.check(image, np.eye(3), DecodeResult(payload, True, corrected, 0.9), whole_frame=whole_frame)
+    assert checked.result.ok is passes
+    assert checked.status == ("passed" if passes else "failed")
