@@ -131,7 +131,8 @@ class PayloadCheck:
     Attributes:
         result: the decode, with ``ok`` withdrawn when the check failed.
         fit: the alignment to the payload's morph (``None`` when not run or diverged).
-        status: ``passed``, ``failed`` (the morph fits no better than the unmorphed drawing),
+        status: ``passed``, ``failed`` (the morph fits no better than the unmorphed drawing, or a
+            repaired whole-frame reading is not this drawing: :meth:`PayloadChecker.repaired_off_the_drawing`),
             ``contradicted`` (it does, but the photo does not show its code bits:
             :attr:`~deepmorph_detect.synthesis.BitEvidence.agrees` is false) or ``not run``
             (the CRC had failed).
@@ -270,8 +271,9 @@ class PayloadChecker:
         readings of such prints. A reading of the whole image framed by its ink (``whole_frame``,
         which does not know the drawing either) is asked the same where its morph fits below
         :data:`WHOLE_FRAME_TRUSTED_FIT`, whatever the alignment; one the code had to correct is
-        refused where the photo is not this drawing (:meth:`repaired_off_the_drawing`). A reading in a photo whose light
-        was estimated from the drawing's own template (:mod:`~deepmorph_detect.template_light`;
+        refused where the photo is not this drawing (:meth:`repaired_off_the_drawing`). A reading
+        in a photo whose light was estimated from the drawing's own template
+        (:mod:`~deepmorph_detect.template_light`;
         ``relit_from``: the unmorphed drawing's alignment in the photo itself) never skips the
         per-bit check: there the drawing and any morph near it fit better than in the photo, so
         no fit measured there vouches for it. It is asked only whether its morph explains the
