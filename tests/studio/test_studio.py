@@ -988,3 +988,39 @@ def test_a_sheet_of_labelled_codes(page, server: Server, tmp_path: Path) -> None
     status, body = request(server, "/api/models/ghost/sheet", token=server.token,
                            data=b'{"count": 2, "start": "0x000001", "code_mm": "wide"}')  # fmt: skip
     assert status == 400 and json.loads(body)["error"] == "code width (mm): expected a number, got 'wide'"
+
+
+def test_a_refused_sheet_answered_late_does_not_cover_a_newer_one(page, server: Server) -> None:
+    """The studio answers sheet requests on a pool of threads, so a busy machine can answer them
+    out of order. A refusal that arrives after a newer sheet was made must not put its stale
+    error in the red bar; held back here, it arrives last on purpose."""
+    held = []
+
+    def hold_refused_downloads(route) -> None:  # noqa: ANN001
+        body = json.loads(route.request.post_data or "{}")
+        if body.get("count") == "40" and not body.get("preview"):
+            held.append(route)  # answered below, after the newer sheet
+        else:
+            route.continue_()
+
+    open_studio(page, server, "print")
+    page.wait_for_function("() => document.querySelector('#print-payload').value.startsWith('0x')")
+    page.route("**/api/models/ghost/sheet", hold_refused_downloads)
+    page.fill("#sheet-form input[name=code_mm]", "40")
+    page.fill("#sheet-form input[name=start]", "0x000001")
+    page.fill("#sheet-form input[name=count]", "40")
+    page.click("#sheet-svg")  # a refused download, held back
+    for _ in range(50):  # the route handler runs as Playwright dispatches the page's events
+        if held:
+            break
+        page.wait_for_timeout(100)
+    assert len(held) == 1
+    page.fill("#sheet-form input[name=count]", "3")
+    with page.expect_download():
+        page.click("#sheet-svg")
+    page.wait_for_selector("#error", state="hidden")
+    with page.expect_response(lambda r: r.request.post_data == held[0].request.post_data) as late:
+        held[0].continue_()
+    assert late.value.status == 400
+    page.wait_for_timeout(300)  # the page has handled the late answer
+    assert page.is_hidden("#error"), page.text_content("#error")

@@ -27,19 +27,19 @@ async function api(path, { quiet = false, ...options } = {}) {
   return data;
 }
 
-// the answer (or error) of the newest of a kind of request only: an older one still in flight
-// gives null
+// the red bar shows the answer (or error) of the newest of a kind of request only: an older one
+// still in flight gives null, or with keep (a download) its own answer, the bar left as it is
 const latest = {};
-async function newest(kind, request) {
+async function newest(kind, request, keep = false) {
   const seq = (latest[kind] = (latest[kind] || 0) + 1);
   try {
     const data = await request();
-    if (latest[kind] !== seq) return null;
+    if (latest[kind] !== seq) return keep ? data : null;
     showError("");
     return data;
   } catch (exc) {
-    if (latest[kind] !== seq) return null;
-    showError(exc.message);
+    if (latest[kind] !== seq && !keep) return null;
+    if (latest[kind] === seq) showError(exc.message);
     throw exc;
   }
 }
@@ -615,7 +615,8 @@ $("#sheet-form").addEventListener("change", sheetPreview);
 document.querySelectorAll("#sheet-form [data-sheet]").forEach((button) =>
   button.addEventListener("click", async () => {
     const format = button.dataset.sheet;
-    const blob = await sheetRequest(format);
+    // sequenced with the previews: a refusal answered after a newer sheet request stays out of the bar
+    const blob = await newest("sheet", () => sheetRequest(format, false, true), true);
     const f = $("#sheet-form");
     saveBlob(blob, `${printModel()}-sheet-${f.page.value}-${f.code_mm.value}mm.${format}`);
   }));
