@@ -56,7 +56,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, frame_size, parse_ints, set_threads, table, write_json  # noqa: E402
-from time_to_print import pick_drawings, read_scenes  # noqa: E402
+from time_to_print import pick_drawings, read_scenes, wide_read  # noqa: E402
 
 BARS = {"medium": 0.99, "hard": 0.95}
 FITTED_ON = ("battery-charging", "codepen")  # the plan was chosen on these two (the rule's first and third)
@@ -159,13 +159,6 @@ def sizing(model: Any) -> str:
     return ", ".join(f"{s.code_bits[0]}->{s.code_bits[1]} {s.measured_on}" for s in shrunk) or "-"
 
 
-def _wide_read(read: dict[str, Any]) -> str:
-    """``read/prints (percent)`` of the prints at least as wide as the model reads, from
-    :func:`time_to_print.read_scenes`'s counts for one severity."""
-    n = read["wide_prints"]
-    return f"{read['wide_read']}/{n} ({100 * read['wide_read'] / n:.1f} %)" if n else "-"
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("feather", type=Path, help="the Feather icons folder")
@@ -228,7 +221,7 @@ def main() -> None:
         scenes = read_scenes(bundle, args.scenes, args.seed, args.frame) if args.scenes else None
         if scenes is not None:
             print(f"{svg.stem} scenes: {scenes}", file=sys.stderr, flush=True)
-            scene_rows.append([svg.stem, *(_wide_read(scenes[s]) for s in BARS), sum(scenes[s]["wrong"] for s in BARS)])
+            scene_rows.append([svg.stem, *(wide_read(scenes[s]) for s in BARS), sum(scenes[s]["wrong"] for s in BARS)])
         batches = batch_read(bundle.with_suffix(".log.jsonl"))
         ratio = trained.payload_bits / report.visible
         role = "fitted" if svg.stem in FITTED_ON else "checked"

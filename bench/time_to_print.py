@@ -159,6 +159,13 @@ def read_scenes(bundle: Path, n: int, seed: int, frame: tuple[int, int] = (640, 
     return out
 
 
+def wide_read(read: dict[str, Any]) -> str:
+    """``read/prints (percent)`` of the prints at least as wide as the model reads, from
+    :func:`read_scenes`'s counts for one severity; ``-`` where there were none."""
+    n = read["wide_prints"]
+    return f"{read['wide_read']}/{n} ({100 * read['wide_read'] / n:.1f} %)" if n else "-"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("feather", type=Path, help="the Feather icons folder (../shared/data/drawings/feather)")

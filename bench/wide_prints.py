@@ -19,14 +19,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, frame_size, set_threads, table, write_json  # noqa: E402
-from time_to_print import read_scenes  # noqa: E402
+from time_to_print import read_scenes, wide_read  # noqa: E402
 
 SEVERITIES = ("medium", "hard")
-
-
-def _share(read: dict[str, int | float]) -> str:
-    """``read/prints (share)`` of the wide prints of one severity."""
-    return f"{read['wide_read']}/{read['wide_prints']} ({100 * read['wide_read_share']:.1f} %)"
 
 
 def main() -> None:
@@ -44,7 +39,7 @@ def main() -> None:
         reading = read_scenes(bundle, args.scenes, args.seed, args.frame)
         results[bundle.stem] = reading
         wrong = sum(reading[s]["wrong"] for s in SEVERITIES)
-        rows.append([bundle.stem, reading["medium"]["wide_px"], *(_share(reading[s]) for s in SEVERITIES), wrong])
+        rows.append([bundle.stem, reading["medium"]["wide_px"], *(wide_read(reading[s]) for s in SEVERITIES), wrong])
         print(f"{bundle.stem}: {reading}", file=sys.stderr, flush=True)
     frame = "x".join(map(str, args.frame))
     print(f"\n{args.scenes} scenes of {frame} per severity ({threads} thread(s)), universal detector")
