@@ -26,9 +26,12 @@ detection there is a false one.
 
 ``--bundles`` reads trained bundles (no detector of their own needed) in the same scenes with the
 universal detector alone (``--severities``; no negatives): prints read and wrong payloads, what a
-user of ``train`` without ``train-detector`` gets.
+user of ``train`` without ``train-detector`` gets. With ``--tuned``, each bundle's ``NAME-tuned.dmm``
+beside it (``train-detector`` at its defaults) is located on the same scenes: what the short
+fine-tune changes, frame time included.
 
     .venv/bin/python bench/universal_detector.py --bundles bench/results/colour_models/bar-chart.dmm --n 300
+    .venv/bin/python bench/universal_detector.py --bundles models/*.dmm --tuned --n 60  # NAME-tuned.dmm skipped
 """
 
 from __future__ import annotations
@@ -156,19 +159,35 @@ def negatives(paths: list[tuple[str, Path]], total: int, seed: int) -> dict[str,
     return out
 
 
-def universal_alone(bundles: list[Path], n: int, seed: int, severities: list[str], threads: int, out: Path) -> None:
+def universal_alone(
+    bundles: list[Path], n: int, seed: int, severities: list[str], threads: int, out: Path, tuned: bool = False
+) -> None:
     """``--bundles``: each bundle's prints in :func:`compare`'s scenes, found by the universal
-    detector alone."""
-    rows, found = [], {}
-    for path in bundles:
-        res = compare(path.stem, path, n, seed, None, own=False, severities=tuple(severities))
+    detector alone (``tuned``: and by the fine-tuned detector of ``NAME-tuned.dmm`` beside it)."""
+    rows, tuned_rows, found = [], [], {}
+    for path in [b for b in bundles if not (tuned and b.stem.endswith("-tuned"))]:
+        fine = path.with_name(f"{path.stem}-tuned.dmm") if tuned else None
+        if fine is not None and not fine.is_file():
+            raise SystemExit(f"--tuned: no {fine} (deepmorph train-detector {path} --out {fine})")
+        res = compare(path.stem, path, n, seed, fine, own=False, severities=tuple(severities))
         found[str(path)] = res
         for sev in severities:
             r = res[f"{sev}/universal"]
             rows.append([path.stem, sev, r["prints"], r["read"], f"{r['read_share']:.1%}", r["wrong"],
                          f"{r['frame_s_median'] * 1000:.0f}"])  # fmt: skip
+            if fine is not None:
+                t = res[f"{sev}/tuned"]
+                tuned_rows.append([path.stem, sev, f"{t['found_share']:.1%} / {r['found_share']:.1%}",
+                                   f"{t['read_share']:.1%} / {r['read_share']:.1%}", f"{t['wrong']} / {r['wrong']}",
+                                   f"{t['corner_error_px'] or 0:.2f} / {r['corner_error_px'] or 0:.2f}",
+                                   f"{t['frame_s_median'] * 1000:.0f} / {r['frame_s_median'] * 1000:.0f}",
+                                   f"{t['frame_s_median'] / r['frame_s_median']:.2f}"])  # fmt: skip
     print(f"\nThe universal detector alone, {n} scenes per bundle and severity, {threads} thread(s):")
     print(table(["bundle", "severity", "prints", "read", "share", "wrong", "frame ms"], rows))
+    if tuned_rows:
+        print("\nFine-tuned (train-detector at its defaults) / universal, the same scenes:")
+        head = ["bundle", "severity", "found", "read", "wrong", "corner px", "frame ms", "time ratio"]
+        print(table(head, tuned_rows))
     write_json(out, {"benchmark": "universal_detector", "environment": environment(), "threads": threads, "n": n,
                      "seed": seed, "bundles": found})  # fmt: skip
 
@@ -181,14 +200,14 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", help="comma-separated drawing names")
-    ap.add_argument("--tuned", action="store_true", help="also NAME-tuned.dmm of --models")
+    ap.add_argument("--tuned", action="store_true", help="also NAME-tuned.dmm of --models, or beside each of --bundles")
     ap.add_argument("--bundles", type=Path, nargs="+", help="trained bundles read with the universal detector alone")
     ap.add_argument("--severities", default="medium,hard", help="of --bundles' scenes")
     ap.add_argument("--out", type=Path, default=RESULTS / "universal_detector.json")
     args = ap.parse_args()
     threads = set_threads(args.threads)
     if args.bundles:
-        universal_alone(args.bundles, args.n, args.seed, args.severities.split(","), threads, args.out)
+        universal_alone(args.bundles, args.n, args.seed, args.severities.split(","), threads, args.out, args.tuned)
         return
     from deepmorph.training.universal import held_out
     from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
@@ -223,12 +242,13 @@ def main() -> None:
     print(table(["drawing", "severity", "found", "read", "wrong", "corner px", "frame ms", "time ratio"], rows))
     tuned_rows = [
         [name, sev, f"{res[f'{sev}/tuned']['found_share']:.1%}", f"{res[f'{sev}/tuned']['read_share']:.1%}",
-         res[f"{sev}/tuned"]["wrong"], f"{res[f'{sev}/tuned']['corner_error_px'] or 0:.2f}"]
+         res[f"{sev}/tuned"]["wrong"], f"{res[f'{sev}/tuned']['corner_error_px'] or 0:.2f}",
+         f"{res[f'{sev}/tuned']['frame_s_median'] * 1000:.0f}"]
         for name, res in per_drawing.items() for sev in ("medium", "hard") if f"{sev}/tuned" in res
     ]  # fmt: skip
     if tuned_rows:
         print("\nThe universal detector fine-tuned (train-detector at its defaults), same scenes:")
-        print(table(["drawing", "severity", "found", "read", "wrong", "corner px"], tuned_rows))
+        print(table(["drawing", "severity", "found", "read", "wrong", "corner px", "frame ms"], tuned_rows))
     for key in ("found_share", "read_share"):
         for sev in ("medium", "hard"):
             gaps = [res[f"{sev}/universal"][key] - res[f"{sev}/own"][key] for res in per_drawing.values()]
