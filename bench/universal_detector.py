@@ -130,6 +130,22 @@ def compare(
     return out
 
 
+#: the columns of :func:`side_by_side`
+SIDE_BY_SIDE = ("found", "read", "wrong", "corner px", "frame ms")
+
+
+def side_by_side(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """Two detectors' :func:`compare` results on the same scenes as ``a / b`` cells, in the
+    order of :data:`SIDE_BY_SIDE`."""
+    return [
+        f"{a['found_share']:.1%} / {b['found_share']:.1%}",
+        f"{a['read_share']:.1%} / {b['read_share']:.1%}",
+        f"{a['wrong']} / {b['wrong']}",
+        f"{a['corner_error_px'] or 0:.2f} / {b['corner_error_px'] or 0:.2f}",
+        f"{a['frame_s_median'] * 1000:.0f} / {b['frame_s_median'] * 1000:.0f}",
+    ]
+
+
 def negatives(paths: list[tuple[str, Path]], total: int, seed: int) -> dict[str, Any]:
     """Scenes without any print of a model, located with the universal detector."""
     from deepmorph_core.model import DeepMorphModel
@@ -177,17 +193,14 @@ def universal_alone(
                          f"{r['frame_s_median'] * 1000:.0f}"])  # fmt: skip
             if fine is not None:
                 t = res[f"{sev}/tuned"]
-                tuned_rows.append([path.stem, sev, f"{t['found_share']:.1%} / {r['found_share']:.1%}",
-                                   f"{t['read_share']:.1%} / {r['read_share']:.1%}", f"{t['wrong']} / {r['wrong']}",
-                                   f"{t['corner_error_px'] or 0:.2f} / {r['corner_error_px'] or 0:.2f}",
-                                   f"{t['frame_s_median'] * 1000:.0f} / {r['frame_s_median'] * 1000:.0f}",
-                                   f"{t['frame_s_median'] / r['frame_s_median']:.2f}"])  # fmt: skip
+                tuned_rows.append(
+                    [path.stem, sev, *side_by_side(t, r), f"{t['frame_s_median'] / r['frame_s_median']:.2f}"]
+                )
     print(f"\nThe universal detector alone, {n} scenes per bundle and severity, {threads} thread(s):")
     print(table(["bundle", "severity", "prints", "read", "share", "wrong", "frame ms"], rows))
     if tuned_rows:
         print("\nFine-tuned (train-detector at its defaults) / universal, the same scenes:")
-        head = ["bundle", "severity", "found", "read", "wrong", "corner px", "frame ms", "time ratio"]
-        print(table(head, tuned_rows))
+        print(table(["bundle", "severity", *SIDE_BY_SIDE, "time ratio"], tuned_rows))
     write_json(out, {"benchmark": "universal_detector", "environment": environment(), "threads": threads, "n": n,
                      "seed": seed, "bundles": found})  # fmt: skip
 
@@ -229,17 +242,9 @@ def main() -> None:
     for name, res in per_drawing.items():
         for sev in ("medium", "hard"):
             own, uni = res[f"{sev}/own"], res[f"{sev}/universal"]
-            rows.append([
-                name, sev,
-                f"{own['found_share']:.1%} / {uni['found_share']:.1%}",
-                f"{own['read_share']:.1%} / {uni['read_share']:.1%}",
-                f"{own['wrong']} / {uni['wrong']}",
-                f"{own['corner_error_px'] or 0:.2f} / {uni['corner_error_px'] or 0:.2f}",
-                f"{own['frame_s_median'] * 1000:.0f} / {uni['frame_s_median'] * 1000:.0f}",
-                f"{uni['frame_s_median'] / own['frame_s_median']:.2f}",
-            ])  # fmt: skip
+            rows.append([name, sev, *side_by_side(own, uni), f"{uni['frame_s_median'] / own['frame_s_median']:.2f}"])
     print(f"\nOwn detector / universal detector, {args.n} scenes per drawing and severity, {threads} thread(s):")
-    print(table(["drawing", "severity", "found", "read", "wrong", "corner px", "frame ms", "time ratio"], rows))
+    print(table(["drawing", "severity", *SIDE_BY_SIDE, "time ratio"], rows))
     tuned_rows = [
         [name, sev, f"{res[f'{sev}/tuned']['found_share']:.1%}", f"{res[f'{sev}/tuned']['read_share']:.1%}",
          res[f"{sev}/tuned"]["wrong"], f"{res[f'{sev}/tuned']['corner_error_px'] or 0:.2f}",
