@@ -246,12 +246,18 @@ class DecodeResult:
         corrected_bits: code bits the decoder changed relative to the hard decisions (BCH
             corrections plus soft flips); -1 when decoding failed.
         confidence: geometric mean of ``max(p, 1 - p)`` over the code bits, in [0.5, 1].
+        rival_log_odds: for a word that passed the CRC with corrections, how much the
+            probabilities still prefer it to every other code word (:meth:`PayloadCodec.rival_margin`
+            with each bit's log-odds as its support): a misread that lands on another word has
+            the decoder's doubt on the bits where the two differ. 0 where not computed (a word
+            read without corrections, or not read).
     """
 
     payload: np.ndarray
     ok: bool
     corrected_bits: int
     confidence: float
+    rival_log_odds: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -422,13 +428,13 @@ class PayloadCodec:
         p, checked = self.spec.payload_bits, self._crc is not None
 
         word = self._bch_correct(hard[None])[0]
-        if word is not None and (not checked or self._crc_ok(word)):
-            return self._result(word[:p], ok=checked, flips=int(np.count_nonzero(word != hard)), conf=conf)
-        if soft:
-            found = self._chase(hard, cost, first=word)
-            if found is not None:
-                return self._result(found[:p], ok=checked, flips=int(np.count_nonzero(found != hard)), conf=conf)
-        return self._result(hard[:p], ok=False, flips=-1, conf=conf)
+        if word is None or (checked and not self._crc_ok(word)):
+            word = self._chase(hard, cost, first=word) if soft else None
+        if word is None:
+            return self._result(hard[:p], ok=False, flips=-1, conf=conf)
+        flips = int(np.count_nonzero(word != hard))
+        margin = self._margin_of(word, q) if checked and flips else 0.0
+        return self._result(word[:p], ok=checked, flips=flips, conf=conf, margin=margin)
 
     def decode_batch(self, probs: np.ndarray, soft: bool = True) -> list[DecodeResult]:
         """:meth:`decode` for each row of a ``(B, code_bits)`` array."""
@@ -659,7 +665,14 @@ class PayloadCodec:
                 return words[i]
         return None
 
-    def _result(self, payload: np.ndarray, ok: bool, flips: int, conf: float) -> DecodeResult:
+    def _margin_of(self, word: np.ndarray, q: np.ndarray) -> float:
+        """:attr:`DecodeResult.rival_log_odds` of the code word ``word`` (before whitening) read
+        from the sent bits' probabilities ``q``."""
+        code = (word ^ self._mask).astype(np.uint8)
+        log_odds = np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS)
+        return self.rival_margin(code, np.where(code == 1, log_odds, -log_odds))
+
+    def _result(self, payload: np.ndarray, ok: bool, flips: int, conf: float, margin: float = 0.0) -> DecodeResult:
         out = np.array(payload, dtype=np.uint8)
         out.setflags(write=False)
-        return DecodeResult(payload=out, ok=ok, corrected_bits=flips, confidence=conf)
+        return DecodeResult(payload=out, ok=ok, corrected_bits=flips, confidence=conf, rival_log_odds=margin)

@@ -660,3 +660,32 @@ def test_a_long_payload_bounds_its_rival_margin_from_below(monkeypatch: pytest.M
     assert codec.rival_margin(words[0], seen) == pytest.approx(-(other != words[0]).sum())
     with pytest.raises(DeepMorphError, match="shape"):
         codec.rival_margin(words[0], np.ones(3))
+
+
+def test_a_corrected_reading_reports_how_much_its_probabilities_prefer_it_to_any_rival() -> None:
+    """A word read with corrections carries its rival margin in the decoder's own log-odds: the
+    least total over the bits where another code word differs, the corrected bit counting
+    against it. A reading without corrections, and one that failed, report 0."""
+    codec = PayloadCodec(choose_codec(11, crc_bits=8, bch_t=1))
+    words = _every_code_word(codec)
+    word = words[777]
+    sure = np.where(word == 1, 0.99, 0.01)
+    log_odds = math.log(0.99 / 0.01)
+    assert codec.decode(sure).corrected_bits == 0 and codec.decode(sure).rival_log_odds == 0.0
+    misread = sure.copy()
+    misread[4] = 1.0 - misread[4]  # one bit read wrong, as confidently
+    repaired = codec.decode(misread)
+    assert repaired.ok and repaired.corrected_bits == 1 and np.array_equal(codec.encode(repaired.payload), word)
+    distance = int(min((w != word).sum() for w in words if (w != word).any()))
+    others = words[(words != word).any(1)]
+    support = np.where((misread > 0.5) == word, log_odds, -log_odds)
+    exact = float(((others != word) * support).sum(1).min())
+    assert repaired.rival_log_odds == pytest.approx(exact, rel=1e-6)
+    # the misread bit counts against it: less than a clear reading's margin, the code distance
+    clear = codec.rival_margin(word, np.full(codec.spec.code_bits, log_odds))
+    assert clear == pytest.approx(distance * log_odds) and repaired.rival_log_odds < clear
+    # the same misread with the other bits read less surely: a smaller margin
+    doubtful = np.where(misread > 0.5, 0.8, 0.2)
+    doubtful[4] = misread[4]
+    assert 0 < codec.decode(doubtful).rival_log_odds < repaired.rival_log_odds
+    assert codec.decode(np.full(codec.spec.code_bits, 0.5)).rival_log_odds == 0.0

@@ -224,6 +224,50 @@ def test_a_collision_read_without_corrections_but_unsure_is_checked_bit_by_bit(
     assert checked.status == "passed" and checked.bits is not None and checked.bits.agrees
 
 
+def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A word the code corrected within its ``t`` is checked bit by bit unless it is read
+    confidently, the decoder's own probabilities prefer it to every other code word by
+    ``TRUSTED_REPAIR_LOG_ODDS`` and its morph fits the photo as only prints of the drawing do
+    (``TRUSTED_MORPH_FIT``); and only for a black-and-white drawing trained for the print's
+    pixels (other decoders read wrong words as surely)."""
+    from deepmorph_detect.check import (
+        CHECK_BELOW_CONFIDENCE,
+        TRUSTED_MORPH_FIT,
+        TRUSTED_REPAIR_LOG_ODDS,
+        is_trusted_repair,
+    )
+
+    scene = SceneMaker(model, severity="medium", seed=4).make(drawings=1)
+    truth = scene.placements[0]
+    pyramid = ImagePyramid(to_gray(scene.image))
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    repaired = DecodeResult(truth.payload, True, 1, 0.99, rival_log_odds=TRUSTED_REPAIR_LOG_ODDS + 5)
+    assert model.print_px is None  # the ghost reads from a 96-px frame: its repairs go bit by bit
+    as_trained = locator.check_payload(pyramid, det.homography, repaired)
+    assert as_trained.status == "passed" and as_trained.bits is not None
+    monkeypatch.setattr(type(model), "print_px", property(lambda self: 200))  # as if trained with --pixels 200
+    sure = locator.check_payload(pyramid, det.homography, repaired)
+    assert sure.fit.correlation >= TRUSTED_MORPH_FIT
+    assert sure.status == "passed" and sure.bits is None  # the morph check alone
+    t = model.codec.spec.bch_t
+    doubts = [
+        replace(repaired, rival_log_odds=TRUSTED_REPAIR_LOG_ODDS - 5),
+        replace(repaired, confidence=CHECK_BELOW_CONFIDENCE - 0.01),
+        replace(repaired, corrected_bits=t + 1),
+    ]
+    for doubt in doubts:
+        checked = locator.check_payload(pyramid, det.homography, doubt)
+        assert checked.bits is not None
+    # nor where the morph fits as other drawings can align, nor without corrections
+    assert not is_trusted_repair(repaired, TRUSTED_MORPH_FIT - 0.01, t)
+    assert not is_trusted_repair(replace(repaired, corrected_bits=0), 0.99, t)
+    monkeypatch.setattr(type(model.drawing), "colour", property(lambda self: True))
+    in_colour = locator.check_payload(pyramid, det.homography, repaired)
+    assert in_colour.bits is not None
+
+
 def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     """Two bits contradicted is allowed; not when several more are barely supported (the
     evidence on a blurred, steeply tilted print is noise of about +-0.6)."""

@@ -1,0 +1,172 @@
+"""Every word that passed the CRC, with its truth: what the per-bit check was spared and what it caught.
+
+One bundle, ``--samples`` photos read by the photo chain (the bundle's detector, else the shipped
+universal one), 1 thread: close-ups of fresh payloads with the print about ``--width`` camera
+pixels wide (``deepmorph_detect.photo_validation.close_ups``), or ``--frame WxH`` scenes with one
+print, another drawing and an ArUco marker, or ``--unrelated`` images that show none of the
+drawing (other icons from ``--icons``, clutter, noise). Every payload that passed the CRC and
+reached the payload check is recorded with whether it is the photo's payload: its corrections,
+confidence, how much the decoder's probabilities prefer it to its nearest rival code word (total
+log-odds, ``DecodeResult.rival_log_odds``, computed here for every word), its morph's fit, and
+the verdict (passed with or without the per-bit check, or withdrawn).
+
+The table: photos read, wrong words that reached the check with their highest log-odds and
+confidence, wrong payloads passed, and right words passed without the per-bit check although
+the code corrected them (``PayloadChecker.vouches_for_repair``). The JSON keeps every record.
+
+    .venv/bin/python bench/repair_trust.py model.dmm --severity hard --width 240 --samples 5000 --seed 41
+    .venv/bin/python bench/repair_trust.py model.dmm --severity hard --frame 1280x720 --samples 400
+    .venv/bin/python bench/repair_trust.py model.dmm --unrelated --icons ../shared/data/drawings/feather
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, frame_size, set_threads, table, write_json  # noqa: E402
+
+NOT_A_PAYLOAD = 2  # a bit value no payload has: the truth of an unrelated image
+
+
+def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any]]:
+    """``(image, camera or None, true payload)`` for each photo asked."""
+    import numpy as np
+
+    if args.unrelated:
+        from capacity import unrelated_images
+
+        nothing = np.full(model.codec.spec.payload_bits, NOT_A_PAYLOAD, dtype=np.uint8)
+        for _, image in unrelated_images(args.samples, args.icons, {model.meta.drawing_name}, args.seed):
+            yield image, None, nothing
+    elif args.frame is not None:
+        from deepmorph_detect.scenes import SceneMaker
+
+        maker = SceneMaker(model, args.frame, args.severity, seed=args.seed)
+        for _ in range(args.samples):
+            scene = maker.make(drawings=1, distractors=1, aruco=True)
+            (truth,) = [p for p in scene.placements if p.kind == "drawing"]
+            yield scene.image, scene.camera, truth.payload
+    else:
+        from deepmorph_detect.photo_validation import close_ups
+
+        for shot in close_ups(model, args.samples, args.seed, args.severity, args.width):
+            yield shot.photo, None, shot.payload
+
+
+def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any]) -> None:
+    """Wrap ``locator``'s payload check (and its reader's looks, for the probabilities read) so
+    that each verdict is appended to ``records`` with ``photo``'s index and truth."""
+    import numpy as np
+
+    codec = locator.model.codec
+    checker, reader = locator.checker, locator.reader
+    verdict, looks = checker._verdict, reader.looks
+    read: dict[str, Any] = {}
+
+    def looks_noting(*args: Any, **kwargs: Any) -> Iterator[Any]:
+        for reading, bitwise in looks(*args, **kwargs):
+            read["probabilities"] = reading.probabilities
+            yield reading, bitwise
+
+    def verdict_noting(pyramid: Any, homography: Any, result: Any, *rest: Any, **keywords: Any) -> Any:
+        out = verdict(pyramid, homography, result, *rest, **keywords)
+        # rest: unmorphed, bitwise, blind, whole_frame, relit_from and (a cast shadow's retry) light_grid
+        light_grid = rest[5] if len(rest) > 5 else keywords.get("light_grid", 0)
+        code = codec.encode(np.asarray(result.payload, dtype=np.uint8))
+        p = np.clip(np.asarray(read["probabilities"], dtype=np.float64), 1e-9, 1 - 1e-9)
+        log_odds = np.log(p) - np.log(1 - p)
+        records.append(
+            {
+                "photo": photo["index"],
+                "right": bool(np.array_equal(result.payload, photo["truth"])),
+                "corrected_bits": int(result.corrected_bits),
+                "confidence": round(float(result.confidence), 5),
+                "rival_log_odds": round(codec.rival_margin(code, np.where(code == 1, log_odds, -log_odds)), 3),
+                "morph_fit": None if out.fit is None else round(float(out.fit.correlation), 4),
+                "light_grid": int(light_grid),
+                "status": out.status,
+                "bit_by_bit": out.bits is not None,
+            }
+        )
+        return out
+
+    checker._verdict, reader.looks = verdict_noting, looks_noting
+
+
+def summary(records: list[dict[str, Any]], read: int, samples: int) -> dict[str, Any]:
+    """The table's row: the first verdict on each word (not its retries in a cast shadow's light)."""
+    first = [r for r in records if r["light_grid"] == 0]
+    wrong = [r for r in first if not r["right"]]
+    spared = [r for r in first if r["right"] and r["corrected_bits"] > 0 and r["status"] == "passed"]
+    return {
+        "photos": samples,
+        "read": read,
+        "words_checked": len(first),
+        "wrong_words": len(wrong),
+        "wrong_max_log_odds": max((r["rival_log_odds"] for r in wrong), default=None),
+        "wrong_max_confidence": max((r["confidence"] for r in wrong), default=None),
+        "wrong_passed": sum(1 for r in records if not r["right"] and r["status"] == "passed"),
+        "repaired_right_passed": len(spared),
+        "repaired_right_spared": sum(1 for r in spared if not r["bit_by_bit"]),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("bundle", type=Path)
+    ap.add_argument("--severity", default="hard")
+    ap.add_argument("--width", type=float, default=None, help="close-ups: the print's width in camera px")
+    ap.add_argument("--frame", type=frame_size, default=None, help="scenes of this size, WxH, instead of close-ups")
+    ap.add_argument("--unrelated", action="store_true", help="images that show none of the drawing instead")
+    ap.add_argument("--icons", type=Path, default=None, help="other drawings for --unrelated")
+    ap.add_argument("--samples", type=int, default=1000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / "repair_trust.json")
+    args = ap.parse_args()
+    threads = set_threads(1)
+    import cv2
+    import numpy as np
+
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.locate import Locator
+
+    cv2.setNumThreads(1)
+    model = DeepMorphModel.load(args.bundle)
+    locator = Locator(model)
+    records: list[dict[str, Any]] = []
+    photo: dict[str, Any] = {}
+    recorded(locator, records, photo)
+    read = 0
+    for index, (image, camera, truth) in enumerate(photos(args, model)):
+        photo.update(index=index, truth=truth)
+        found = locator.locate(image, camera) if camera is not None else locator.locate(image)
+        read += any(f.result.ok and np.array_equal(f.result.payload, truth) for f in found)
+    kind = "unrelated" if args.unrelated else f"scenes {args.frame[0]}x{args.frame[1]}" if args.frame else "close-ups"
+    size = "" if args.unrelated or args.frame else f" {args.width:g} px" if args.width else ""
+    row = summary(records, read, args.samples)
+    columns = {"photos": "photos", "read": "read", "words_checked": "words checked", "wrong_words": "wrong words",
+               "wrong_max_log_odds": "their max log-odds", "wrong_max_confidence": "their max confidence",
+               "wrong_passed": "wrong passed", "repaired_right_passed": "right repaired passed",
+               "repaired_right_spared": "of them spared the bits"}  # fmt: skip
+    print(f"{kind}{size}, {'' if args.unrelated else args.severity + ', '}seed {args.seed}, {threads} thread")
+    print(table(["bundle", *columns.values()], [[args.bundle.stem, *(row[k] for k in columns)]]))
+    report = {
+        "environment": environment(),
+        "bundle": str(args.bundle),
+        "kind": kind,
+        "severity": args.severity,
+        "width": args.width,
+        "seed": args.seed,
+        "summary": row,
+        "records": records,
+    }
+    print(f"wrote {write_json(args.out, report)}")
+
+
+if __name__ == "__main__":
+    main()
