@@ -162,12 +162,22 @@ class PayloadCheck:
             :attr:`~deepmorph_detect.synthesis.BitEvidence.agrees` is false) or ``not run``
             (the CRC had failed).
         bits: the per-bit evidence, when it was asked for.
+        vouched: a payload the code corrected, passed without the per-bit check because the
+            decoder is as sure of it as of a confident word read without corrections
+            (:meth:`PayloadChecker.vouches_for_repair`).
     """
 
     result: DecodeResult
     fit: MorphFit | None
     status: str
     bits: BitEvidence | None = None
+    vouched: bool = False
+
+    @property
+    def settled(self) -> bool:
+        """Whether the payload passed and is not weak (:func:`is_weak`), or was vouched for: no
+        reading at another turn of the print can beat it."""
+        return self.result.ok and (self.vouched or not is_weak(self.result))
 
 
 class MorphTemplates:
@@ -354,8 +364,10 @@ class PayloadChecker:
             return PayloadCheck(replace(result, ok=False), fit, "failed")
         if whole_frame and self.repaired_off_the_drawing(result, fit):
             return PayloadCheck(replace(result, ok=False), fit, "failed")
+        vouched = False
         if bitwise is None:
-            bitwise = is_weak(result) and not self.vouches_for_repair(result, fit, relit_from)
+            vouched = is_weak(result) and self.vouches_for_repair(result, fit, relit_from)
+            bitwise = is_weak(result) and not vouched
         # a confident reading of a drawing a blind proposer found, whose morph fits no better
         # than other drawings can align: where it aligned as other drawings do not, is it this
         # drawing at all? (``explained``); elsewhere the whole per-bit check
@@ -369,7 +381,7 @@ class PayloadChecker:
         elif not bitwise and whole_frame:
             is_it_the_drawing = fit.correlation < WHOLE_FRAME_TRUSTED_FIT
         if not bitwise and not is_it_the_drawing:
-            return PayloadCheck(result, fit, "passed")
+            return PayloadCheck(result, fit, "passed", vouched=vouched)
         code = self.model.codec.encode(np.asarray(result.payload, dtype=np.uint8))
         # a colour print is asked in its own colours only where the photo shows the drawing:
         # their extra freedom also explains stripes of clutter that a bar chart's whole frame

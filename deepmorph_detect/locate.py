@@ -38,7 +38,7 @@ from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Candidate, Detector
 from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
 from deepmorph_detect.camera import Camera, project
-from deepmorph_detect.check import RELIT_MAX_CORRECTIONS, MorphTemplates, PayloadCheck, PayloadChecker, is_weak
+from deepmorph_detect.check import RELIT_MAX_CORRECTIONS, MorphTemplates, PayloadCheck, PayloadChecker
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
 from deepmorph_detect.light_field import realign_in_light_field
 from deepmorph_detect.pose import Placer
@@ -68,7 +68,7 @@ UNREAD_BLIND_CORRELATION = 0.8
 #: each of the cube (3 turns) and the chip (4), the same prints read with frames 0.7-0.8x as
 #: long on average; at one turn, the codepen diamond (2) lost a print
 LATER_LOOK_TURNS = 2
-#: A weak reading (:func:`~deepmorph_detect.check.is_weak`) aligned that well is compared with the
+#: A weak reading (not :attr:`~deepmorph_detect.check.PayloadCheck.settled`) aligned that well is compared with the
 #: reading at the best other turn of its frame where that turn aligns at most this much worse: a
 #: drawing that nearly looks the same half turned (a battery) aligned at 0.832 at either turn of a
 #: print, and read another word at the wrong one, with 4 corrections against the true one's 1
@@ -423,7 +423,8 @@ class Locator:
         well at each of those turns, and which one the alignment ended at is chance) is read
         again at each such turn until a reading passes, the first looks at every turn before the
         later looks at any; the turn that reads also gives the pose.
-        A weak reading there (:func:`~deepmorph_detect.check.is_weak`) is compared with those
+        A weak reading there (not :attr:`PayloadCheck.settled <deepmorph_detect.check.PayloadCheck.settled>`:
+        read with corrections or unsure, and not vouched for) is compared with those
         at the other turns: read at the wrong turn, such a drawing shows its true morph turned,
         which can land on another code word with corrections; the reading with the fewest
         corrections, then the most confident, wins.
@@ -509,7 +510,7 @@ class Locator:
                 # the later looks at the turns whose first looks read most confidently
                 order = sorted(order, key=lambda kt: -_confidence(readings.get(kt[0])))[:LATER_LOOK_TURNS]
             for k, at in order:
-                if any(_settled(r[1].result) for r in readings.values()):
+                if any(r[1].settled for r in readings.values()):
                     break
                 if k in readings and readings[k][1].status == "passed":
                     continue  # its later looks would end at the same passing reading
@@ -523,7 +524,7 @@ class Locator:
                 H, checked, probs = other
         if first_looks_only:
             return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
-        if not _settled(checked.result) and alignment.correlation >= UNREAD_BLIND_CORRELATION:
+        if not checked.settled and alignment.correlation >= UNREAD_BLIND_CORRELATION:
             margin = TURN_TIE_MARGIN if checked.result.ok else 0.0
             realigned = self.aligner.other_turn(pyramid, alignment, margin)
             if realigned is not None:
@@ -670,11 +671,6 @@ def _read_too_small(located: Located) -> bool:
 def _confidence(reading: tuple[np.ndarray, PayloadCheck, np.ndarray] | None) -> float:
     """A turn's first-look confidence (``-1`` for a turn not read)."""
     return -1.0 if reading is None else float(reading[1].result.confidence)
-
-
-def _settled(result: DecodeResult) -> bool:
-    """Whether a reading needs no reading at another turn: it passed, and is not weak."""
-    return result.ok and not is_weak(result)
 
 
 def _stronger(a: DecodeResult, b: DecodeResult) -> bool:

@@ -247,10 +247,12 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     assert model.print_px is None  # the ghost reads from a 96-px frame: its repairs go bit by bit
     as_trained = locator.check_payload(pyramid, det.homography, repaired)
     assert as_trained.status == "passed" and as_trained.bits is not None
+    assert not as_trained.vouched and not as_trained.settled  # the other turns may still beat it
     monkeypatch.setattr(type(model), "print_px", property(lambda self: 200))  # as if trained with --pixels 200
     sure = locator.check_payload(pyramid, det.homography, repaired)
     assert sure.fit.correlation >= TRUSTED_MORPH_FIT
     assert sure.status == "passed" and sure.bits is None  # the morph check alone
+    assert sure.vouched and sure.settled  # and no other turn of the print is read
     t = model.codec.spec.bch_t
     doubts = [
         replace(repaired, rival_log_odds=TRUSTED_REPAIR_LOG_ODDS - 5),
@@ -259,7 +261,7 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     ]
     for doubt in doubts:
         checked = locator.check_payload(pyramid, det.homography, doubt)
-        assert checked.bits is not None
+        assert checked.bits is not None and not checked.vouched and not checked.settled
     # nor where the morph fits as other drawings can align, nor without corrections
     assert not is_trusted_repair(repaired, TRUSTED_MORPH_FIT - 0.01, t)
     assert not is_trusted_repair(replace(repaired, corrected_bits=0), 0.99, t)
