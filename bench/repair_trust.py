@@ -78,15 +78,13 @@ def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any])
         # rest: unmorphed, bitwise, blind, whole_frame, relit_from and (a cast shadow's retry) light_grid
         light_grid = rest[5] if len(rest) > 5 else keywords.get("light_grid", 0)
         code = codec.encode(np.asarray(result.payload, dtype=np.uint8))
-        p = np.clip(np.asarray(read["probabilities"], dtype=np.float64), 1e-9, 1 - 1e-9)
-        log_odds = np.log(p) - np.log(1 - p)
         records.append(
             {
                 "photo": photo["index"],
                 "right": bool(np.array_equal(result.payload, photo["truth"])),
                 "corrected_bits": int(result.corrected_bits),
                 "confidence": round(float(result.confidence), 5),
-                "rival_log_odds": round(codec.rival_margin(code, np.where(code == 1, log_odds, -log_odds)), 3),
+                "rival_log_odds": round(codec.rival_log_odds(code, read["probabilities"]), 3),
                 "morph_fit": None if out.fit is None else round(float(out.fit.correlation), 4),
                 "light_grid": int(light_grid),
                 "status": out.status,

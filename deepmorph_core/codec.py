@@ -433,7 +433,7 @@ class PayloadCodec:
         if word is None:
             return self._result(hard[:p], ok=False, flips=-1, conf=conf)
         flips = int(np.count_nonzero(word != hard))
-        margin = self._margin_of(word, q) if checked and flips else 0.0
+        margin = self.rival_log_odds((word ^ self._mask).astype(np.uint8), q) if checked and flips else 0.0
         return self._result(word[:p], ok=checked, flips=flips, conf=conf, margin=margin)
 
     def decode_batch(self, probs: np.ndarray, soft: bool = True) -> list[DecodeResult]:
@@ -442,6 +442,16 @@ class PayloadCodec:
         if arr.ndim != 2:
             raise DeepMorphError(f"probabilities must have shape (B, {self.spec.code_bits}), got {tuple(arr.shape)}")
         return [self.decode(row, soft=soft) for row in arr]
+
+    def rival_log_odds(self, code_bits: np.ndarray, probs: np.ndarray) -> float:
+        """How much the decoder's probabilities ``probs`` (``(code_bits,)``, each P(bit = 1))
+        prefer the code word ``code_bits`` to every other code word: :meth:`rival_margin` with
+        each bit's log-odds, signed towards the word, as its support
+        (:attr:`DecodeResult.rival_log_odds` of a word read with corrections)."""
+        q = self._probabilities(probs)
+        code = np.asarray(code_bits, dtype=np.uint8)
+        log_odds = np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS)
+        return self.rival_margin(code, np.where(code == 1, log_odds, -log_odds))
 
     def rival_margin(self, code_bits: np.ndarray, support: np.ndarray) -> float:
         """How much per-bit ``support`` prefers the code word ``code_bits`` to every other code
@@ -664,13 +674,6 @@ class PayloadCodec:
             if self._crc is None or self._crc_ok(words[i]):
                 return words[i]
         return None
-
-    def _margin_of(self, word: np.ndarray, q: np.ndarray) -> float:
-        """:attr:`DecodeResult.rival_log_odds` of the code word ``word`` (before whitening) read
-        from the sent bits' probabilities ``q``."""
-        code = (word ^ self._mask).astype(np.uint8)
-        log_odds = np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS)
-        return self.rival_margin(code, np.where(code == 1, log_odds, -log_odds))
 
     def _result(self, payload: np.ndarray, ok: bool, flips: int, conf: float, margin: float = 0.0) -> DecodeResult:
         out = np.array(payload, dtype=np.uint8)

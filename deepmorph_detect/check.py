@@ -366,7 +366,7 @@ class PayloadChecker:
             return PayloadCheck(replace(result, ok=False), fit, "failed")
         vouched = False
         if bitwise is None:
-            vouched = is_weak(result) and self.vouches_for_repair(result, fit, relit_from)
+            vouched = self.vouches_for_repair(result, fit, relit_from)  # only ever a corrected word
             bitwise = is_weak(result) and not vouched
         # a confident reading of a drawing a blind proposer found, whose morph fits no better
         # than other drawings can align: where it aligned as other drawings do not, is it this
