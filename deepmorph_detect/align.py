@@ -172,8 +172,9 @@ class Aligner:
         aligned in flat light too, and that one is kept when the photo's failed or correlates
         worse. A bend that keeps the correlation above :data:`WEAK_ALIGNMENT` shows in the
         outline's shape: no flat print makes it (:meth:`bent`). A blind proposer's outline
-        (``Candidate.blind``: most of them are other drawings, each wider search costing one
-        about 17 ms) takes the wider searches in flat light only, after the photo's quick path:
+        (``Candidate.blind``: most of them are other drawings, each turned away in 7-10 ms, most
+        of it the wider searches) takes the wider searches in flat light only, after the photo's
+        quick path (which then ends short of OpenCV's fallback, :func:`refine`'s ``fallback``):
         away from shadows flat light is the photo, and on 200 scenes of the ghost it read the
         same prints in half the frame time. It goes there also when it aligns in the photo
         below :data:`BLIND_SEARCH_BELOW`, and the flat light's alignment replaces that one only
@@ -184,11 +185,16 @@ class Aligner:
         start = self.homography(cand.corners)
         aim = BLIND_SEARCH_BELOW if cand.blind else None
 
-        def search(seen_in: ImagePyramid, wide: bool) -> Alignment | None:
+        def search(seen_in: ImagePyramid, wide: bool, fallback: bool = True) -> Alignment | None:
             accept = self.min_correlation if wide else None
-            return refine(seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized, aim=aim)
+            return refine(
+                seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized, aim=aim, fallback=fallback
+            )
 
-        alignment = search(pyramid, gray is None or not cand.blind)
+        # a blind outline searched again in flat light when the photo's quick path falls short
+        # takes that path without OpenCV's slower fallback: flat light's quick path has it
+        to_flat_light = gray is not None and cand.blind and cand.score >= FAINT_PROPOSAL
+        alignment = search(pyramid, gray is None or not cand.blind, fallback=not to_flat_light)
         if gray is None or (cand.blind and cand.score < FAINT_PROPOSAL):
             return pyramid, alignment
         missed = not self.accepts(alignment)

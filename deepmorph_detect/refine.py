@@ -47,6 +47,12 @@ SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain co
 #: size, where ECC diverged from every corner order; enlarged, 4 of 6 aligned
 SIZED_SWEEP_SCALES = (1.15, 1.3)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
+#: a wider search's coarse solve below this is not carried through the finer levels, where it
+#: cannot reach what a wider search must (``accept`` plus the margin, 0.6 for a detector's
+#: outline): over 1,200 medium and hard 1280x720 scenes of six drawings, of the 407 solves on
+#: prints carried none from below 0.5 reached more than 0.56, and 5 of the 4,400 on other drawings
+#: 0.6-0.66; nine in ten solves carried were other drawings'
+WIDE_CARRY_FROM = 0.5
 # a coarse solve by inverse composition that reaches this correlation is kept; below it, OpenCV's
 # wider-basin solve runs from the same start (:func:`_coarse_steps`)
 COARSE_FAST_BAR = 0.7
@@ -315,7 +321,7 @@ def _coarse_steps(
     from a wider search's starts (``(homography, crop)`` each): by inverse composition, and
     when none of them reaches :data:`COARSE_FAST_BAR`, again by OpenCV's forward-additive ECC
     from the same start (a wider basin, at about 4x the time): from each start (``wide``
-    None), or from the ``wide`` whose fast solves correlate best.
+    None), or from the ``wide`` whose fast solves correlate best (none at ``wide`` 0).
 
     On prints the fast solve almost always gets there; what falls back is mostly clutter and
     other drawings. Once one order clears the bar, the runner-up is not solved by OpenCV: a
@@ -441,6 +447,7 @@ def refine(
     sized: bool = False,
     aim: float | None = None,
     ink: bool = True,
+    fallback: bool = True,
 ) -> Alignment | None:
     """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
     template's levels.
@@ -474,6 +481,11 @@ def refine(
         ink: the wider searches end with the starts from the print's ink; ``False`` where the
             pyramid shows no paper to find the ink on (the edges of
             :mod:`~deepmorph_detect.edge_align`).
+        fallback: the quick path's coarse solves fall back on OpenCV's wider basin when none
+            reaches :data:`COARSE_FAST_BAR` (:func:`_coarse_steps`). ``False``: the quick path
+            ends there instead, short of a result, where the caller searches wider elsewhere
+            (a blind proposal's photo, searched again in flat light), so that proposals of other
+            drawings, which fall short almost always, do not pay for both searches.
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -483,11 +495,13 @@ def refine(
     its = iterations or (COARSE_ITERATIONS,) + (FINE_ITERATIONS,) * (len(levels) - 1)
     starts = corner_orders(homography, template)[:orders] if orders > 1 else [np.asarray(homography, np.float64)]
 
-    def from_outlines(tries: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, float] | None]:
+    def from_outlines(
+        tries: list[tuple[np.ndarray, np.ndarray]], fallbacks: int = 1
+    ) -> list[tuple[np.ndarray, float] | None]:
         """A wider search's coarsest solves: OpenCV's only from the start whose fast solve
         correlates best (from every start it finds nothing more for its time; from none, the
-        prints only OpenCV reaches are lost)."""
-        return _coarse_steps(pyramid, tries, template, levels[0], its[0], 5, wide=1)
+        prints only OpenCV reaches from an outline are lost), or from none (``fallbacks`` 0)."""
+        return _coarse_steps(pyramid, tries, template, levels[0], its[0], 5, wide=fallbacks)
 
     scored = _plain_scores(pyramid, starts, template, levels[0])
     coarse: list[tuple[np.ndarray, float] | None] = []
@@ -496,9 +510,11 @@ def refine(
         # the best two orders by plain correlation hold the right one almost always; ECC decides
         # between them at the coarsest level unless the best is ahead by a clear margin
         close = [r for r in scored[:2] if scored[0][0] - r[0] < ORDER_MARGIN]
-        coarse = _coarse_steps(pyramid, [(H, crop) for _, H, crop in close], template, levels[0], its[0], 5)
+        tries = [(H, crop) for _, H, crop in close]
+        coarse = _coarse_steps(pyramid, tries, template, levels[0], its[0], 5, wide=None if fallback else 0)
         chosen = max(range(len(coarse)), key=lambda i: -1.0 if coarse[i] is None else coarse[i][1])
-        best = None if coarse[chosen] is None else _finish(pyramid, coarse[chosen], template, levels, its)
+        short = coarse[chosen] is None or (not fallback and coarse[chosen][1] < COARSE_FAST_BAR)
+        best = None if short else _finish(pyramid, coarse[chosen], template, levels, its)
     elif accept is None:
         return None
     # else: an outline so far off that no corner order correlates at all (a detector's outline
@@ -520,12 +536,18 @@ def refine(
         that one ended below ``accept``)."""
         return replace(a, searched=True)
 
-    def best_few(starts: list[np.ndarray], best: Alignment | None) -> Alignment | None:
+    def carried(step: tuple[np.ndarray, float] | None) -> Alignment | None:
+        """A wider search's coarse solve carried through the finer levels, where it reaches
+        :data:`WIDE_CARRY_FROM` at the coarsest."""
+        return None if step is None or step[1] < WIDE_CARRY_FROM else _finish(pyramid, step, template, levels, its)
+
+    def best_few(starts: list[np.ndarray], best: Alignment | None, fallbacks: int = 1) -> Alignment | None:
         """``best``, or better: the :data:`SWEEP_TRIES` best of ``starts`` by plain correlation,
-        each solved from its outline and carried through all levels."""
+        each solved from its outline (:func:`from_outlines`) and carried through all levels
+        (:func:`carried`)."""
         scored = _plain_scores(pyramid, starts, template, levels[0])[:SWEEP_TRIES]
-        for step in from_outlines([(H, crop) for start, H, crop in scored if start >= min_start]):
-            best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+        for step in from_outlines([(H, crop) for start, H, crop in scored if start >= min_start], fallbacks):
+            best = _better(best, carried(step))
         return best
 
     # the detector's corner order may be a quarter turn off, with plain correlation ranking the
@@ -533,8 +555,7 @@ def refine(
     others = [i for i, (start, _, _) in enumerate(scored) if i != chosen and start >= min_start]
     fresh = iter(from_outlines([scored[i][1:] for i in others if i >= len(coarse)]))
     for i in others:
-        step = coarse[i] if i < len(coarse) else next(fresh)
-        best = _better(best, None if step is None else _finish(pyramid, step, template, levels, its))
+        best = _better(best, carried(coarse[i] if i < len(coarse) else next(fresh)))
     if good(best):
         return searched(best)
     # the outline itself is off: turned or scaled starts; an ink square is turned as its ink, but
@@ -547,7 +568,9 @@ def refine(
         # the outline's shape is off (a print seen steeply from the side, outlined with the wrong
         # shear): starts from the print's own ink (:mod:`~deepmorph_detect.inkstart`)
         quad = project(homography, viewbox_corners(template.viewbox))
-        best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best)
+        # without OpenCV's fallback: these starts fit the print's shear already, and over 800
+        # scenes of four drawings it reached 0.7 from 5 of 700 starts on other drawings, on no print
+        best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best, 0)
         if good(best):
             return searched(best)
     # short of the aim, a wider search still beats a quick path that was not accepted at all
