@@ -191,11 +191,11 @@ class Aligner:
                 seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized, aim=aim, fallback=fallback
             )
 
-        # a blind outline searched again in flat light when the photo's quick path falls short
+        photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
+        # a blind outline that flat light searches again when the photo's quick path falls short
         # takes that path without OpenCV's slower fallback: flat light's quick path has it
-        to_flat_light = gray is not None and cand.blind and cand.score >= FAINT_PROPOSAL
-        alignment = search(pyramid, gray is None or not cand.blind, fallback=not to_flat_light)
-        if gray is None or (cand.blind and cand.score < FAINT_PROPOSAL):
+        alignment = search(pyramid, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
+        if gray is None or photo_only:
             return pyramid, alignment
         missed = not self.accepts(alignment)
         weak = (

@@ -70,32 +70,26 @@ def test_wider_searches_carry_only_coarse_solves_that_can_reach_the_bar(
     ``WIDE_CARRY_FROM`` is carried to the finer level, and the ink's starts (the last stage) run
     no OpenCV solve."""
     carried: list[float] = []
-    finish, ink = refine_module._finish, refine_module.ink_starts
-    stage = {"ink": False, "opencv_in_ink": 0}
+    finish, ink, coarse_steps = refine_module._finish, refine_module.ink_starts, refine_module._coarse_steps
+    solved: list[float] = []  # every coarse solve, quick path first
+    opencv = _count_opencv(monkeypatch)
+    opencv_before_ink: list[int] = []  # OpenCV's solves when the ink's starts were taken
 
     def noted_finish(pyramid, coarse, *args):  # noqa: ANN001, ANN002, ANN202
         carried.append(coarse[1])
         return finish(pyramid, coarse, *args)
 
     def noted_ink(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        stage["ink"] = True
+        opencv_before_ink.append(len(opencv))
         return ink(*args, **kwargs)
-
-    step, coarse_steps = refine_module._ecc_step, refine_module._coarse_steps
-    solved: list[float] = []  # every coarse solve, quick path first
 
     def noted_coarse(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         out = coarse_steps(*args, **kwargs)
         solved.extend(s[1] for s in out if s is not None)
         return out
 
-    def noted_step(*args, wide_basin: bool = False, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        stage["opencv_in_ink"] += int(wide_basin and stage["ink"])
-        return step(*args, wide_basin=wide_basin, **kwargs)
-
     monkeypatch.setattr(refine_module, "_finish", noted_finish)
     monkeypatch.setattr(refine_module, "ink_starts", noted_ink)
-    monkeypatch.setattr(refine_module, "_ecc_step", noted_step)
     monkeypatch.setattr(refine_module, "_coarse_steps", noted_coarse)
     photo = _noise()
     photo[150:330, 230:410] = 1.0  # a sheet of paper, so the ink's starts are found
@@ -104,7 +98,7 @@ def test_wider_searches_carry_only_coarse_solves_that_can_reach_the_bar(
     start = locator.aligner.homography(OUTLINE)
     found = refine(ImagePyramid(photo), start, locator.template, orders=4, accept=0.55, sized=True, min_start=-1.0)
     assert found is None or found.correlation < 0.6
-    assert stage["ink"]
     assert any(c < WIDE_CARRY_FROM for c in solved[2:])  # the wider searches' solves fell short ...
     assert all(c >= WIDE_CARRY_FROM for c in carried[1:])  # ... and were not carried
-    assert stage["opencv_in_ink"] == 0
+    assert opencv_before_ink  # the ink's starts were taken (the last stage) ...
+    assert len(opencv) == opencv_before_ink[0]  # ... and their solves ran no OpenCV
