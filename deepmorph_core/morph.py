@@ -169,7 +169,8 @@ class MorphSpace:
         hi = self.upper.to(unit)
         values = lo + (hi - lo) * unit
         if self._move_pairs.numel():
-            ix, iy = self._move_pairs[:, 0], self._move_pairs[:, 1]
+            pairs = self._move_pairs.to(unit.device)
+            ix, iy = pairs[:, 0], pairs[:, 1]
             r = hi[ix]
             x, y = values[:, ix] / r, values[:, iy] / r
             dx = r * x * torch.sqrt((1 - y * y / 2).clamp_min(0))

@@ -19,8 +19,9 @@ from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig
+from tests.app.pretend_cuda import pretend_cuda
 from tests.app.test_training import TINY
-from tests.conftest import table_text
+from tests.conftest import make_svg, table_text
 
 app = application()
 CUDA = torch.cuda.is_available()
@@ -106,6 +107,42 @@ def test_the_channels_last_decoder_computes_what_the_default_layout_does() -> No
     b.square().sum().backward()
     for (name, p), q in zip(plain.named_parameters(), fast.parameters()):
         torch.testing.assert_close(p.grad, q.grad.contiguous(), atol=1e-5, rtol=1e-4, msg=name)
+
+
+TWO_COLOURS = make_svg(
+    """<g stroke="#1f5fbf" stroke-width="2.5" stroke-linecap="round" fill="none" dm:move="2.5">
+  <polyline points="4 6 12 4 20 6"/>
+  <line x1="4" y1="12" x2="20" y2="12" stroke="#d9480f"/>
+  <polyline points="4 18 12 20 20 18"/>
+  <circle cx="12" cy="12" r="3" fill="#f2c12e" dm:move="1.5"/>
+</g>"""
+)
+
+
+@pytest.mark.parametrize(
+    ("drawing", "settings"),
+    [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {})],
+    ids=["black-and-white", "colour"],
+)
+def test_the_cuda_path_keeps_its_tensors_on_the_device(
+    drawing: bytes, settings: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no GPU is at hand (CI): training with ``device="cuda"`` (real renders, registration,
+    small prints, a colour drawing's renders, the decoder's ONNX graph) and its validation on
+    the device, with a pretend CUDA device (``tests/app/pretend_cuda.py``), never hand a CPU
+    tensor to an operation on the device's tensors, as the first run on a real GPU found
+    ``values_from_unit`` doing."""
+    svg = tmp_path / "drawing.svg"
+    svg.write_bytes(drawing)
+    out = tmp_path / "m.dmm"
+    cfg = {"steps": 6, "batch": 8, "width": 32, "severity": "easy", "hard_fraction": 0.25, "threads": 1}
+    with pretend_cuda(monkeypatch) as device:
+        train_model(svg, out, payload_bits=4, crc_bits=8, ecc_t=0, train={**cfg, **settings, "device": "cuda"},
+                    validation_samples=(8, 4))  # fmt: skip
+    assert not device.mixes, device.mixes
+    model = DeepMorphModel.load(out)
+    assert model.meta.record.device == "cuda" and "decoder" in model.graphs
+    assert next(model.decoder.parameters()).device.type == "cpu"
 
 
 @needs_cuda
