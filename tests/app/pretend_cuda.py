@@ -6,8 +6,9 @@ Tensors "on the device" are :class:`OnDevice` tensors: CPU tensors whose ``.devi
 name CUDA to the CPU and marks what they return; marks pass on through every operation (the
 tensor subclass's default behaviour). Where a call mixes marked tensors with unmarked ones of
 one or more dimensions, as CUDA refuses to (a zero-dimensional CPU tensor is allowed, as on
-CUDA; so are CPU index tensors in ``x[idx]``), or asks for ``.numpy()`` of a marked one, the
-mode records the project's innermost frame. The numbers are the CPU's; only placement is
+CUDA; so are CPU index tensors in ``x[idx]``), asks for ``.numpy()`` of a marked one, or draws
+random numbers for the device from a CPU generator (CUDA refuses that too), the mode records the
+project's innermost frame. The numbers are the CPU's; only placement is
 checked.
 """
 
@@ -119,6 +120,11 @@ class PretendCuda(TorchFunctionMode):
         kwargs = dict(kwargs or {})
         name = getattr(func, "__name__", "")
         if func in FACTORIES or name in ("new_zeros", "new_empty", "new_ones", "new_full", "new_tensor"):
+            like = args[0] if name.endswith("_like") or name.startswith("new_") else None
+            on_device = _names_cuda(kwargs.get("device", like))
+            generator = kwargs.get("generator")
+            if on_device and generator is not None and generator.device.type != "cuda":
+                self._record("a CPU generator drawing on the device", func)
             if "device" in kwargs and _names_cuda(kwargs["device"]):
                 kwargs["device"] = "cpu"
                 return _mark(func(*args, **kwargs))
