@@ -19,9 +19,9 @@ from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.networks import Decoder, DecoderConfig
-from tests.app.pretend_cuda import pretend_cuda
 from tests.app.test_training import TINY
 from tests.conftest import make_svg, table_text
+from tests.pretend_cuda import pretend_cuda
 
 app = application()
 CUDA = torch.cuda.is_available()
@@ -129,7 +129,7 @@ def test_the_cuda_path_keeps_its_tensors_on_the_device(
 ) -> None:
     """Where no GPU is at hand (CI): training with ``device="cuda"`` (real renders, registration,
     small prints, a colour drawing's renders, the decoder's ONNX graph) and its validation on
-    the device, with a pretend CUDA device (``tests/app/pretend_cuda.py``), never hand a CPU
+    the device, with a pretend CUDA device (``tests/pretend_cuda.py``), never hand a CPU
     tensor to an operation on the device's tensors, as the first run on a real GPU found
     ``values_from_unit`` doing."""
     svg = tmp_path / "drawing.svg"

@@ -25,6 +25,7 @@ from deepmorph_detect.network import INPUT_SIZE, DetectorGraph
 from deepmorph_detect.runtime import DeviceNetwork
 from deepmorph_detect.scenes import close_up_photo
 from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
+from tests.pretend_cuda import pretend_cuda
 
 app = application()
 CUDA = torch.cuda.is_available()
@@ -94,6 +95,24 @@ def test_an_unknown_device_is_refused(model: DeepMorphModel) -> None:
     assert result.exit_code == 2 and "tpu" in result.output
     with pytest.raises(DeepMorphError, match="expected one of auto, cpu, cuda"):
         deepmorph.load(BUNDLED_MODEL, device="tpu")
+
+
+@pytest.mark.parametrize("detector", [None, "universal"])
+def test_the_cuda_chain_keeps_its_tensors_on_the_device(
+    model: DeepMorphModel, detector: str | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where no GPU is at hand (CI): the chain on a pretend CUDA device (``tests/pretend_cuda.py``)
+    never hands a CPU tensor to an operation on the device's tensors, and reads what the CPU
+    reads (the numbers are the CPU's either way)."""
+    photos = _photos(model, 3)
+    cpu = Locator(model, detector, device="cpu")
+    expected = [[(d.payload.binary, d.ok) for d in cpu.locate(photo)] for photo, _ in photos]
+    with pretend_cuda(monkeypatch) as device:
+        cuda = Locator(model, detector, device="cuda")
+        assert isinstance(cuda.reader.decoder, DeviceNetwork)
+        got = [[(d.payload.binary, d.ok) for d in cuda.locate(photo)] for photo, _ in photos]
+    assert not device.mixes, device.mixes
+    assert got == expected and any(ok for found in got for _, ok in found)
 
 
 @needs_cuda

@@ -27,6 +27,9 @@ from torch.overrides import TorchFunctionMode
 
 CUDA = torch.device("cuda", 0)
 PROJECT = ("deepmorph/", "deepmorph_core/", "deepmorph_augment/", "deepmorph_detect/", "deepmorph_primitives/")
+# torch's own bookkeeping, where the pretend device's marks do not follow (gradients come back
+# unmarked): what it mixes is not the project's doing
+TORCH_OWN = ("/torch/optim/", "/torch/autograd/", "/torch/_tensor.py", "/torch/nn/utils/")
 FACTORIES = {
     torch.zeros, torch.ones, torch.empty, torch.full, torch.arange, torch.linspace, torch.logspace, torch.tensor,
     torch.as_tensor, torch.rand, torch.randn, torch.randint, torch.randperm, torch.eye, torch.scalar_tensor,
@@ -92,8 +95,8 @@ class PretendCuda(TorchFunctionMode):
             f for f in stack if any(p in f.filename.replace("\\", "/") for p in PROJECT) and "/tests/" not in f.filename
         ]
         innermost = stack[-1].filename
-        if not ours or ("site-packages" in innermost and "kornia" not in innermost):
-            return  # inside torch itself (an optimiser's step, autograd), not the project's doing
+        if not ours or any(part in innermost.replace("\\", "/") for part in TORCH_OWN):
+            return  # an optimiser's step or autograd: the gradients are the CPU's here, not the project's doing
         where = f"{ours[-1].filename.rsplit('/', 2)[-2]}/{ours[-1].filename.rsplit('/', 1)[-1]}:{ours[-1].lineno}"
         self.mixes[(what, getattr(func, "__name__", str(func)), where)] += 1
 
@@ -145,7 +148,15 @@ class PretendCuda(TorchFunctionMode):
                 out.requires_grad_(args[0].requires_grad)
                 out._is_param = True
             return out
-        if name in ("__repr__", "__format__", "__str__", "copy_", "__reduce_ex__"):
+        if name in (
+            "__repr__",
+            "__format__",
+            "__str__",
+            "copy_",
+            "__reduce_ex__",
+            "_has_compatible_shallow_copy_type",
+            "__set__",
+        ):
             return func(*args, **kwargs)
         tensors = _tensors(args, []) + _tensors(kwargs, [])
         if any(isinstance(t, OnDevice) for t in tensors):
