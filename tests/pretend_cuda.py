@@ -170,9 +170,10 @@ class PretendCuda(TorchFunctionMode):
 
 
 @contextmanager
-def pretend_cuda(monkeypatch: pytest.MonkeyPatch) -> Iterator[PretendCuda]:
+def pretend_cuda() -> Iterator[PretendCuda]:
     """Within the block, ``torch.cuda`` says one device is there and ``cuda`` tensors are
-    marked CPU tensors (modules' parameters too: ``.to()`` replaces them rather than their data).
+    marked CPU tensors (modules' parameters too: ``.to()`` replaces them rather than their data);
+    everything is as before once it ends.
 
     ONNX export (:func:`deepmorph_core.graphs.make_graph`, as the model calls it) runs outside
     the mode, which its tracer does not follow; a network or example handed to it on the device
@@ -183,26 +184,26 @@ def pretend_cuda(monkeypatch: pytest.MonkeyPatch) -> Iterator[PretendCuda]:
     pretend = {"is_available": lambda: True, "device_count": lambda: 1, "current_device": lambda: 0,
                "set_device": lambda *a, **k: None, "synchronize": lambda *a, **k: None}  # fmt: skip
     real = {name: getattr(torch.cuda, name) for name in pretend}
-
     real_make_graph = model_module.make_graph
+    mode = PretendCuda()
 
     def make_graph_on_the_cpu(net: torch.nn.Module, examples: list[torch.Tensor], *args: Any, **kwargs: Any) -> Any:
         if any(isinstance(t, OnDevice) for t in [*net.parameters(), *net.buffers(), *examples]):
             mode._record("ONNX export of a CUDA network", real_make_graph)
             raise GraphError("pretend CUDA: the network or its examples are on the device")
-        with torch.overrides._pop_mode_temporarily(), monkeypatch.context() as outside:
+        with torch.overrides._pop_mode_temporarily(), pytest.MonkeyPatch.context() as outside:
             for name, function in real.items():  # the exporter asks torch.cuda too
                 outside.setattr(torch.cuda, name, function)
             return real_make_graph(net, examples, *args, **kwargs)
 
-    monkeypatch.setattr(model_module, "make_graph", make_graph_on_the_cpu)
-    for name, function in pretend.items():
-        monkeypatch.setattr(torch.cuda, name, function)
-    mode = PretendCuda()
     overwrite = torch.__future__.get_overwrite_module_params_on_conversion()
-    torch.__future__.set_overwrite_module_params_on_conversion(True)
-    try:
-        with mode:
-            yield mode
-    finally:
-        torch.__future__.set_overwrite_module_params_on_conversion(overwrite)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(model_module, "make_graph", make_graph_on_the_cpu)
+        for name, function in pretend.items():
+            patch.setattr(torch.cuda, name, function)
+        torch.__future__.set_overwrite_module_params_on_conversion(True)
+        try:
+            with mode:
+                yield mode
+        finally:
+            torch.__future__.set_overwrite_module_params_on_conversion(overwrite)

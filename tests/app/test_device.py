@@ -124,9 +124,7 @@ TWO_COLOURS = make_svg(
     [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {})],
     ids=["black-and-white", "colour"],
 )
-def test_the_cuda_path_keeps_its_tensors_on_the_device(
-    drawing: bytes, settings: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_the_cuda_path_keeps_its_tensors_on_the_device(drawing: bytes, settings: dict, tmp_path: Path) -> None:
     """Where no GPU is at hand (CI): training with ``device="cuda"`` (real renders, registration,
     small prints, a colour drawing's renders, the decoder's ONNX graph) and its validation on
     the device, with a pretend CUDA device (``tests/pretend_cuda.py``), never hand a CPU
@@ -136,10 +134,11 @@ def test_the_cuda_path_keeps_its_tensors_on_the_device(
     svg.write_bytes(drawing)
     out = tmp_path / "m.dmm"
     cfg = {"steps": 6, "batch": 8, "width": 32, "severity": "easy", "hard_fraction": 0.25, "threads": 1}
-    with pretend_cuda(monkeypatch) as device:
+    with pretend_cuda() as device:
         train_model(svg, out, payload_bits=4, crc_bits=8, ecc_t=0, train={**cfg, **settings, "device": "cuda"},
                     validation_samples=(8, 4))  # fmt: skip
     assert not device.mixes, device.mixes
+    assert not torch.cuda.is_available() or CUDA  # the pretence ends with the block
     model = DeepMorphModel.load(out)
     assert model.meta.record.device == "cuda" and "decoder" in model.graphs
     assert next(model.decoder.parameters()).device.type == "cpu"

@@ -98,16 +98,14 @@ def test_an_unknown_device_is_refused(model: DeepMorphModel) -> None:
 
 
 @pytest.mark.parametrize("detector", [None, "universal"])
-def test_the_cuda_chain_keeps_its_tensors_on_the_device(
-    model: DeepMorphModel, detector: str | None, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_the_cuda_chain_keeps_its_tensors_on_the_device(model: DeepMorphModel, detector: str | None) -> None:
     """Where no GPU is at hand (CI): the chain on a pretend CUDA device (``tests/pretend_cuda.py``)
     never hands a CPU tensor to an operation on the device's tensors, and reads what the CPU
     reads (the numbers are the CPU's either way)."""
     photos = _photos(model, 3)
     cpu = Locator(model, detector, device="cpu")
     expected = [[(d.payload.binary, d.ok) for d in cpu.locate(photo)] for photo, _ in photos]
-    with pretend_cuda(monkeypatch) as device:
+    with pretend_cuda() as device:
         cuda = Locator(model, detector, device="cuda")
         assert isinstance(cuda.reader.decoder, DeviceNetwork)
         got = [[(d.payload.binary, d.ok) for d in cuda.locate(photo)] for photo, _ in photos]
