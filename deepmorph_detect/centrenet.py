@@ -206,7 +206,7 @@ def detector_graph(net: nn.Module) -> StoredGraph:
     W, H = INPUT_SIZE
     generator = torch.Generator().manual_seed(0)
     examples = [torch.rand(1, 1, H, W, generator=generator) for _ in range(3)]
-    weights = {f"detector.{k}": v for k, v in net.state_dict().items()}
+    weights = {f"detector.{k}": v.detach().cpu() for k, v in net.state_dict().items()}
     module = DetectorGraph(fused_for_inference(net))
     return make_graph(module, examples, "image", ["heat", "corners"], weights_fingerprint(weights, "detector"))
 

@@ -78,7 +78,7 @@ def save_universal(
     path: str | Path, net: DetectorNet, meta: UniversalMeta, graph: StoredGraph | None, extra: dict[str, torch.Tensor]
 ) -> None:
     """Write a universal detector file atomically (``extra``: a checkpoint's optimiser state)."""
-    tensors = {f"detector.{k}": v for k, v in net.state_dict().items()}
+    tensors = {f"detector.{k}": v.cpu() for k, v in net.state_dict().items()}
     meta = meta.model_copy(update={"graphs": {"detector": graph.meta} if graph is not None else {}})
     if graph is not None:
         tensors["graph.detector"] = torch.frombuffer(bytearray(graph.data), dtype=torch.uint8)

@@ -175,10 +175,11 @@ def pretend_cuda() -> Iterator[PretendCuda]:
     marked CPU tensors (modules' parameters too: ``.to()`` replaces them rather than their data);
     everything is as before once it ends.
 
-    ONNX export (:func:`deepmorph_core.graphs.make_graph`, as the model calls it) runs outside
+    ONNX export (:func:`deepmorph_core.graphs.make_graph`, as the model and the detector call it) runs outside
     the mode, which its tracer does not follow; a network or example handed to it on the device
     is recorded and refused (the export traces CPU examples, so CUDA weights would fail it)."""
     import deepmorph_core.model as model_module
+    import deepmorph_detect.centrenet as detector_module
     from deepmorph_core.graphs import GraphError
 
     pretend = {"is_available": lambda: True, "device_count": lambda: 1, "current_device": lambda: 0,
@@ -198,7 +199,8 @@ def pretend_cuda() -> Iterator[PretendCuda]:
 
     overwrite = torch.__future__.get_overwrite_module_params_on_conversion()
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(model_module, "make_graph", make_graph_on_the_cpu)
+        for module in (model_module, detector_module):
+            patch.setattr(module, "make_graph", make_graph_on_the_cpu)
         for name, function in pretend.items():
             patch.setattr(torch.cuda, name, function)
         torch.__future__.set_overwrite_module_params_on_conversion(True)

@@ -27,6 +27,7 @@ from torch import Tensor
 from deepmorph.training.detector_settings import DetectorSettings, SceneSettings
 from deepmorph.training.loop import Panel, TrainingLoop
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
+from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
@@ -201,19 +202,22 @@ class DetectorRun:
             self.earlier.append({"config": {"universal": meta_u.config}, "record": meta_u.record.model_dump()})
         self.record.total_steps = config.steps
         self.record.threads = torch.get_num_threads()
+        self.record.device = self.device.type
         if resuming:
             self.net.load_state_dict(stored_weights(model.detector_state))
             restore_optimiser(self.opt, model.extra_tensors)
         self._batches: Iterator[tuple[Tensor, Tensor, Tensor, Tensor]] | None = None
 
     def set_up(self, config: SceneSettings, out: Path) -> None:
-        """Threads, seed, a fresh network and its optimiser."""
+        """Threads, seed, the device, a fresh network on it and its optimiser."""
         self.cfg, self.out = config, Path(out)
         if config.threads:
             use_threads(config.threads)
         keep_freed_memory()  # each step reuses the last one's pages (deepmorph_core/heap.py)
-        torch.manual_seed(config.seed)
-        self.net = DetectorNet(config.width)
+        self.device = torch.device("cuda", torch.cuda.current_device()) if resolve_device(config.device) == "cuda" \
+            else torch.device("cpu")  # fmt: skip
+        torch.manual_seed(config.seed)  # the weights are drawn on the CPU, the same on either device
+        self.net = DetectorNet(config.width).to(self.device)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
 
     def dataset(self) -> SceneBatches:
@@ -223,7 +227,7 @@ class DetectorRun:
     def checkpoint(self) -> None:
         """Write the bundle with the detector (and optimiser state until finished; at the end,
         with the detector's ONNX graph)."""
-        self.model.detector_state = {f"detector.{k}": v for k, v in self.net.state_dict().items()}
+        self.model.detector_state = {f"detector.{k}": v.cpu() for k, v in self.net.state_dict().items()}
         self.model.meta.detector = DetectorMeta(
             name=CentreNetDetector.name, config=self.cfg.model_dump(), record=self.record, earlier=self.earlier
         )
@@ -259,7 +263,7 @@ class DetectorRun:
                 )
             )
             self.net.train()
-        img, heat, corners, mask = next(self._batches)
+        img, heat, corners, mask = (t.to(self.device) for t in next(self._batches))
         hl, cl = self.net(normalise_input(img))
         lh = focal_loss(hl, heat)
         lc = quad_loss(cl, corners, mask)
@@ -279,7 +283,7 @@ def optimiser_tensors(opt: torch.optim.Optimizer, step: int) -> dict[str, Tensor
     extra = {"dtrain.step": torch.tensor([step]), "dtrain.rng": torch.get_rng_state()}
     for pid, st in opt.state_dict()["state"].items():
         for key, val in st.items():
-            extra[f"dtrain.opt.{pid}.{key}"] = val if torch.is_tensor(val) else torch.tensor(val)
+            extra[f"dtrain.opt.{pid}.{key}"] = val.cpu() if torch.is_tensor(val) else torch.tensor(val)
     return extra
 
 

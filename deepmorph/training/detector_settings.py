@@ -31,6 +31,8 @@ class SceneSettings:
         seed: scenes and initialisation.
         threads: torch threads of the training process.
         workers: scene-making processes (0: in the training process).
+        device: where the network trains (``auto``: CUDA where present); scenes are made on
+            the CPU whatever the device.
         checkpoint_every, log_every: in steps.
     """
 
@@ -43,6 +45,7 @@ class SceneSettings:
     seed: int = setting(0, "seed")
     threads: Annotated[int | None, Ge(1), Le(256)] = setting(1, "threads")
     workers: Annotated[int, Ge(0), Le(16)] = setting(1, "workers", "Scene-making processes.")
+    device: Literal["cpu", "cuda", "auto"] = setting("auto", "device")
     checkpoint_every: Annotated[int, Ge(1)] = 200
     log_every: Annotated[int, Ge(1)] = 25
 

@@ -220,6 +220,7 @@ class UniversalRun(DetectorRun):
             restore_optimiser(self.opt, resume_from["tensors"])
             self.record = resume_from["meta"].record
         self.record.threads = torch.get_num_threads()
+        self.record.device = self.device.type
         self._batches = None
 
     def dataset(self) -> PoolBatches:
@@ -287,12 +288,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="where the network trains")
     p.add_argument("--limit", type=int, default=0, help="at most N drawings a folder (quick runs)")
     p.add_argument("--resume", action="store_true")
     args = p.parse_args(argv)
     config = UniversalConfig(
         steps=args.steps, batch=args.batch, lr=args.lr, width=args.channels, seed=args.seed,
-        threads=args.threads, workers=args.workers,
+        threads=args.threads, workers=args.workers, device=args.device,
     )  # fmt: skip
     try:
         out, seconds = train_universal(args.folders, args.out, config, args.resume, args.limit)

@@ -29,6 +29,7 @@ from deepmorph_detect.network import (
     stored_weights,
 )
 from deepmorph_detect.scenes import SceneMaker
+from tests.pretend_cuda import pretend_cuda
 
 app = application()  # the command line's own commands and every installed plugin's
 
@@ -247,6 +248,31 @@ def test_a_new_detector_replaces_the_stored_close_up_validation(tmp_path: Path) 
     assert records["close-ups"].description != "stale" and records["close-ups"].samples == 2
 
 
+def test_the_detector_trains_and_resumes_on_the_device_it_is_given(tmp_path: Path) -> None:
+    """``device="cuda"`` on a pretend CUDA device (``tests/pretend_cuda.py``): the network, its
+    batches and, on resuming, the optimiser's state go to the device, no operation mixes the two,
+    the bundle records the device and stores CPU weights and the detector's graph, and the
+    weights are those the CPU trains (the pretend device computes as the CPU does)."""
+    on_cpu = tmp_path / "cpu.dmm"
+    train_detector(BUNDLED_MODEL, on_cpu, _config(3).model_copy(update={"device": "cpu"}))
+    cut = tmp_path / "cuda.dmm"
+
+    def stop_at_1(m: dict) -> None:
+        if m["step"] == 1:
+            raise KeyboardInterrupt
+
+    with pretend_cuda() as device:
+        with pytest.raises(Interrupted):
+            train_detector(BUNDLED_MODEL, cut, _config(3).model_copy(update={"device": "cuda"}), on_log=stop_at_1)
+        train_detector(cut, cut, resume=True)
+    assert not device.mixes, device.mixes
+    a, b = DeepMorphModel.load(on_cpu), DeepMorphModel.load(cut)
+    assert a.meta.detector.record.device == "cpu" and b.meta.detector.record.device == "cuda"
+    assert "detector" in b.graphs
+    for key, val in a.detector_state.items():
+        assert type(b.detector_state[key]) is torch.Tensor and torch.equal(val, b.detector_state[key]), key
+
+
 def test_the_commands_options_are_the_declared_settings() -> None:
     """``train-detector``'s options take their defaults, bounds and help from
     :class:`DetectorSettings`, which :class:`DetectorConfig` inherits; the command has no
@@ -260,7 +286,7 @@ def test_the_commands_options_are_the_declared_settings() -> None:
 
     options, config = declared(train_detector_cmd), DetectorConfig()
     for field, setting in exposed(DetectorSettings).items():
-        if setting.option in ("seed", "threads"):  # the options every command shares, with their own help
+        if setting.option in ("seed", "threads", "device"):  # the options every command shares, with their own help
             continue
         assert options[field].default == getattr(config, field), field
         assert options[field].flags == (f"--{setting.option}",) and options[field].help == setting.help

@@ -15,6 +15,7 @@ from deepmorph.cli import application
 from deepmorph.training.codec import train_model
 from deepmorph.training.loop import read_log
 from deepmorph.training.validation import validate_renders
+from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.device import resolve_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
@@ -53,6 +54,12 @@ def test_cuda_without_cuda_is_one_clear_line(tiny: Path, tmp_path: Path) -> None
     assert result.exit_code == 1
     assert "no CUDA device is available" in result.output and "Traceback" not in result.output
     assert not (tmp_path / "m.dmm").exists()
+    detector = CliRunner().invoke(
+        app,
+        ["train-detector", str(BUNDLED_MODEL), "--out", str(tmp_path / "d.dmm"), "--steps", "1", "--device", "cuda"],
+    )
+    assert detector.exit_code == 1 and "no CUDA device is available" in detector.output
+    assert "Traceback" not in detector.output and not (tmp_path / "d.dmm").exists()
 
 
 @pytest.mark.parametrize("command", ["train", "validate"])

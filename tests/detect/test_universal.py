@@ -39,6 +39,7 @@ from deepmorph_detect.universal import (
     shared_runner,
     unmirrored,
 )
+from tests.pretend_cuda import pretend_cuda
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 FOLDERS = [DATA / "feather", DATA / "flat-color-icons"]
@@ -84,6 +85,21 @@ def test_pool_scenes_mark_each_print_by_its_ink_square() -> None:
 
 def _config(steps: int) -> UniversalConfig:
     return UniversalConfig(steps=steps, batch=2, workers=0, checkpoint_every=2, log_every=1, seed=5)
+
+
+def test_it_trains_on_the_device_it_is_given(tmp_path: Path) -> None:
+    """``device="cuda"`` on a pretend CUDA device (``tests/pretend_cuda.py``): no operation mixes
+    the device's tensors with the CPU's, the file records the device and holds the graph, and the
+    weights are the CPU's (the pretend device computes as the CPU does)."""
+    on_cpu, on_cuda = tmp_path / "cpu.safetensors", tmp_path / "cuda.safetensors"
+    train_universal(FOLDERS, on_cpu, _config(2).model_copy(update={"device": "cpu"}), limit=3)
+    with pretend_cuda() as device:
+        train_universal(FOLDERS, on_cuda, _config(2).model_copy(update={"device": "cuda"}), limit=3)
+    assert not device.mixes, device.mixes
+    a, b = load_universal(on_cpu), load_universal(on_cuda)
+    assert a[2].record.device == "cpu" and b[2].record.device == "cuda" and b[1] is not None
+    for key, val in a[0].state_dict().items():
+        assert torch.equal(val, b[0].state_dict()[key]), key
 
 
 def test_short_training_checkpoints_and_resumes_exactly(tmp_path: Path) -> None:
