@@ -29,4 +29,12 @@ def resolve_device(name: str) -> str:
     return name
 
 
-__all__ = ["DEVICES", "resolve_device"]
+def torch_device(name: str) -> torch.device:
+    """The torch device ``name`` resolves to (:func:`resolve_device`): CUDA's current device
+    (``cuda:<index>``, which ``torch.cuda.set_device`` chose for a torchrun process), or the CPU."""
+    if resolve_device(name) == "cuda":
+        return torch.device("cuda", torch.cuda.current_device())
+    return torch.device("cpu")
+
+
+__all__ = ["DEVICES", "resolve_device", "torch_device"]

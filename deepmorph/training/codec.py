@@ -67,7 +67,7 @@ from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, Valid
 from deepmorph_core.capacity import predict, size_warning
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
-from deepmorph_core.device import resolve_device
+from deepmorph_core.device import resolve_device, torch_device
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import check_target
 from deepmorph_core.heap import keep_freed_memory
@@ -185,8 +185,7 @@ class CodecRun:
     def __init__(self, model: DeepMorphModel, config: TrainConfig, out: Path, world: World | None = None):
         self.model, self.cfg, self.out = model, config, Path(out)
         self.world = world or World()
-        device = resolve_device(config.device)
-        self.device = torch.device("cuda", torch.cuda.current_device()) if device == "cuda" else torch.device("cpu")
+        self.device = torch_device(config.device)
         self.shards = config.shards or 1
         self.mine = rank_shards(self.shards, self.world)
         if config.threads:

@@ -27,7 +27,7 @@ from torch import Tensor
 from deepmorph.training.detector_settings import DetectorSettings, SceneSettings
 from deepmorph.training.loop import Panel, TrainingLoop
 from deepmorph_core.bundle import DetectorMeta, TrainingRecord
-from deepmorph_core.device import resolve_device
+from deepmorph_core.device import torch_device
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.fileio import same_file
 from deepmorph_core.graphs import GraphError
@@ -214,8 +214,7 @@ class DetectorRun:
         if config.threads:
             use_threads(config.threads)
         keep_freed_memory()  # each step reuses the last one's pages (deepmorph_core/heap.py)
-        self.device = torch.device("cuda", torch.cuda.current_device()) if resolve_device(config.device) == "cuda" \
-            else torch.device("cpu")  # fmt: skip
+        self.device = torch_device(config.device)
         torch.manual_seed(config.seed)  # the weights are drawn on the CPU, the same on either device
         self.net = DetectorNet(config.width).to(self.device)
         self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
