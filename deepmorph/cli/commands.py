@@ -675,8 +675,9 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         rows.append(
             (
                 "decoder tuned",
-                f"{run['steps']}/{run['total_steps']} steps, {run['elapsed_s']:.0f} s, small prints "
-                f"{run['small_prints']:.0%}, bit acc {run.get('bit_acc', float('nan')):.4f}"
+                f"{run['steps']}/{run['total_steps']} steps, {run['elapsed_s']:.0f} s"
+                + (f" on {run['device']}" if "device" in run else "")  # none in tunings from before it was recorded
+                + f", small prints {run['small_prints']:.0%}, bit acc {run.get('bit_acc', float('nan')):.4f}"
                 + ("" if run["finished"] else " (interrupted)"),
             )
         )

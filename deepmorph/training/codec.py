@@ -834,6 +834,7 @@ class TuningRun(CodecRun):
             "total_steps": config.steps,
             **{k: getattr(config, k) for k in ("small_prints", "severity", "lr", "batch", "hard_fraction", "seed")},
             "threads": self.record.threads,
+            "device": self.device.type,
         }
         self._window: list[float] = []
 

@@ -12,7 +12,7 @@ import torch
 from typer.testing import CliRunner
 
 from deepmorph.cli import application
-from deepmorph.training.codec import train_model
+from deepmorph.training.codec import train_model, tune_decoder
 from deepmorph.training.loop import read_log
 from deepmorph.training.validation import validate_renders
 from deepmorph_core.bundled import BUNDLED_MODEL
@@ -149,6 +149,21 @@ def test_the_cuda_path_keeps_its_tensors_on_the_device(drawing: bytes, settings:
     model = DeepMorphModel.load(out)
     assert model.meta.record.device == "cuda" and "decoder" in model.graphs
     assert next(model.decoder.parameters()).device.type == "cpu"
+
+
+def test_tuning_the_decoder_keeps_its_tensors_on_the_device(tiny: Path, tmp_path: Path) -> None:
+    """``tune-decoder`` with ``device="cuda"`` on the pretend device: no mix, its entry in the
+    bundle's tunings says cuda (the training record stays the training's), and the tuned decoder
+    comes back on the CPU with its ONNX graph."""
+    base, tuned = tmp_path / "m.dmm", tmp_path / "tuned.dmm"
+    train_model(tiny, base, payload_bits=4, crc_bits=8, ecc_t=0, train={"steps": 2, "batch": 8, "width": 32, "threads": 1},
+                validation_samples=(0, 0))  # fmt: skip
+    with pretend_cuda() as device:
+        tune_decoder(base, tuned, steps=4, device="cuda", validation_samples=(8, 4))
+    assert not device.mixes, device.mixes
+    model = DeepMorphModel.load(tuned)
+    assert model.meta.tuning[-1]["device"] == "cuda" and model.meta.record.device == "cpu"
+    assert "decoder" in model.graphs and next(model.decoder.parameters()).device.type == "cpu"
 
 
 @needs_cuda
