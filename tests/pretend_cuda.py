@@ -19,6 +19,7 @@ import copy
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -26,7 +27,8 @@ import torch
 from torch.overrides import TorchFunctionMode
 
 CUDA = torch.device("cuda", 0)
-PROJECT = ("deepmorph/", "deepmorph_core/", "deepmorph_augment/", "deepmorph_detect/", "deepmorph_primitives/")
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = {"deepmorph", "deepmorph_core", "deepmorph_augment", "deepmorph_detect", "deepmorph_primitives"}
 # torch's own bookkeeping, where the pretend device's marks do not follow (gradients come back
 # unmarked): what it mixes is not the project's doing
 TORCH_OWN = ("/torch/optim/", "/torch/autograd/", "/torch/_tensor.py", "/torch/nn/utils/")
@@ -48,6 +50,15 @@ class OnDevice(torch.Tensor):
     @property
     def is_cuda(self) -> bool:  # type: ignore[override]
         return True
+
+
+def _in_project(filename: str) -> str | None:
+    """``filename`` relative to the repository when it is in one of the packages, else None."""
+    try:
+        rel = Path(filename).resolve().relative_to(ROOT)
+    except ValueError:
+        return None
+    return rel.as_posix() if rel.parts and rel.parts[0] in PACKAGES else None
 
 
 def _names_cuda(where: Any) -> bool:
@@ -91,13 +102,13 @@ class PretendCuda(TorchFunctionMode):
 
     def _record(self, what: str, func: Any) -> None:
         stack = traceback.extract_stack()[:-2]
-        ours = [
-            f for f in stack if any(p in f.filename.replace("\\", "/") for p in PROJECT) and "/tests/" not in f.filename
-        ]
+        ours = [(f, _in_project(f.filename)) for f in stack]
+        ours = [(f, rel) for f, rel in ours if rel is not None]
         innermost = stack[-1].filename
         if not ours or any(part in innermost.replace("\\", "/") for part in TORCH_OWN):
             return  # an optimiser's step or autograd: the gradients are the CPU's here, not the project's doing
-        where = f"{ours[-1].filename.rsplit('/', 2)[-2]}/{ours[-1].filename.rsplit('/', 1)[-1]}:{ours[-1].lineno}"
+        frame, rel = ours[-1]
+        where = f"{rel}:{frame.lineno}"
         self.mixes[(what, getattr(func, "__name__", str(func)), where)] += 1
 
     def _to(self, func: Any, args: tuple, kwargs: dict[str, Any]) -> Any:
