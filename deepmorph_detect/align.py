@@ -195,7 +195,7 @@ class Aligner:
         # a blind outline that flat light searches again when the photo's quick path falls short
         # takes that path without OpenCV's slower fallback: flat light's quick path has it
         alignment = search(pyramid, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
-        if gray is None or photo_only:
+        if photo_only:
             return pyramid, alignment
         missed = not self.accepts(alignment)
         weak = (

@@ -25,6 +25,7 @@ from deepmorph_detect.network import (
     STRIDE,
     DetectorGraph,
     DetectorNet,
+    detector_tensors,
     fused_for_inference,
     standardise,
     stored_weights,
@@ -206,7 +207,7 @@ def detector_graph(net: nn.Module) -> StoredGraph:
     W, H = INPUT_SIZE
     generator = torch.Generator().manual_seed(0)
     examples = [torch.rand(1, 1, H, W, generator=generator) for _ in range(3)]
-    weights = {f"detector.{k}": v.detach().cpu() for k, v in net.state_dict().items()}
+    weights = detector_tensors(net)
     module = DetectorGraph(fused_for_inference(net))
     return make_graph(module, examples, "image", ["heat", "corners"], weights_fingerprint(weights, "detector"))
 

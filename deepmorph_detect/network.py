@@ -65,6 +65,12 @@ class DetectorNet(nn.Module):
         return self.heat(f), self.corners(f)
 
 
+def detector_tensors(net: nn.Module) -> dict[str, Tensor]:
+    """The network's state dict as a bundle files it: ``detector.*``, on the CPU (where a
+    network trained on CUDA is saved and fingerprinted). The inverse of :func:`stored_weights`."""
+    return {f"detector.{k}": v.detach().cpu() for k, v in net.state_dict().items()}
+
+
 def stored_weights(detector_state: dict[str, Tensor]) -> dict[str, Tensor]:
     """A bundle's ``detector.*`` tensors (``DeepMorphModel.detector_state``) as the network's
     own state dict: the prefix the bundle files them under dropped."""
@@ -118,6 +124,7 @@ __all__ = [
     "STRIDE",
     "DetectorGraph",
     "DetectorNet",
+    "detector_tensors",
     "focal_loss",
     "fused_for_inference",
     "normalise_input",

@@ -34,7 +34,7 @@ from deepmorph_core.protocols import Candidate
 from deepmorph_core.render import render_svg_rgb
 from deepmorph_detect.camera import project, viewbox_corners
 from deepmorph_detect.centrenet import MAX_WIDTH, MIN_WIDTH, CentreNetDetector, Runner, detector_runner
-from deepmorph_detect.network import DetectorNet, stored_weights
+from deepmorph_detect.network import DetectorNet, detector_tensors, stored_weights
 from deepmorph_detect.propose import quad_bbox
 
 FORMAT = "deepmorph-universal-detector/1"
@@ -78,7 +78,7 @@ def save_universal(
     path: str | Path, net: DetectorNet, meta: UniversalMeta, graph: StoredGraph | None, extra: dict[str, torch.Tensor]
 ) -> None:
     """Write a universal detector file atomically (``extra``: a checkpoint's optimiser state)."""
-    tensors = {f"detector.{k}": v.cpu() for k, v in net.state_dict().items()}
+    tensors = detector_tensors(net)
     meta = meta.model_copy(update={"graphs": {"detector": graph.meta} if graph is not None else {}})
     if graph is not None:
         tensors["graph.detector"] = torch.frombuffer(bytearray(graph.data), dtype=torch.uint8)

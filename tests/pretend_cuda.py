@@ -8,8 +8,7 @@ tensor subclass's default behaviour). Where a call mixes marked tensors with unm
 one or more dimensions, as CUDA refuses to (a zero-dimensional CPU tensor is allowed, as on
 CUDA; so are CPU index tensors in ``x[idx]``), asks for ``.numpy()`` of a marked one, or draws
 random numbers for the device from a CPU generator (CUDA refuses that too), the mode records the
-project's innermost frame. The numbers are the CPU's; only placement is
-checked.
+project's innermost frame. The numbers are the CPU's; only placement is checked.
 """
 
 from __future__ import annotations

@@ -36,7 +36,15 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.severity import PHOTO_SIZE
 from deepmorph_core.threads import use_threads
 from deepmorph_detect.centrenet import CentreNetDetector, detector_graph
-from deepmorph_detect.network import INPUT_SIZE, STRIDE, DetectorNet, focal_loss, normalise_input, stored_weights
+from deepmorph_detect.network import (
+    INPUT_SIZE,
+    STRIDE,
+    DetectorNet,
+    detector_tensors,
+    focal_loss,
+    normalise_input,
+    stored_weights,
+)
 from deepmorph_detect.scenes import Placement, Scene, SceneMaker
 from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
 
@@ -226,7 +234,7 @@ class DetectorRun:
     def checkpoint(self) -> None:
         """Write the bundle with the detector (and optimiser state until finished; at the end,
         with the detector's ONNX graph)."""
-        self.model.detector_state = {f"detector.{k}": v.cpu() for k, v in self.net.state_dict().items()}
+        self.model.detector_state = detector_tensors(self.net)
         self.model.meta.detector = DetectorMeta(
             name=CentreNetDetector.name, config=self.cfg.model_dump(), record=self.record, earlier=self.earlier
         )

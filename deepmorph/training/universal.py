@@ -43,6 +43,7 @@ from deepmorph.training.detector import (
 )
 from deepmorph.training.loop import TrainingLoop
 from deepmorph_core.bundle import TrainingRecord
+from deepmorph_core.device import DEVICES
 from deepmorph_core.errors import DeepMorphError, DeepMorphWarning
 from deepmorph_core.graphs import GraphError
 from deepmorph_core.render import render_svg_rgb
@@ -288,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="where the network trains")
+    p.add_argument("--device", choices=DEVICES, default="auto", help="where the network trains")
     p.add_argument("--limit", type=int, default=0, help="at most N drawings a folder (quick runs)")
     p.add_argument("--resume", action="store_true")
     args = p.parse_args(argv)
