@@ -183,7 +183,9 @@ class PretendCuda(TorchFunctionMode):
 def pretend_cuda() -> Iterator[PretendCuda]:
     """Within the block, ``torch.cuda`` says one device is there and ``cuda`` tensors are
     marked CPU tensors (modules' parameters too: ``.to()`` replaces them rather than their data);
-    everything is as before once it ends.
+    everything is as before once it ends. The universal detector's runners, cached per process
+    and device, are dropped on entry and exit: a pretend ``cuda`` runner (CPU weights) must not
+    serve a real CUDA device later in the same process, nor a real one serve the pretence.
 
     ONNX export (:func:`deepmorph_core.graphs.make_graph`, as the model and the detector call it) runs outside
     the mode, which its tracer does not follow; a network or example handed to it on the device
@@ -191,6 +193,7 @@ def pretend_cuda() -> Iterator[PretendCuda]:
     import deepmorph_core.model as model_module
     import deepmorph_detect.centrenet as detector_module
     from deepmorph_core.graphs import GraphError
+    from deepmorph_detect.universal import shared_runner
 
     pretend = {"is_available": lambda: True, "device_count": lambda: 1, "current_device": lambda: 0,
                "set_device": lambda *a, **k: None, "synchronize": lambda *a, **k: None}  # fmt: skip
@@ -214,8 +217,10 @@ def pretend_cuda() -> Iterator[PretendCuda]:
         for name, function in pretend.items():
             patch.setattr(torch.cuda, name, function)
         torch.__future__.set_overwrite_module_params_on_conversion(True)
+        shared_runner.cache_clear()
         try:
             with mode:
                 yield mode
         finally:
+            shared_runner.cache_clear()
             torch.__future__.set_overwrite_module_params_on_conversion(overwrite)

@@ -156,8 +156,8 @@ def test_tuning_the_decoder_keeps_its_tensors_on_the_device(tiny: Path, tmp_path
     bundle's tunings says cuda (the training record stays the training's), and the tuned decoder
     comes back on the CPU with its ONNX graph."""
     base, tuned = tmp_path / "m.dmm", tmp_path / "tuned.dmm"
-    train_model(tiny, base, payload_bits=4, crc_bits=8, ecc_t=0, train={"steps": 2, "batch": 8, "width": 32, "threads": 1},
-                validation_samples=(0, 0))  # fmt: skip
+    cpu = {"steps": 2, "batch": 8, "width": 32, "threads": 1, "device": "cpu"}  # the CPU even where CUDA is present
+    train_model(tiny, base, payload_bits=4, crc_bits=8, ecc_t=0, train=cpu, validation_samples=(0, 0))
     with pretend_cuda() as device:
         tune_decoder(base, tuned, steps=4, device="cuda", validation_samples=(8, 4))
     assert not device.mixes, device.mixes

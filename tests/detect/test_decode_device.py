@@ -24,7 +24,7 @@ from deepmorph_detect.locate import Locator
 from deepmorph_detect.network import INPUT_SIZE, DetectorGraph
 from deepmorph_detect.runtime import DeviceNetwork
 from deepmorph_detect.scenes import close_up_photo
-from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal
+from deepmorph_detect.universal import UNIVERSAL_PATH, load_universal, shared_runner
 from tests.pretend_cuda import pretend_cuda
 
 app = application()
@@ -113,12 +113,23 @@ def test_the_cuda_chain_keeps_its_tensors_on_the_device(model: DeepMorphModel, d
     assert got == expected and any(ok for found in got for _, ok in found)
 
 
+def test_a_pretend_runner_does_not_outlive_the_pretence() -> None:
+    """The universal detector's runner is cached per process and device: one made on the pretend
+    device (CPU weights) must be gone when the pretence ends, or a real CUDA device later in the
+    same process would be handed CPU weights (found on an H200, where the pretend tests run too)."""
+    with pretend_cuda():
+        pretend = shared_runner(device="cuda")
+        assert isinstance(pretend, DeviceNetwork)
+    assert shared_runner.cache_info().currsize == 0
+
+
 @needs_cuda
 @pytest.mark.parametrize("detector", [None, "universal"])
 def test_cuda_reads_what_the_cpu_reads(model: DeepMorphModel, detector: str | None) -> None:
     """The same photos on both: the same payloads, vouched for alike, corners within 0.5 px."""
     cpu, cuda = Locator(model, detector, device="cpu"), Locator(model, detector, device="cuda")
     assert isinstance(cuda.reader.decoder, DeviceNetwork) and cuda.detector.net.device.type == "cuda"
+    assert all(p.device.type == "cuda" for p in cuda.detector.net.net.parameters())
     read = 0
     for photo, bits in _photos(model, 12):
         a, b = cpu.locate(photo), cuda.locate(photo)
