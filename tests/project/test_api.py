@@ -144,6 +144,18 @@ def test_a_folder_is_not_an_image(ghost: deepmorph.Model, tmp_path: Path) -> Non
         ghost.decode(tmp_path)
 
 
+def _alike(a: object, b: object, tol: float = 1e-5) -> bool:
+    """The same JSON values, numbers within ``tol``: after other reads in the same process, the
+    same frames' pose can come out a unit apart in its sixth printed decimal (float rounding)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_alike(a[k], b[k], tol) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_alike(x, y, tol) for x, y in zip(a, b))
+    if isinstance(a, float) or isinstance(b, float):
+        return isinstance(a, (int, float)) and isinstance(b, (int, float)) and abs(a - b) <= tol
+    return a == b
+
+
 def test_a_folder_or_a_video_is_one_sequence_read_as_decode_reads_it(ghost: deepmorph.Model, tmp_path: Path) -> None:
     """``Model.decode_sequence``: a folder of frames and a video of the same print, shaken a
     little, give one drawing read over the frames, as ``deepmorph decode`` gives it."""
@@ -164,7 +176,8 @@ def test_a_folder_or_a_video_is_one_sequence_read_as_decode_reads_it(ghost: deep
         assert found["ok"] and found["payload"]["bits"] == bits and found["frames"] >= 3, found
     assert ghost.decode_sequence(tmp_path / "clip.avi", every=2).frames == 2
     res = CliRunner().invoke(application(), ["decode", str(BUNDLED_MODEL), str(folder), "--json"])
-    assert res.exit_code == 0 and json.loads(res.stdout)[0]["detections"] == ghost.decode_sequence(folder).detections
+    assert res.exit_code == 0
+    assert _alike(json.loads(res.stdout)[0]["detections"], ghost.decode_sequence(folder).detections)
     # a frame cut short is skipped, and said; the others still count
     whole = (folder / "f01.png").read_bytes()
     (folder / "f01.png").write_bytes(whole[: len(whole) // 3])
