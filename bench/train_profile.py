@@ -165,6 +165,25 @@ def time_steps(run: Any, timer: Timer, steps: int) -> dict[str, float]:
     return out
 
 
+def count_operators(run: Any, steps: int) -> float:
+    """Mean ATen operator calls per step over ``steps`` steps, forward and backward: on a GPU
+    each is at least one kernel launch, so this count bounds from below what a step pays in
+    launches however fast the device computes."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    class Count(TorchDispatchMode):
+        calls = 0
+
+        def __torch_dispatch__(self, func: Any, types: Any, args: Any = (), kwargs: Any = None) -> Any:
+            Count.calls += 1
+            return func(*args, **(kwargs or {}))
+
+    with Count():
+        for _ in range(steps):
+            run.step()
+    return Count.calls / steps
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--feather", type=Path, default=FEATHER)
@@ -174,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pixels", type=int, default=None, help="profile train --pixels N")
+    ap.add_argument("--op-steps", type=int, default=3, help="steps whose ATen operator calls are counted per stage")
     ap.add_argument("--out", type=Path, default=RESULTS / "train_profile.json")
     args = ap.parse_args(argv)
     threads = set_threads(args.threads)
@@ -203,9 +223,11 @@ def main(argv: list[str] | None = None) -> int:
         run.record.step = ramp_end
         run.cfg = config.model_copy(update={"stage1_max_fraction": 1.0})  # stays in stage 1 while timed
         stage1 = time_steps(run, timer, args.steps)
+        stage1_operators = count_operators(run, args.op_steps)
         run.cfg = config
         run.record.stage, run.record.stage2_start = 2, ramp_end
         stage2 = time_steps(run, timer, args.steps)
+        operators = {"stage 1": stage1_operators, "stage 2": count_operators(run, args.op_steps)}
         # the same stage-2 steps with the decoder in the default (NCHW) layout: the step before
         # CodecRun trained it channels-last on the CPU
         layout, run.memory_format = run.memory_format, torch.contiguous_format
@@ -230,6 +252,10 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"a default run ({config.steps} steps, stage 1 at most {s1_share:.0%}): about {run_minutes:.1f} min of "
         "training steps"
+    )
+    print(
+        f"ATen operator calls per step (each at least one kernel launch on a GPU): stage 1 "
+        f"{operators['stage 1']:.0f}, stage 2 {operators['stage 2']:.0f}"
     )
     nchw_decoder = 1000 * (nchw["decoder fwd"] + nchw["decoder bwd"])
     print(
@@ -259,6 +285,7 @@ def main(argv: list[str] | None = None) -> int:
             "decoder_layout": str(layout).split(".")[-1],
             "stage2_nchw_decoder_s": nchw,
             "layout_speedup": round(nchw["step"] / stage2["step"], 3),
+            "operators_per_step": operators,
             "load_average": os.getloadavg(),
             "default_run_minutes": round(run_minutes, 2),
         },
