@@ -128,8 +128,8 @@ TWO_COLOURS = make_svg(
 
 @pytest.mark.parametrize(
     ("drawing", "settings"),
-    [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {})],
-    ids=["black-and-white", "colour"],
+    [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {}), (TINY, {"print_px": 64})],
+    ids=["black-and-white", "colour", "pixels"],
 )
 def test_the_cuda_path_keeps_its_tensors_on_the_device(drawing: bytes, settings: dict, tmp_path: Path) -> None:
     """Where no GPU is at hand (CI): training with ``device="cuda"`` (real renders, registration,
@@ -149,6 +149,7 @@ def test_the_cuda_path_keeps_its_tensors_on_the_device(drawing: bytes, settings:
     model = DeepMorphModel.load(out)
     assert model.meta.record.device == "cuda" and "decoder" in model.graphs
     assert next(model.decoder.parameters()).device.type == "cpu"
+    assert model.registered == ("print_px" in settings)  # --pixels: renders registered onto the drawing
 
 
 def test_tuning_the_decoder_keeps_its_tensors_on_the_device(tiny: Path, tmp_path: Path) -> None:
@@ -167,7 +168,8 @@ def test_tuning_the_decoder_keeps_its_tensors_on_the_device(tiny: Path, tmp_path
 
 
 @needs_cuda
-def test_cuda_trains_and_validates_as_the_cpu_does(tiny: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("settings", [{}, {"print_px": 64}], ids=["96 px", "pixels"])
+def test_cuda_trains_and_validates_as_the_cpu_does(tiny: Path, tmp_path: Path, settings: dict) -> None:
     """Tolerances: the logged loss of every step within 2e-3 of the CPU's (the same draws: the
     generators stay on the CPU; only float rounding differs); every weight within 2 x lr x steps
     (Adam moves a weight by at most about lr a step, and where a gradient is near zero rounding
@@ -178,7 +180,7 @@ def test_cuda_trains_and_validates_as_the_cpu_does(tiny: Path, tmp_path: Path) -
     runs = {}
     for device in ("cpu", "cuda"):
         out = tmp_path / f"{device}.dmm"
-        train_model(tiny, out, payload_bits=4, crc_bits=8, ecc_t=0, train={**cfg, "device": device},
+        train_model(tiny, out, payload_bits=4, crc_bits=8, ecc_t=0, train={**cfg, **settings, "device": device},
                     validation_samples=(0, 0))  # fmt: skip
         runs[device] = out
     cpu, cuda = DeepMorphModel.load(runs["cpu"]), DeepMorphModel.load(runs["cuda"])
