@@ -73,9 +73,11 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
 
     keep: list[Path] = []
     phases: dict[str, float] = {}
+    logged = {"step": 0}
 
     def on_start(total: int, done: int) -> Any:
         def on_log(line: dict[str, Any]) -> None:
+            logged["step"] = line["step"]
             # the loop checkpoints after it logs: at a multiple of ``curve`` plus one log, the
             # file holds the checkpoint of that multiple
             step = line["step"] - settings.get("log_every", DEFAULTS.log_every)
@@ -88,6 +90,9 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
 
     def on_validation() -> None:
         phases["validation_start"] = time.perf_counter()
+        # said as it happens: a run cut short in its validation (a time limit) keeps its steps' figures
+        print(f"  training ended after {phases['validation_start'] - t0:.0f} s (last logged step "
+              f"{logged['step']}); validating", flush=True)  # fmt: skip
 
     t0 = time.perf_counter()
     summary = train_model(
