@@ -5,7 +5,7 @@ registry entry shows when an uploaded photo is decoded and an unread one says wh
 bundled ghost is printed in a counted number of clicks and seconds, a payload typed as a number
 or hex or picked from the registry is printed as an SVG and a PNG that read back to it, a short
 training run's progress reaches the page (and survives a reload, and a run can be cancelled),
-and the scan tab reads a fake camera fast enough. Each tab's screenshot goes to docs/studio/."""
+and the scan tab reads a fake camera fast enough. Each tab's screenshot is taken (to docs/studio/ with ``DEEPMORPH_SCREENSHOTS``)."""
 
 from __future__ import annotations
 
