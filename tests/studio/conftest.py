@@ -22,7 +22,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 #: Where the tabs' screenshots go: docs/studio/ only when asked (``DEEPMORPH_SCREENSHOTS=docs/studio``,
 #: docs/studio.md), so that running the tests leaves the repository as it was.
-SHOTS = Path(os.environ.get("DEEPMORPH_SCREENSHOTS") or Path(tempfile.gettempdir()) / f"deepmorph-studio-{os.getpid()}")
+SHOTS = Path(os.environ.get("DEEPMORPH_SCREENSHOTS") or Path(tempfile.gettempdir()) / "deepmorph-studio-shots")
 CHROMIUM = os.environ.get("DEEPMORPH_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--headless",
