@@ -51,7 +51,10 @@ def _reasons(check: Any) -> tuple[str, ...]:
     if check.status == "failed" or check.bits is None:
         return ("morph fit",)
     bits = check.bits
-    return broken_rules(bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation, bits.rival_margin)
+    return broken_rules(
+        bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation, bits.rival_margin,
+        bits.runner_up_passes,
+    )  # fmt: skip
 
 
 def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:

@@ -280,6 +280,7 @@ class PayloadChecker:
         whole_frame: bool = False,
         relit_from: float | None = None,
         in_shadow: bool = False,
+        probabilities: np.ndarray | None = None,
     ) -> PayloadCheck:
         """The morph check of a decoded payload (one frame's, or one fused over frames): a
         payload that passed the CRC keeps its ``ok`` only when its morph fits the photo better
@@ -316,7 +317,9 @@ class PayloadChecker:
         photo where the photo itself aligned at :data:`DRAWING_LIKE_ALIGNMENT` or better.
         A word the bit rules pass is withdrawn where its nearest rival explains the photo better
         (:meth:`rival_deviation`); read with corrections in a photo relit from the template, where
-        the rival does not leave :data:`RELIT_RIVAL_MARGIN` times as much unexplained.
+        the rival does not leave :data:`RELIT_RIVAL_MARGIN` times as much unexplained; and,
+        given the decoder's ``probabilities`` of the reading, where the code word they prefer next
+        passes every bit rule too (:meth:`runner_up_passes`).
         A colour drawing's bits are asked in its colours (one contrast field per colour channel,
         :meth:`MorphSynthesis.evidence <deepmorph_detect.synthesis.MorphSynthesis.evidence>`)
         only where the unmorphed drawing aligned at :data:`DRAWING_LIKE_ALIGNMENT` or better,
@@ -336,11 +339,22 @@ class PayloadChecker:
         pyramid = self.pyramid(image)
         verdict = None
         if not in_shadow:
-            verdict = self._verdict(pyramid, homography, result, unmorphed, bitwise, blind, whole_frame, relit_from)
+            verdict = self._verdict(
+                pyramid, homography, result, unmorphed, bitwise, blind, whole_frame, relit_from, 0, probabilities
+            )
             if verdict.status == "passed":
                 return verdict
         shadowed = self._verdict(
-            pyramid, homography, result, None, bitwise is not False, blind, whole_frame, relit_from, SHADOW_GRID
+            pyramid,
+            homography,
+            result,
+            None,
+            bitwise is not False,
+            blind,
+            whole_frame,
+            relit_from,
+            SHADOW_GRID,
+            probabilities,
         )
         return shadowed if verdict is None or shadowed.status == "passed" else verdict
 
@@ -355,6 +369,7 @@ class PayloadChecker:
         whole_frame: bool,
         relit_from: float | None,
         light_grid: int = 0,
+        probabilities: np.ndarray | None = None,
     ) -> PayloadCheck:
         """:meth:`check`'s verdict on a payload that passed the CRC, in the light asked:
         ``light_grid`` 0, ECC's and the per-bit check's smooth light; else the morph fits aligned
@@ -397,8 +412,44 @@ class PayloadChecker:
             margin = RELIT_RIVAL_MARGIN if relit_from is not None and result.corrected_bits > 0 else 1.0
             bits = replace(bits, rival_deviation=rival, rival_margin=margin)
         if bits.explained if is_it_the_drawing else bits.agrees:
+            if not is_it_the_drawing and self.runner_up_passes(
+                pyramid, homography, code, probabilities, unmorphed, blind, whole_frame, relit_from, light_grid
+            ):
+                bits = replace(bits, runner_up_passes=True)
+                return PayloadCheck(replace(result, ok=False), fit, "contradicted", bits)
             return PayloadCheck(result, fit, "passed", bits)
         return PayloadCheck(replace(result, ok=False), fit, "contradicted", bits)
+
+    def runner_up_passes(  # noqa: PLR0913
+        self,
+        pyramid: ImagePyramid,
+        homography: np.ndarray,
+        code: np.ndarray,
+        probabilities: np.ndarray | None,
+        unmorphed: Alignment | None,
+        blind: bool,
+        whole_frame: bool,
+        relit_from: float | None,
+        light_grid: int,
+    ) -> bool:
+        """Whether the decoder's runner-up to the code word ``code`` (the other code word its
+        ``probabilities`` prefer most, :meth:`PayloadCodec.nearest_rival` with their log-odds for
+        support) also passes the whole per-bit check in the same light: two code words the photo
+        both shows leave the payload undecided."""
+        if probabilities is None:
+            return False
+        codec = self.model.codec
+        p = np.clip(np.asarray(probabilities, dtype=np.float64), 1e-6, 1 - 1e-6)
+        log_odds = np.log(p / (1 - p))
+        runner = codec.nearest_rival(code, np.where(code == 1, log_odds, -log_odds))
+        if runner is None:
+            return False
+        decoded = codec.decode(runner.astype(np.float32), soft=False)
+        if not decoded.ok or decoded.corrected_bits:
+            return False
+        asked = DecodeResult(decoded.payload, True, 0, 0.5)
+        verdict = self._verdict(pyramid, homography, asked, unmorphed, True, blind, whole_frame, relit_from, light_grid)
+        return verdict.status == "passed"
 
     def vouches_for_repair(self, result: DecodeResult, fit: MorphFit, relit_from: float | None = None) -> bool:
         """Whether a payload the code corrected skips the per-bit check (:func:`is_trusted_repair`):

@@ -598,6 +598,7 @@ class Locator:
                 whole_frame=whole,
                 relit_from=relit_from,
                 in_shadow=in_shadow,
+                probabilities=reading.probabilities,
             )
             if attempt.status == "passed" and repaired:
                 aside = (attempt.fit.homography, attempt, reading.probabilities)

@@ -143,6 +143,7 @@ class BitEvidence:
     unlit: np.ndarray | None = None
     rival_deviation: float | None = None
     rival_margin: float = 1.0
+    runner_up_passes: bool = False
 
     @property
     def contradicted(self) -> int:
@@ -179,7 +180,8 @@ class BitEvidence:
         :data:`MIN_WEAKEST_SUM`), its morph explaining the photo where its bits act
         (:attr:`deviation` at most :data:`MAX_DEVIATION`), and its nearest rival word, whose bits
         the photo shows where the two differ, not explaining the photo better
-        (:attr:`rival_deviation` below :attr:`rival_margin` times :attr:`deviation`)."""
+        (:attr:`rival_deviation` below :attr:`rival_margin` times :attr:`deviation`), and the
+        decoder's runner-up word not passing all of this too (:attr:`runner_up_passes`)."""
         return not self.reason
 
     def to_json(self) -> dict[str, Any]:
@@ -193,18 +195,21 @@ class BitEvidence:
             fields["nearest_rival_deviation"] = round(self.rival_deviation, 3)
             if self.rival_margin != 1.0:
                 fields["rival_margin"] = self.rival_margin
+        if self.runner_up_passes:
+            fields["runner_up_passes"] = True
         return fields
 
     @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
         return disagreement(
-            self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin
-        )
+            self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin,
+            self.runner_up_passes,
+        )  # fmt: skip
 
 
 #: The per-bit check's rules (:attr:`BitEvidence.agrees`), by name, in the order they are asked.
-BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival")
+BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up")
 
 
 def broken_rules(
@@ -213,16 +218,19 @@ def broken_rules(
     deviation: float,
     rival_deviation: float | None = None,
     rival_margin: float = 1.0,
+    runner_up_passes: bool = False,
 ) -> tuple[str, ...]:
     """The :data:`BIT_RULES` a code word breaks (empty when it agrees): too many bits shown
     flipped, its weakest bits barely shown, a photo its morph does not explain, or a photo that
     the nearest rival word explains better, or not ``rival_margin`` times worse, its bits shown
-    where the two differ (``rival_deviation``)."""
+    where the two differ (``rival_deviation``), or the decoder's runner-up word passing every
+    rule too (``runner_up_passes``)."""
     broken = (
         contradicted > MAX_CONTRADICTED,
         weakest_sum < MIN_WEAKEST_SUM,
         deviation > MAX_DEVIATION,
         rival_deviation is not None and rival_deviation < rival_margin * deviation,
+        runner_up_passes,
     )
     return tuple(rule for rule, hit in zip(BIT_RULES, broken) if hit)
 
@@ -233,9 +241,11 @@ def disagreement(
     deviation: float,
     rival_deviation: float | None = None,
     rival_margin: float = 1.0,
+    runner_up_passes: bool = False,
 ) -> str:
     """The first of :func:`broken_rules` a code word breaks, in words (empty when none)."""
-    first = next(iter(broken_rules(contradicted, weakest_sum, deviation, rival_deviation, rival_margin)), "")
+    broken = broken_rules(contradicted, weakest_sum, deviation, rival_deviation, rival_margin, runner_up_passes)
+    first = next(iter(broken), "")
     if first == "bits flipped":
         return f"the photo shows {contradicted} of its code bits flipped"
     if first == "weakest bits":
@@ -254,6 +264,8 @@ def disagreement(
             f"the nearest other code word explains the photo {how}, its bits shown where the two differ "
             f"(deviation {rival_deviation:.2f} against {deviation:.2f}{needed})"
         )
+    if first == "runner-up":
+        return "the code word the decoder read next passes the check too: the photo does not tell them apart"
     return ""
 
 
@@ -262,6 +274,7 @@ def disagreement_in(fields: dict[str, Any]) -> str:
     return disagreement(
         fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"],
         fields.get("nearest_rival_deviation"), fields.get("rival_margin", 1.0),
+        fields.get("runner_up_passes", False),
     )  # fmt: skip
 
 

@@ -287,7 +287,8 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
     # every rule a word breaks, by name and in the order asked (the first is the reason given)
-    assert broken_rules(3, -1.0, 1.5, 0.4) == BIT_RULES == ("bits flipped", "weakest bits", "unexplained", "rival")
+    assert broken_rules(3, -1.0, 1.5, 0.4, 1.0, True) == BIT_RULES
+    assert BIT_RULES == ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up")
     assert broken_rules(0, -1.0, 1.5) == ("weakest bits", "unexplained") and broken_rules(2, 5.0, 1.0, 1.0) == ()
     assert disagreement(0, 5.0, 0.5, 0.3).startswith("the nearest other code word explains the photo better")
 
@@ -400,6 +401,78 @@ def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     assert np.array_equal(asked[-1], rival)
     photo_shows(1.0 + 0.3 * wobble)
     assert checker.check(image, np.eye(3), read).status == "contradicted"
+
+
+def _read_next(code: np.ndarray, runner_up: np.ndarray) -> np.ndarray:
+    """Decoder probabilities that read ``code``, sure of every bit but those where ``runner_up``
+    differs: the word the decoder would read next."""
+    sure = np.where(code == 1, 0.95, 0.05)
+    return np.where(runner_up != code, np.where(code == 1, 0.6, 0.4), sure).astype(np.float32)
+
+
+def test_the_decoders_runner_up_is_asked_in_the_photo(model: DeepMorphModel, locator: Locator) -> None:
+    """A print of one word, read as a near word whose runner-up (by the decoder's log-odds) is
+    the printed one: the runner-up passes the whole per-bit check there. Read next as a word the
+    photo does not show, it does not; nor where no probabilities are given."""
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(3))[0]
+    photo, H = _small_print(model, payload, 80, seed=1)
+    pyramid = ImagePyramid(photo)
+    printed = model.codec.encode(payload)
+    near = [model.codec.encode(p) for p in _near_payloads(payload)]
+    read, other = near[0], near[1]
+    assert (
+        model.codec.nearest_rival(read, np.where(read == 1, 1.0, -1.0) * _log_odds(_read_next(read, printed)))
+        is not None
+    )
+    asks = (pyramid, H, read)
+    rest = (None, False, False, None, 0)
+    assert checker.runner_up_passes(*asks, _read_next(read, printed), *rest)
+    assert not checker.runner_up_passes(*asks, _read_next(read, other), *rest)
+    assert not checker.runner_up_passes(*asks, None, *rest)
+
+
+def _log_odds(probs: np.ndarray) -> np.ndarray:
+    return np.log(probs / (1 - probs))
+
+
+def test_a_word_whose_runner_up_passes_too_is_withdrawn(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two code words the photo both shows leave the payload undecided: a word that passes every
+    bit rule is withdrawn where the decoder's runner-up passes them too, with that reason in its
+    JSON; it passes where the runner-up does not, or where the decoder's probabilities are not
+    given (a payload fused over frames)."""
+    import deepmorph_detect.check as check_module
+    from deepmorph_detect.refine import Alignment
+
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(29))[0]
+    code = model.codec.encode(payload)
+    runner_up = min((model.codec.encode(p) for p in _near_payloads(payload)), key=lambda c: int((c != code).sum()))
+    shown = {"runner-up": True}
+
+    def evidence(pyramid, homography, asked_code, *args, **kwargs) -> BitEvidence:
+        both = np.array_equal(asked_code, code) or (shown["runner-up"] and np.array_equal(asked_code, runner_up))
+        return BitEvidence(np.asarray(asked_code), np.full(len(code), 1.0 if both else -1.0, np.float32), 0.9, 1.0)
+
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence)
+    monkeypatch.setattr(checker.synthesis, "shown_on", lambda p, h, c, bits, *a: np.ones(len(bits), np.float32))
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), 0.9, 0.85))
+    monkeypatch.setattr(check_module, "refine_at", lambda *args, **kwargs: Alignment(np.eye(3), 0.9, 128))
+    image = np.full((64, 64), 0.8, np.float32)
+    read = DecodeResult(payload, True, 1, 0.92)
+    probs = _read_next(code, runner_up)
+    undecided = checker.check(image, np.eye(3), read, probabilities=probs)
+    assert undecided.status == "contradicted" and not undecided.result.ok
+    assert undecided.bits.runner_up_passes and not undecided.bits.agrees
+    reason = "the code word the decoder read next passes the check too: the photo does not tell them apart"
+    assert undecided.bits.reason == reason and disagreement_in(undecided.bits.to_json()) == reason
+    assert broken_rules(0, 5.0, 0.0, None, 1.0, True) == ("runner-up",)
+    assert checker.check(image, np.eye(3), read).status == "passed"  # no probabilities: not asked
+    shown["runner-up"] = False
+    decided = checker.check(image, np.eye(3), read, probabilities=probs)
+    assert decided.status == "passed" and "runner_up_passes" not in decided.bits.to_json()
 
 
 def test_a_word_its_morph_leaves_unexplained_is_withdrawn_whatever_flat_light_shows(
