@@ -448,10 +448,21 @@ class PayloadCodec:
         prefer the code word ``code_bits`` to every other code word: :meth:`rival_margin` with
         each bit's log-odds, signed towards the word, as its support
         (:attr:`DecodeResult.rival_log_odds` of a word read with corrections)."""
-        q = self._probabilities(probs)
         code = np.asarray(code_bits, dtype=np.uint8)
+        return self.rival_margin(code, self._decoder_support(code, probs))
+
+    def runner_up(self, code_bits: np.ndarray, probs: np.ndarray) -> np.ndarray | None:
+        """The code word the decoder's probabilities ``probs`` prefer next to the code word
+        ``code_bits``: :meth:`nearest_rival` with each bit's log-odds, signed towards the word, as
+        its support (the rival :meth:`rival_log_odds` measures); ``None`` where it finds none."""
+        code = np.asarray(code_bits, dtype=np.uint8)
+        return self.nearest_rival(code, self._decoder_support(code, probs))
+
+    def _decoder_support(self, code: np.ndarray, probs: np.ndarray) -> np.ndarray:
+        """Each bit's log-odds under the decoder's ``probs``, signed towards the code word ``code``."""
+        q = self._probabilities(probs)
         log_odds = np.log(q + _PROB_EPS) - np.log(1.0 - q + _PROB_EPS)
-        return self.rival_margin(code, np.where(code == 1, log_odds, -log_odds))
+        return np.where(code == 1, log_odds, -log_odds)
 
     def rival_margin(self, code_bits: np.ndarray, support: np.ndarray) -> float:
         """How much per-bit ``support`` prefers the code word ``code_bits`` to every other code

@@ -433,15 +433,13 @@ class PayloadChecker:
         light_grid: int,
     ) -> bool:
         """Whether the decoder's runner-up to the code word ``code`` (the other code word its
-        ``probabilities`` prefer most, :meth:`PayloadCodec.nearest_rival` with their log-odds for
-        support) also passes the whole per-bit check in the same light: two code words the photo
-        both shows leave the payload undecided."""
+        ``probabilities`` prefer most, :meth:`PayloadCodec.runner_up`) also passes the whole
+        per-bit check in the same light: two code words the photo both shows leave the payload
+        undecided."""
         if probabilities is None:
             return False
         codec = self.model.codec
-        p = np.clip(np.asarray(probabilities, dtype=np.float64), 1e-6, 1 - 1e-6)
-        log_odds = np.log(p / (1 - p))
-        runner = codec.nearest_rival(code, np.where(code == 1, log_odds, -log_odds))
+        runner = codec.runner_up(code, probabilities)
         if runner is None:
             return False
         decoded = codec.decode(runner.astype(np.float32), soft=False)
