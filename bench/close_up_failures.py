@@ -45,16 +45,10 @@ KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words 
 
 def _reasons(check: Any) -> tuple[str, ...]:
     """The rules a withdrawn attempt broke (:class:`~deepmorph_detect.check.PayloadCheck`): the
-    morph fit, else :func:`~deepmorph_detect.synthesis.broken_rules`."""
-    from deepmorph_detect.synthesis import broken_rules
-
+    morph fit, else :attr:`BitEvidence.broken <deepmorph_detect.synthesis.BitEvidence.broken>`."""
     if check.status == "failed" or check.bits is None:
         return ("morph fit",)
-    bits = check.bits
-    return broken_rules(
-        bits.contradicted, bits.weakest_sum, bits.deviation, bits.rival_deviation, bits.rival_margin,
-        bits.runner_up_passes,
-    )  # fmt: skip
+    return check.bits.broken
 
 
 def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:

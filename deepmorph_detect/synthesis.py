@@ -200,6 +200,15 @@ class BitEvidence:
         return fields
 
     @property
+    def broken(self) -> tuple[str, ...]:
+        """The :data:`BIT_RULES` this word breaks, in the order they are asked (empty when it
+        :attr:`agrees`): :func:`broken_rules` of its fields."""
+        return broken_rules(
+            self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin,
+            self.runner_up_passes,
+        )  # fmt: skip
+
+    @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
         return disagreement(

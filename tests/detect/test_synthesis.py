@@ -285,6 +285,8 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     # and the reason given is the half of the rule that failed, not a count of flipped bits
     assert said.reason == "the photo barely shows its 5 weakest code bits (support -0.10, at least 0.5 needed)"
     assert BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).reason == ""
+    assert said.broken == ("weakest bits",) and BitEvidence(np.zeros(38, np.uint8), clear, 0.9, 1.0).broken == ()
+    assert replace(said, runner_up_passes=True).broken == ("weakest bits", "runner-up")
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
     # every rule a word breaks, by name and in the order asked (the first is the reason given)
     assert broken_rules(3, -1.0, 1.5, 0.4, 1.0, True) == BIT_RULES
