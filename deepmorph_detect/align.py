@@ -6,10 +6,10 @@ the whole image framed by its ink with one quick solve. A candidate is kept when
 correlates well enough and its outline can be a print (:func:`plausible_outline`); the same
 drawing found twice is kept once. A detector's outline that aligns poorly in the photo, or into
 an outline no flat print makes (:meth:`Aligner.bent`), is aligned again in flat light (shadows
-divided out), and the better alignment is kept. A drawing
-aligned but not read can be aligned again as a flat sheet, without perspective
-(:meth:`Aligner.as_flat_sheet`), or from its detector's outline on the print's edges alone
-(:meth:`Aligner.on_edges`).
+divided out), and the better alignment is kept; one aligned in neither is aligned as a flat
+sheet (:meth:`Aligner.outline_as_flat_sheet`). A drawing aligned but not read can be aligned
+again as a flat sheet, without perspective (:meth:`Aligner.as_flat_sheet`), or from its
+detector's outline on the print's edges alone (:meth:`Aligner.on_edges`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,15 @@ from deepmorph_core.photo import flatten_illumination
 from deepmorph_core.protocols import Candidate
 from deepmorph_detect.camera import around_outline, outline_size, project, rigid_misfit, viewbox_corners
 from deepmorph_detect.edge_align import align_on_edges, edge_template
-from deepmorph_detect.refine import WIDE_SEARCH_MARGIN, Alignment, ImagePyramid, Template, refine, refine_affine
+from deepmorph_detect.refine import (
+    WIDE_SEARCH_MARGIN,
+    Alignment,
+    ImagePyramid,
+    Template,
+    corner_orders,
+    refine,
+    refine_affine,
+)
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 # a detector outline aligned in the photo below this is aligned in flat light too, and the better
@@ -180,7 +188,9 @@ class Aligner:
         below :data:`BLIND_SEARCH_BELOW`, and the flat light's alignment replaces that one only
         where it reaches that bar plus the wider searches' margin; one scored below
         :data:`FAINT_PROPOSAL` takes the photo's quick path alone. A detector that knows
-        the drawing takes them in both, which finds a few more prints that do not read.
+        the drawing takes them in both, which finds a few more prints that do not read. An
+        outline (not a faint blind one) aligned in neither is aligned as a flat sheet
+        (:meth:`outline_as_flat_sheet`).
         """
         start = self.homography(cand.corners)
         aim = BLIND_SEARCH_BELOW if cand.blind else None
@@ -197,7 +207,7 @@ class Aligner:
         alignment = search(pyramid, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
         if photo_only:
             return pyramid, alignment
-        missed = not self.accepts(alignment)
+        seen_in, missed = pyramid, not self.accepts(alignment)
         weak = (
             missed
             or alignment.correlation < WEAK_ALIGNMENT
@@ -207,13 +217,23 @@ class Aligner:
         if weak or (aim is not None and alignment.correlation < aim):
             flat = self.in_flat_light(gray, cand.corners)
             in_flat = search(flat, True)
+            better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
             # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
-            if missed:
-                return flat, in_flat
-            better = self.accepts(in_flat) and in_flat.correlation > alignment.correlation
             if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):
-                return flat, in_flat
-        return pyramid, alignment
+                seen_in, alignment = flat, in_flat
+        if self.accepts(alignment):
+            return seen_in, alignment
+        sheet = self.outline_as_flat_sheet(pyramid, cand)
+        return (pyramid, sheet) if sheet is not None else (seen_in, alignment)
+
+    def outline_as_flat_sheet(self, pyramid: ImagePyramid, cand: Candidate) -> Alignment | None:
+        """A detector's outline aligned as a flat sheet (:func:`~deepmorph_detect.refine.refine_affine`)
+        from each of its corner orders, the best of them at the coarsest level solved on; where
+        this aligner accepts it, else ``None``. For an outline neither the photo nor flat light
+        aligned: on a clear print in soft light ECC ran off to a bent outline from every start,
+        and an affine map cannot bend."""
+        sheet = refine_affine(pyramid, corner_orders(self.homography(cand.corners), self.template), self.template)
+        return sheet if self.accepts(sheet) else None
 
     def bent(self, homography: np.ndarray, image_shape: tuple[int, ...]) -> bool:
         """Whether the outline ``homography`` (SVG units -> pixels) gives the drawing is one no flat

@@ -369,7 +369,10 @@ def nearest_affine(homography: np.ndarray, template: Template) -> np.ndarray:
 
 
 def refine_affine(
-    pyramid: ImagePyramid, homography: np.ndarray, template: Template, iterations: tuple[int, ...] = AFFINE_ITERATIONS
+    pyramid: ImagePyramid,
+    homography: np.ndarray | list[np.ndarray],
+    template: Template,
+    iterations: tuple[int, ...] = AFFINE_ITERATIONS,
 ) -> Alignment | None:
     """The print aligned again as a flat sheet seen nearly head-on: from the parallelogram
     nearest ``homography``'s outline (:func:`nearest_affine`), an affine ECC solve at each
@@ -377,10 +380,21 @@ def refine_affine(
 
     A cast shadow's edge across a light fill is an edge the drawing does not have: a full
     homography can bend a corner of the outline out to lay the drawing's edge on it, and
-    correlate well. An affine map cannot bend, so the print's own edges decide. ``None`` when
-    ECC diverges."""
-    H, reached = nearest_affine(homography, template), None
-    for width, n in zip(sorted(template.images), iterations):
+    correlate well. An affine map cannot bend, so the print's own edges decide. Given several
+    starts (a list), each is solved at the coarsest level and only the best there is solved on:
+    the finer levels cost most. ``None`` when ECC diverges."""
+    starts = homography if isinstance(homography, list) else [homography]
+    widths = sorted(template.images)
+    coarse = [
+        _ecc_step(pyramid, nearest_affine(H, template), template, widths[0], iterations[0], 3, affine=True)
+        for H in starts
+    ]
+    solved = [step for step in coarse if step is not None]
+    if not solved:
+        return None
+    H, rho = max(solved, key=lambda step: step[1])
+    reached = Alignment(H, rho, widths[0])
+    for width, n in zip(widths[1:], iterations[1:]):
         step = _ecc_step(pyramid, H, template, width, n, 3, affine=True)
         if step is None:
             return None

@@ -10,16 +10,17 @@ import numpy as np
 import pytest
 
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.align import BENT_OUTLINE, WEAK_ALIGNMENT
+from deepmorph_detect.align import BENT_OUTLINE, MIN_CORRELATION, WEAK_ALIGNMENT
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
-from deepmorph_detect.refine import ImagePyramid, nearest_affine, refine_affine
+from deepmorph_detect.refine import ImagePyramid, nearest_affine, refine, refine_affine
 from tests.conftest import easy_print_aligned
 from tests.detect.colour_close_ups import close_up, corner_error
 
 DATA = Path(__file__).parents[1] / "data"
 PHOTO = DATA / "photos" / "shadow_across_colour_close_up.png"
 BENDING = DATA / "photos" / "shadow_bending_colour_close_up.png"
+RUN_OFF = DATA / "photos" / "outline_run_off_colour_close_up.png"
 
 
 def test_the_nearest_affine_map_keeps_an_affine_one_and_flattens_a_perspective(crystal) -> None:
@@ -120,3 +121,26 @@ def test_a_print_aligned_and_not_read_is_read_again_as_a_flat_sheet_then_in_its_
     monkeypatch.setattr(locator.aligner, "as_flat_sheet", lambda pyramid, alignment: weak)
     locator.decode_drawing(gray, pyramid, bent, 1.0, cam, "detector", True)
     assert len(read_at) == 1 and lit_from == [bent.homography]
+
+
+def test_an_outline_neither_the_photo_nor_flat_light_aligns_is_aligned_as_a_flat_sheet(heart) -> None:
+    """A clear medium colour close-up of the pink heart in soft light, outlined by the universal
+    detector at another turn: ECC's full homography from that outline, searched at every corner
+    order, runs off in the photo and in flat light alike (it does even from the truth), so
+    nothing there is accepted. Aligned as a flat sheet from the same outline, the heart is
+    accepted where an affine solve from the truth itself lands (the sheet is tilted: no affine
+    map fits it closer than a tenth of its width at the frame's corners), and it is kept."""
+    template, aligner = heart
+    gray, truth, candidate = close_up(RUN_OFF)
+    pyramid = ImagePyramid(gray)
+    for seen_in in (pyramid, aligner.in_flat_light(gray, candidate.corners)):
+        full = refine(seen_in, aligner.homography(candidate.corners), template, orders=4, accept=MIN_CORRELATION)
+        assert not aligner.accepts(full)
+    sheet = aligner.outline_as_flat_sheet(pyramid, candidate)
+    assert sheet is not None and aligner.accepts(sheet)
+    from_truth = refine_affine(pyramid, aligner.homography(truth), template)
+    assert from_truth is not None
+    off = corner_error(sheet.homography, template, truth)
+    assert abs(off - corner_error(from_truth.homography, template, truth)) < 0.01 and off < 0.12
+    (aligned,) = aligner.verify(pyramid, [candidate], gray)
+    assert aligned.pyramid is pyramid and np.allclose(aligned.alignment.homography, sheet.homography)

@@ -316,6 +316,49 @@ def test_a_word_with_a_few_bits_shown_flipped_is_withdrawn_however_far_its_rival
     assert disagreement_in(checked.bits.to_json()) == checked.bits.reason
 
 
+def test_a_repaired_word_on_an_outline_no_flat_print_makes_is_withdrawn(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A cast shadow's edge bent the alignment (one corner pulled a quarter of the print's width
+    out): a word the code corrected, its morph fitted there, is withdrawn before its bits are
+    asked, since a bent homography takes up part of a wrong word's morph. The same outline
+    seen as a flat print (a tilted square, every corner where a pose puts it) does not withdraw
+    it, nor does the bent one a word read without corrections."""
+    from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.check import repaired_on_a_bent_outline
+
+    checker = locator.checker
+    frame = viewbox_corners(locator.template.viewbox).astype(np.float32)
+    tilted = np.array([[220, 150], [420, 140], [440, 330], [210, 340]], np.float32)
+    bent = tilted.copy()
+    bent[2] += (50, 50)
+    flat_H, bent_H = (cv2.getPerspectiveTransform(frame, q).astype(np.float64) for q in (tilted, bent))
+    image = np.full((480, 640), 0.8, np.float32)
+    pyramid = ImagePyramid(image)
+    assert np.allclose(project(bent_H, frame), bent, atol=1e-3)
+    assert repaired_on_a_bent_outline(bent_H, locator.template, pyramid)
+    assert not repaired_on_a_bent_outline(flat_H, locator.template, pyramid)
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(23))[0]
+    code = model.codec.encode(payload)
+    asked: list[np.ndarray] = []
+
+    def evidence(*args, **kwargs) -> BitEvidence:
+        asked.append(code)
+        return BitEvidence(code, np.ones(len(code), np.float32), 0.9, 1.0)
+
+    fitted_at: list[np.ndarray] = []
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(fitted_at[-1], 0.9, 0.85))
+    monkeypatch.setattr(checker.synthesis, "evidence", evidence)
+    monkeypatch.setattr(checker, "rival_deviation", lambda *args, **kwargs: None)
+    repaired = DecodeResult(payload, True, 1, 0.95)
+    fitted_at.append(bent_H)
+    withdrawn = checker.check(pyramid, bent_H, repaired)
+    assert withdrawn.status == "failed" and not withdrawn.result.ok and asked == []
+    assert checker.check(pyramid, bent_H, replace(repaired, corrected_bits=0)).status == "passed" and asked
+    fitted_at.append(flat_H)
+    assert checker.check(pyramid, flat_H, repaired).status == "passed"
+
+
 def test_a_word_whose_nearest_rival_explains_the_photo_better_is_withdrawn(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
