@@ -217,8 +217,9 @@ def repaired_on_a_bent_outline(homography: np.ndarray, template: Template, pyram
     :data:`~deepmorph_detect.align.BENT_OUTLINE`). A cast shadow's edge can bend the alignment,
     and a bent homography takes up part of a wrong word's morph: the code's corrections then
     complete the wrong word, and the per-bit check, asked at the same bent outline, agrees (a
-    `reading` at 5 bits, hard close-up, 17 % of the print's width off). On 1499 right words read
-    from 1600 colour close-ups none lay on such an outline (the furthest at 0.034). A word read
+    `reading` at 5 bits, hard close-up, 17 % of the print's width off). Of 1499 right words reported
+    from 1600 colour close-ups none lay on such an outline (the furthest at 0.034); where a right
+    word did and failed so, another alignment of the same print read it. A word read
     without corrections still passes there: a photo cropped around a steeply tilted print moves
     the principal point, and the misfit with it."""
     height, width = pyramid.levels[0].shape[:2]
