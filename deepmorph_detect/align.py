@@ -236,11 +236,8 @@ class Aligner:
         return sheet if self.accepts(sheet) else None
 
     def bent(self, homography: np.ndarray, image_shape: tuple[int, ...]) -> bool:
-        """Whether the outline ``homography`` (SVG units -> pixels) gives the drawing is one no flat
-        print makes in an uncropped photo of ``image_shape`` (:data:`BENT_OUTLINE`): a cast
-        shadow's edge bent it."""
-        size = (int(image_shape[1]), int(image_shape[0]))
-        return rigid_misfit(homography, self.frame_corners, size) > BENT_OUTLINE
+        """:func:`bent_outline` of this drawing's frame."""
+        return bent_outline(homography, self.frame_corners, image_shape)
 
     def other_turn(self, pyramid: ImagePyramid, alignment: Alignment, margin: float = 0.0) -> Alignment | None:
         """The print aligned again from each of the drawing's other turns
@@ -301,6 +298,15 @@ class Aligner:
         return ImagePyramid(flat)
 
 
+def bent_outline(homography: np.ndarray, frame_corners: np.ndarray, image_shape: tuple[int, ...]) -> bool:
+    """Whether the outline ``homography`` (SVG units -> pixels) gives a drawing's frame
+    ``frame_corners`` is one no flat print makes in an uncropped photo of ``image_shape``
+    (:func:`~deepmorph_detect.camera.rigid_misfit` over :data:`BENT_OUTLINE`): a cast shadow's
+    edge bent it."""
+    size = (int(image_shape[1]), int(image_shape[0]))
+    return rigid_misfit(homography, frame_corners, size) > BENT_OUTLINE
+
+
 def ink_thickness(template: Template, view_width: int) -> float:
     """The drawing's thickest ink feature (twice the largest distance from paper inside its
     ink) in pixels of a view ``view_width`` wide, from the finest template level."""
@@ -309,5 +315,5 @@ def ink_thickness(template: Template, view_width: int) -> float:
     return 2.0 * float(depth.max()) * view_width / finest
 
 
-__all__ = ["BENT_OUTLINE", "MIN_CORRELATION", "SAME_DRAWING", "WEAK_ALIGNMENT", "Aligned", "Aligner", "ink_thickness",
-           "plausible_outline"]  # fmt: skip
+__all__ = ["BENT_OUTLINE", "MIN_CORRELATION", "SAME_DRAWING", "WEAK_ALIGNMENT", "Aligned", "Aligner", "bent_outline",
+           "ink_thickness", "plausible_outline"]  # fmt: skip

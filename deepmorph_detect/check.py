@@ -20,8 +20,8 @@ import numpy as np
 from deepmorph_core.codec import DecodeResult
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
-from deepmorph_detect.align import BENT_OUTLINE
-from deepmorph_detect.camera import rigid_misfit, viewbox_corners
+from deepmorph_detect.align import bent_outline
+from deepmorph_detect.camera import viewbox_corners
 from deepmorph_detect.fastrender import Renderer
 from deepmorph_detect.light_field import align_in_light_field
 from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template, refine_at
@@ -213,8 +213,8 @@ class MorphTemplates:
 
 def repaired_on_a_bent_outline(homography: np.ndarray, template: Template, pyramid: ImagePyramid) -> bool:
     """Whether a word the code corrected was read at an outline no flat print makes in the photo
-    (:func:`~deepmorph_detect.camera.rigid_misfit` over
-    :data:`~deepmorph_detect.align.BENT_OUTLINE`). A cast shadow's edge can bend the alignment,
+    (:func:`~deepmorph_detect.align.bent_outline`, as :meth:`Aligner.bent
+    <deepmorph_detect.align.Aligner.bent>` asks of alignments). A cast shadow's edge can bend the alignment,
     and a bent homography takes up part of a wrong word's morph: the code's corrections then
     complete the wrong word, and the per-bit check, asked at the same bent outline, agrees (a
     `reading` at 5 bits, hard close-up, 17 % of the print's width off). Of 1499 right words reported
@@ -222,8 +222,7 @@ def repaired_on_a_bent_outline(homography: np.ndarray, template: Template, pyram
     word did and failed so, another alignment of the same print read it. A word read
     without corrections still passes there: a photo cropped around a steeply tilted print moves
     the principal point, and the misfit with it."""
-    height, width = pyramid.levels[0].shape[:2]
-    return rigid_misfit(homography, viewbox_corners(template.viewbox), (width, height)) > BENT_OUTLINE
+    return bent_outline(homography, viewbox_corners(template.viewbox), pyramid.levels[0].shape)
 
 
 class PayloadChecker:

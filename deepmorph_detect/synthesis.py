@@ -200,21 +200,23 @@ class BitEvidence:
         return fields
 
     @property
-    def broken(self) -> tuple[str, ...]:
-        """The :data:`BIT_RULES` this word breaks, in the order they are asked (empty when it
-        :attr:`agrees`): :func:`broken_rules` of its fields."""
-        return broken_rules(
+    def _rule_inputs(self) -> tuple[int, float, float, float | None, float, bool]:
+        """What the bit rules are asked of (:func:`broken_rules`, :func:`disagreement`), in their order."""
+        return (
             self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin,
             self.runner_up_passes,
         )  # fmt: skip
 
     @property
+    def broken(self) -> tuple[str, ...]:
+        """The :data:`BIT_RULES` this word breaks, in the order they are asked (empty when it
+        :attr:`agrees`): :func:`broken_rules` of its fields."""
+        return broken_rules(*self._rule_inputs)
+
+    @property
     def reason(self) -> str:
         """Why :attr:`agrees` is false, in words (empty when it is true)."""
-        return disagreement(
-            self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin,
-            self.runner_up_passes,
-        )  # fmt: skip
+        return disagreement(*self._rule_inputs)
 
 
 #: The per-bit check's rules (:attr:`BitEvidence.agrees`), by name, in the order they are asked.
