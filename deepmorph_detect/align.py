@@ -95,10 +95,20 @@ class Aligner:
         ink_thickness: the drawing's thickest ink feature, in pixels of a view ``view_width``
             wide (sizes the flat-light filter).
         view_width: the width of the rectified views the thickness is measured in.
+        flat_sheet: an outline neither the photo nor flat light aligns is aligned as a flat
+            sheet (:meth:`outline_as_flat_sheet`): a colour drawing's, where it read more close-ups.
     """
 
-    def __init__(self, template: Template, min_correlation: float, ink_thickness: float, view_width: int) -> None:
+    def __init__(
+        self,
+        template: Template,
+        min_correlation: float,
+        ink_thickness: float,
+        view_width: int,
+        flat_sheet: bool = True,
+    ) -> None:
         self.template = template
+        self.flat_sheet = flat_sheet
         self.min_correlation = min_correlation
         self.frame_corners = viewbox_corners(template.viewbox)
         self._ink_thickness = ink_thickness
@@ -190,7 +200,7 @@ class Aligner:
         :data:`FAINT_PROPOSAL` takes the photo's quick path alone. A detector that knows
         the drawing takes them in both, which finds a few more prints that do not read. An
         outline (not a faint blind one) aligned in neither is aligned as a flat sheet
-        (:meth:`outline_as_flat_sheet`).
+        (:meth:`outline_as_flat_sheet`), where this aligner does that (:attr:`flat_sheet`).
         """
         start = self.homography(cand.corners)
         aim = BLIND_SEARCH_BELOW if cand.blind else None
@@ -221,7 +231,7 @@ class Aligner:
             # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
             if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):
                 seen_in, alignment = flat, in_flat
-        if self.accepts(alignment):
+        if self.accepts(alignment) or not self.flat_sheet:
             return seen_in, alignment
         sheet = self.outline_as_flat_sheet(pyramid, cand)
         return (pyramid, sheet) if sheet is not None else (seen_in, alignment)

@@ -68,6 +68,12 @@ UNREAD_BLIND_CORRELATION = 0.8
 #: each of the cube (3 turns) and the chip (4), the same prints read with frames 0.7-0.8x as
 #: long on average; at one turn, the codepen diamond (2) lost a print
 LATER_LOOK_TURNS = 2
+#: The verdict of a drawing that looks the same turned whose readings at two of its turns passed
+#: every check with two payloads, neither of them read without corrections and confidently: read
+#: at the wrong turn, its true morph turned is a morph too and can pass the checks; the photo does
+#: not say which turn is right, so neither payload is given (a `--pixels 200` codepen diamond:
+#: once in 2500 medium close-ups, the wrong word beside the right one, 2 corrections against 1)
+TURN_CONFLICT = "turn conflict"
 #: A weak reading (not :attr:`~deepmorph_detect.check.PayloadCheck.settled`) aligned that well is compared with the
 #: reading at the best other turn of its frame where that turn aligns at most this much worse: a
 #: drawing that nearly looks the same half turned (a battery) aligned at 0.832 at either turn of a
@@ -187,7 +193,8 @@ class Locator:
         view_width = model.width * RECTIFY_WIDTH_FACTOR
         thickness = ink_thickness(self.template, view_width)
         self.ink_share = thickness / view_width
-        self.aligner = Aligner(self.template, min_correlation, thickness, view_width)
+        # the flat sheet read more close-ups of colour drawings, none of black-and-white ones
+        self.aligner = Aligner(self.template, min_correlation, thickness, view_width, flat_sheet=md.colour)
         self.reader = Reader(model, self.template, self.morphs, self.synthesis, thickness, self.device)
         # the per-bit check asks at a finer width than the last look reads
         checks = MorphSynthesis(model, self.template, CHECK_WIDTH, renderer=self.renderer)
@@ -522,9 +529,15 @@ class Locator:
             other = readings[k]
             if other[1].result.ok and (not checked.result.ok or _stronger(other[1].result, checked.result)):
                 H, checked, probs = other
+        if not checked.settled and _turns_disagree([r[1] for r in readings.values()], checked.result):
+            checked = replace(checked, result=replace(checked.result, ok=False), status=TURN_CONFLICT)
         if first_looks_only:
             return self.placer.place(gray.shape, H, checked, probs, alignment.correlation, score, cam, source)
-        if not checked.settled and alignment.correlation >= UNREAD_BLIND_CORRELATION:
+        if (
+            not checked.settled
+            and checked.status != TURN_CONFLICT
+            and alignment.correlation >= UNREAD_BLIND_CORRELATION
+        ):
             margin = TURN_TIE_MARGIN if checked.result.ok else 0.0
             realigned = self.aligner.other_turn(pyramid, alignment, margin)
             if realigned is not None:
@@ -669,6 +682,12 @@ def _read_too_small(located: Located) -> bool:
     return located.too_small and located.morph_check == "passed"
 
 
+def _turns_disagree(checks: list[PayloadCheck], chosen: DecodeResult) -> bool:
+    """Whether the ``chosen`` reading passed and a reading at another turn passed every check
+    with another payload (:data:`TURN_CONFLICT`)."""
+    return chosen.ok and any(c.result.ok and not np.array_equal(c.result.payload, chosen.payload) for c in checks)
+
+
 def _confidence(reading: tuple[np.ndarray, PayloadCheck, np.ndarray] | None) -> float:
     """A turn's first-look confidence (``-1`` for a turn not read)."""
     return -1.0 if reading is None else float(reading[1].result.confidence)
@@ -685,6 +704,7 @@ __all__ = [
     "UNREAD_MARGIN",
     "UNREAD_BLIND_CORRELATION",
     "TURN_TIE_MARGIN",
+    "TURN_CONFLICT",
     "FILLS_FRAME",
     "NARROW_SHARE",
     "COLOUR_FLOOR_SHARE",

@@ -144,7 +144,8 @@ class Located(Detection):
     # "passed", "failed" (ok withdrawn), "contradicted" (the photo does not show its code bits,
     # BitEvidence.agrees: ok withdrawn), "not run" (CRC failed); from deepmorph_detect.track also
     # "tracked" (the payload its track confirmed in an earlier frame, read again from its morph)
-    # and "track conflict" (another payload than the track's passed: ok withdrawn)
+    # and "track conflict" (another payload than the track's passed: ok withdrawn); from a drawing that
+    # looks the same turned "turn conflict" (two turns passed with two payloads: ok withdrawn)
     morph_check: str = "not run"
     # the narrowest print (photo pixels) its model reads well: the decoder's frame width
     needs_px: float | None = None

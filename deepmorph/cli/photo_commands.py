@@ -217,6 +217,8 @@ def _print_decoded(results: list[dict[str, Any]], as_json: bool) -> None:
                 status = f"NOT READ: {too_small_reason(d['too_small'])}"
             elif d.get("morph_check") == "failed":
                 status = "NOT VERIFIED (the CRC passed, but the decoded morph does not fit the photo)"
+            elif d.get("morph_check") == "turn conflict":
+                status = "NOT VERIFIED (the drawing looks the same turned, and two turns read two payloads)"
             elif d.get("morph_check") == "contradicted":
                 why = disagreement_in(d)
                 status = f"NOT VERIFIED (the CRC passed, but {why})"

@@ -29,7 +29,8 @@ def colour_aligner(svg: Path) -> tuple[Template, Aligner]:
     unmorphed = md.to_svg(md.neutral_values()[0])
     _, renderer = template_renderer(unmorphed, md.drawing.viewbox, LEVELS, md.channel)
     template = Template.from_svg(unmorphed, md.drawing.viewbox, LEVELS, stretched_renderer(renderer, md.ink_level))
-    return template, Aligner(template, MIN_CORRELATION, ink_thickness(template, VIEW_WIDTH), VIEW_WIDTH)
+    thickness = ink_thickness(template, VIEW_WIDTH)
+    return template, Aligner(template, MIN_CORRELATION, thickness, VIEW_WIDTH, flat_sheet=md.colour)
 
 
 def _candidate(proposal: dict) -> Candidate:

@@ -994,6 +994,35 @@ def test_a_weak_reading_of_a_symmetric_drawing_gives_way_to_a_stronger_one_at_an
         assert read.result.ok and np.array_equal(read.result.payload, expected_payload)
 
 
+def test_two_weak_readings_of_a_symmetric_drawing_at_two_turns_give_no_payload(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Read at the wrong turn, a symmetric drawing's true morph turned is a morph too, and a word
+    read there with corrections can pass every check. Where the readings at two turns pass with two
+    payloads and neither is strong, the photo does not say which turn is right: neither is given
+    (``turn conflict``). Two weak readings of one payload are given."""
+    from deepmorph_detect.locate import TURN_CONFLICT
+
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
+    symmetric = Locator(model)
+    symmetric.template.__dict__["symmetric_turns"] = (_half_turn(locator.viewbox),)
+    H, strong, probs = symmetric._read_and_check(gray, pyramid, right, "detector", True, False)
+    assert strong.result.ok
+    weak = replace(strong, result=replace(strong.result, corrected_bits=1, confidence=0.96))
+    other = replace(weak, result=replace(weak.result, payload=1 - strong.result.payload, corrected_bits=2))
+    for at_the_other_turn, ok in ((other, False), (weak, True)):
+        calls: list[int] = []
+
+        def scripted(*args: object, turned: PayloadCheck = at_the_other_turn, calls: list[int] = calls, **kw: object):
+            calls.append(1)
+            return (H, weak if len(calls) == 1 else turned, probs)
+
+        monkeypatch.setattr(symmetric, "_read_and_check", scripted)
+        read = symmetric._decode_at(gray, pyramid, right, 1.0, cam, "detector", True, False)
+        assert read.result.ok is ok and (read.morph_check == TURN_CONFLICT) is not ok
+        assert np.array_equal(read.result.payload, strong.result.payload)  # the stronger, withdrawn or given
+
+
 def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns_as_well(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.align import BENT_OUTLINE, MIN_CORRELATION, WEAK_ALIGNMENT
+from deepmorph_detect.align import BENT_OUTLINE, MIN_CORRELATION, WEAK_ALIGNMENT, Aligner, ink_thickness
 from deepmorph_detect.camera import project, rigid_misfit, viewbox_corners
 from deepmorph_detect.locate import BLIND_READ_CORRELATION, Locator
 from deepmorph_detect.refine import ImagePyramid, nearest_affine, refine, refine_affine
 from tests.conftest import easy_print_aligned
-from tests.detect.colour_close_ups import close_up, corner_error
+from tests.detect.colour_close_ups import VIEW_WIDTH, close_up, corner_error
 
 DATA = Path(__file__).parents[1] / "data"
 PHOTO = DATA / "photos" / "shadow_across_colour_close_up.png"
@@ -144,3 +144,17 @@ def test_an_outline_neither_the_photo_nor_flat_light_aligns_is_aligned_as_a_flat
     assert abs(off - corner_error(from_truth.homography, template, truth)) < 0.01 and off < 0.12
     (aligned,) = aligner.verify(pyramid, [candidate], gray)
     assert aligned.pyramid is pyramid and np.allclose(aligned.alignment.homography, sheet.homography)
+
+
+def test_only_a_colour_drawing_aligns_an_outline_as_a_flat_sheet(heart, model: DeepMorphModel) -> None:
+    """The flat sheet read more close-ups of colour drawings and none of black-and-white ones,
+    while every other drawing's outline that reaches it costs a few milliseconds: the photo
+    chain's aligner takes it for a colour drawing only. Without it the heart's outline that ran
+    off everywhere else is not kept."""
+    template, aligner = heart
+    gray, _, candidate = close_up(RUN_OFF)
+    pyramid = ImagePyramid(gray)
+    assert aligner.flat_sheet and len(aligner.verify(pyramid, [candidate], gray)) == 1
+    without = Aligner(template, MIN_CORRELATION, ink_thickness(template, VIEW_WIDTH), VIEW_WIDTH, flat_sheet=False)
+    assert without.verify(pyramid, [candidate], gray) == []
+    assert not Locator(model).aligner.flat_sheet  # the ghost, in black ink

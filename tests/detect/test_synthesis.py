@@ -231,7 +231,8 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     confidently, the decoder's own probabilities prefer it to every other code word by
     ``TRUSTED_REPAIR_LOG_ODDS`` and its morph fits the photo as only prints of the drawing do
     (``TRUSTED_MORPH_FIT``); and only for a black-and-white drawing trained for the print's
-    pixels (other decoders read wrong words as surely)."""
+    pixels that does not look the same turned (other decoders, and a symmetric drawing read at
+    the wrong turn, read wrong words as surely)."""
     from deepmorph_detect.check import (
         CHECK_BELOW_CONFIDENCE,
         TRUSTED_MORPH_FIT,
@@ -265,6 +266,12 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     # nor where the morph fits as other drawings can align, nor without corrections
     assert not is_trusted_repair(repaired, TRUSTED_MORPH_FIT - 0.01, t)
     assert not is_trusted_repair(replace(repaired, corrected_bits=0), 0.99, t)
+    # nor for a drawing that looks the same turned: at the wrong turn its true morph turned reads
+    # as another word as surely
+    with monkeypatch.context() as m:
+        m.setattr(locator.checker.template, "symmetric_turns", (np.eye(3),))
+        assert locator.check_payload(pyramid, det.homography, repaired).bits is not None
+    assert locator.check_payload(pyramid, det.homography, repaired).bits is None
     monkeypatch.setattr(type(model.drawing), "colour", property(lambda self: True))
     in_colour = locator.check_payload(pyramid, det.homography, repaired)
     assert in_colour.bits is not None
@@ -478,11 +485,13 @@ def test_the_decoders_runner_up_is_asked_in_the_photo(model: DeepMorphModel, loc
 def test_a_word_whose_runner_up_passes_too_is_withdrawn(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Two code words the photo both shows leave the payload undecided: a word that passes every
-    bit rule is withdrawn where the decoder's runner-up passes them too, with that reason in its
-    JSON; it passes where the runner-up does not, or where the decoder's probabilities are not
-    given (a payload fused over frames)."""
+    """Two code words the photo both shows leave the payload undecided: a colour drawing's word
+    that passes every bit rule is withdrawn where the decoder's runner-up passes them too, with
+    that reason in its JSON; it passes where the runner-up does not, or where the decoder's
+    probabilities are not given (a payload fused over frames). A black-and-white drawing's
+    (the ghost's) is not asked: its models read no wrong payload without the rule."""
     import deepmorph_detect.check as check_module
+    from deepmorph_detect.check import PayloadChecker
     from deepmorph_detect.refine import Alignment
 
     checker = locator.checker
@@ -502,6 +511,9 @@ def test_a_word_whose_runner_up_passes_too_is_withdrawn(
     image = np.full((64, 64), 0.8, np.float32)
     read = DecodeResult(payload, True, 1, 0.92)
     probs = _read_next(code, runner_up)
+    assert not checker.asks_runner_up
+    assert checker.check(image, np.eye(3), read, probabilities=probs).status == "passed"
+    monkeypatch.setattr(PayloadChecker, "asks_runner_up", property(lambda self: True))  # as a colour drawing's
     undecided = checker.check(image, np.eye(3), read, probabilities=probs)
     assert undecided.status == "contradicted" and not undecided.result.ok
     assert undecided.bits.runner_up_passes and not undecided.bits.agrees
