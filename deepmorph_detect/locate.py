@@ -72,7 +72,8 @@ LATER_LOOK_TURNS = 2
 #: every check with two payloads, neither of them read without corrections and confidently: read
 #: at the wrong turn, its true morph turned is a morph too and can pass the checks; the photo does
 #: not say which turn is right, so neither payload is given (a `--pixels 200` codepen diamond:
-#: once in 2500 medium close-ups, the wrong word beside the right one, 2 corrections against 1)
+#: twice in 10,000 240-px close-ups, the wrong word beside the right one, 2 and 3 corrections
+#: against 1)
 TURN_CONFLICT = "turn conflict"
 #: A weak reading (not :attr:`~deepmorph_detect.check.PayloadCheck.settled`) aligned that well is compared with the
 #: reading at the best other turn of its frame where that turn aligns at most this much worse: a
