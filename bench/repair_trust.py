@@ -10,9 +10,10 @@ confidence, how much the decoder's probabilities prefer it to its nearest rival 
 log-odds, ``DecodeResult.rival_log_odds``, computed here for every word), its morph's fit, and
 the verdict (passed with or without the per-bit check, or withdrawn).
 
-The table: photos read, wrong words that reached the check with their highest log-odds and
-confidence, wrong payloads passed, and right words passed without the per-bit check although
-the code corrected them (``PayloadChecker.vouches_for_repair``). The JSON keeps every record.
+The table: photos read, photos that gave a wrong payload, wrong words that reached the check
+with their highest log-odds and confidence, wrong words the check passed, and right words passed
+without the per-bit check although the code corrected them
+(``PayloadChecker.vouches_for_repair``). The JSON keeps every record.
 
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --width 240 --samples 5000 --seed 41
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --frame 1280x720 --samples 400
@@ -96,14 +97,17 @@ def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any])
     checker._verdict, reader.looks = verdict_noting, looks_noting
 
 
-def summary(records: list[dict[str, Any]], read: int, samples: int) -> dict[str, Any]:
-    """The table's row: the first verdict on each word (not its retries in a cast shadow's light)."""
+def summary(records: list[dict[str, Any]], read: int, wrong_payloads: int, samples: int) -> dict[str, Any]:
+    """The table's row: the first verdict on each word (not its retries in a cast shadow's light),
+    and the photos whose chain gave a wrong payload (a word that passed its check can still be
+    withdrawn later, by a reading at another turn)."""
     first = [r for r in records if r["light_grid"] == 0]
     wrong = [r for r in first if not r["right"]]
     spared = [r for r in first if r["right"] and r["corrected_bits"] > 0 and r["status"] == "passed"]
     return {
         "photos": samples,
         "read": read,
+        "wrong_payloads": wrong_payloads,
         "words_checked": len(first),
         "wrong_words": len(wrong),
         "wrong_max_log_odds": max((r["rival_log_odds"] for r in wrong), default=None),
@@ -139,15 +143,17 @@ def main() -> None:
     records: list[dict[str, Any]] = []
     photo: dict[str, Any] = {}
     recorded(locator, records, photo)
-    read = 0
+    read = wrong_payloads = 0
     for index, (image, camera, truth) in enumerate(photos(args, model)):
         photo.update(index=index, truth=truth)
         found = locator.locate(image, camera) if camera is not None else locator.locate(image)
         read += any(f.result.ok and np.array_equal(f.result.payload, truth) for f in found)
+        wrong_payloads += any(f.result.ok and not np.array_equal(f.result.payload, truth) for f in found)
     kind = "unrelated" if args.unrelated else f"scenes {args.frame[0]}x{args.frame[1]}" if args.frame else "close-ups"
     size = "" if args.unrelated or args.frame else f" {args.width:g} px" if args.width else ""
-    row = summary(records, read, args.samples)
-    columns = {"photos": "photos", "read": "read", "words_checked": "words checked", "wrong_words": "wrong words",
+    row = summary(records, read, wrong_payloads, args.samples)
+    columns = {"photos": "photos", "read": "read", "wrong_payloads": "wrong payloads",
+               "words_checked": "words checked", "wrong_words": "wrong words",
                "wrong_max_log_odds": "their max log-odds", "wrong_max_confidence": "their max confidence",
                "wrong_passed": "wrong passed", "repaired_right_passed": "right repaired passed",
                "repaired_right_spared": "of them spared the bits"}  # fmt: skip

@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import inspect
 import warnings
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -512,6 +513,18 @@ class Locator:
         # The first looks at every turn before the later looks at any: which turn the alignment
         # ended at is chance, and a first look at the right turn reads most prints.
         readings: dict[int, tuple[np.ndarray, PayloadCheck, np.ndarray]] = {}
+        looked: dict[int, tuple[list[np.ndarray], list[Reading]]] = {}  # each turn's views, first looks
+
+        def first_looks(k: int) -> tuple[list[np.ndarray], list[Reading]]:
+            if k not in looked:
+                views = self._views(gray, pyramid, turns[k].homography, source)
+                looked[k] = views, self.reader.first_looks(views, soft)
+            return looked[k]
+
+        def unrivalled(k: int) -> bool:
+            # no other turn's first look reads a word that passes the CRC (PayloadChecker.check)
+            return not any(r.result.ok for j in range(len(turns)) if j != k for r in first_looks(j)[1])
+
         for first_only in (True, False) if len(turns) > 1 and not first_looks_only else (first_looks_only,):
             order = list(enumerate(turns))
             if not first_only and len(turns) > LATER_LOOK_TURNS:
@@ -523,7 +536,17 @@ class Locator:
                 if k in readings and readings[k][1].status == "passed":
                     continue  # its later looks would end at the same passing reading
                 readings[k] = self._read_and_check(
-                    gray, pyramid, at, source, soft, blind, relit_from, in_shadow=in_shadow, first_only=first_only
+                    gray,
+                    pyramid,
+                    at,
+                    source,
+                    soft,
+                    blind,
+                    relit_from,
+                    in_shadow=in_shadow,
+                    first_only=first_only,
+                    looked=first_looks(k),
+                    unrivalled=functools.partial(unrivalled, k),
                 )
         H, checked, probs = readings[0]
         for k in sorted(readings)[1:]:
@@ -563,6 +586,8 @@ class Locator:
         stronger_than: DecodeResult | None = None,
         in_shadow: bool = False,
         first_only: bool = False,
+        looked: tuple[list[np.ndarray], list[Reading]] | None = None,
+        unrivalled: Callable[[], bool] | None = None,
     ) -> tuple[np.ndarray, PayloadCheck, np.ndarray]:
         """:meth:`decode_drawing`'s readings and checks at one alignment: the homography to
         place the drawing by (the passed payload's morph fit, else the alignment's), the
@@ -573,15 +598,14 @@ class Locator:
         counts as not read. ``stronger_than``: only readings
         stronger than this one are checked (and can pass); the others count as not read.
         ``in_shadow``: checked in the shadow's light alone (:meth:`_decode_at`). ``first_only``:
-        the first looks alone."""
+        the first looks alone. ``looked``: the views at this alignment and their first looks,
+        where already read. ``unrivalled``: asked for a reading the code corrected, whether no
+        other symmetric turn's first look reads a word that passes the CRC (a drawing that looks
+        the same turned may then be vouched for, ``unrivalled_turn`` of
+        :meth:`PayloadChecker.check <deepmorph_detect.check.PayloadChecker.check>`)."""
         H = alignment.homography
-        views = [self.reader.rectify(pyramid, H)]
         whole = source == WHOLE_FRAME
-        if whole:
-            # A drawing that fills the frame is also read as it is, framed by its ink: a full
-            # homography fitted to the unmorphed drawing can absorb part of a morph whose every
-            # point moves (no fixed elements); the better-verified reading wins.
-            views.append(gray)
+        views, firsts = looked if looked is not None else (self._views(gray, pyramid, H, source), None)
         readings: list[Reading] = []
         checked: PayloadCheck | None = None  # the verdict on the first payload that passed the CRC
         probs = np.full(self.model.codec.spec.code_bits, 0.5, dtype=np.float32)
@@ -593,7 +617,7 @@ class Locator:
         # what is returned, and refused as too small
         only_uncorrected = self.keeps_only_uncorrected(H)
         aside: tuple[np.ndarray, PayloadCheck, np.ndarray] | None = None
-        for reading, bitwise in self.reader.looks(pyramid, H, views, readings, soft, first_only):
+        for reading, bitwise in self.reader.looks(pyramid, H, views, readings, soft, first_only, firsts):
             readings.append(reading)
             if not reading.result.ok or (stronger_than is not None and not _stronger(reading.result, stronger_than)):
                 continue
@@ -613,6 +637,7 @@ class Locator:
                 relit_from=relit_from,
                 in_shadow=in_shadow,
                 probabilities=reading.probabilities,
+                unrivalled_turn=bool(reading.result.corrected_bits and unrivalled is not None and unrivalled()),
             )
             if attempt.status == "passed" and repaired:
                 aside = (attempt.fit.homography, attempt, reading.probabilities)
@@ -632,6 +657,16 @@ class Locator:
                 result = self.model.codec.decode(probs, soft=soft)
             checked = PayloadCheck(replace(result, ok=False) if result.ok else result, None, "not run")
         return H, checked, probs
+
+    def _views(self, gray: np.ndarray, pyramid: ImagePyramid, H: np.ndarray, source: str) -> list[np.ndarray]:
+        """The views a drawing aligned at ``H`` is read in: rectified, and a drawing that fills
+        the frame (``source`` :data:`WHOLE_FRAME`) also as it is, framed by its ink: a full
+        homography fitted to the unmorphed drawing can absorb part of a morph whose every point
+        moves (no fixed elements); the better-verified reading wins."""
+        views = [self.reader.rectify(pyramid, H)]
+        if source == WHOLE_FRAME:
+            views.append(gray)
+        return views
 
     def check_payload(
         self,

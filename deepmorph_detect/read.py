@@ -117,13 +117,15 @@ class Reader:
         readings: list[Reading],
         soft: bool,
         first_only: bool = False,
+        firsts: list[Reading] | None = None,
     ) -> Iterator[tuple[Reading, bool | None]]:
         """Readings of one drawing, each with the ``bitwise`` argument its check takes, in the
         order they are tried (see the module); the caller appends each reading to ``readings``
         before asking for the next. ``first_only``: the first looks alone (a drawing that
-        aligned too poorly to be worth the later ones)."""
-        firsts = [r for r in (self.read(view, soft) for view in views) if r is not None]
-        firsts.sort(key=lambda r: (r.result.ok, r.result.confidence), reverse=True)
+        aligned too poorly to be worth the later ones). ``firsts``: the :meth:`first_looks` of
+        ``views``, where the caller already read them."""
+        if firsts is None:
+            firsts = self.first_looks(views, soft)
         for reading in firsts:
             yield reading, None
         if first_only:
@@ -135,6 +137,12 @@ class Reader:
             yield reading, None
         if readings:
             yield self.read_by_synthesis(pyramid, H, readings), True
+
+    def first_looks(self, views: list[np.ndarray], soft: bool) -> list[Reading]:
+        """The first looks: each view read as it is, the most confident passing reading first."""
+        firsts = [r for r in (self.read(view, soft) for view in views) if r is not None]
+        firsts.sort(key=lambda r: (r.result.ok, r.result.confidence), reverse=True)
+        return firsts
 
     def read_framed_by_template(self, view: np.ndarray, soft: bool) -> Reading | None:
         """The rectified view framed where the alignment puts the unmorphed drawing's ink

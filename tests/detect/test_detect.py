@@ -20,7 +20,7 @@ import deepmorph_detect.locate as locate_module
 from deepmorph.cli import application
 from deepmorph.measure.scene_bench import morph_check_rates
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.codec import PayloadCodec
+from deepmorph_core.codec import DecodeResult, PayloadCodec
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
@@ -1021,6 +1021,50 @@ def test_two_weak_readings_of_a_symmetric_drawing_at_two_turns_give_no_payload(
         read = symmetric._decode_at(gray, pyramid, right, 1.0, cam, "detector", True, False)
         assert read.result.ok is ok and (read.morph_check == TURN_CONFLICT) is not ok
         assert np.array_equal(read.result.payload, strong.result.payload)  # the stronger, withdrawn or given
+
+
+def test_a_symmetric_drawing_s_repair_is_vouched_for_only_where_no_other_turn_reads_a_word(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Read at the wrong turn, a symmetric drawing's true morph turned can read as another word
+    as surely as a right one. A repair the decoder is sure of skips the per-bit check only where
+    the first looks at every other turn read no word that passes the CRC; where one does, the
+    repair goes bit by bit and the other turn is read too."""
+    from deepmorph_detect.check import TRUSTED_REPAIR_LOG_ODDS
+    from deepmorph_detect.read import Reading
+
+    placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
+    monkeypatch.setattr(type(model), "print_px", property(lambda self: 200))  # as if trained with --pixels 200
+    for other_turn_reads, expected in ((False, [True]), (True, [False, False])):
+        symmetric = Locator(model)
+        symmetric.template.__dict__["symmetric_turns"] = (_half_turn(locator.viewbox),)
+        real_first_looks, real_check = symmetric.reader.first_looks, symmetric.checker.check
+        turns_read: list[int] = []
+
+        def first_looks(views, soft, turns_read=turns_read, reads=other_turn_reads, real=real_first_looks):
+            turns_read.append(1)
+            firsts = real(views, soft)
+            if len(turns_read) == 1:  # the print's own turn: its word, as a repair the decoder is sure of
+                sure = {"corrected_bits": 1, "confidence": 0.99, "rival_log_odds": TRUSTED_REPAIR_LOG_ODDS + 5}
+                return [replace(r, result=replace(r.result, **sure)) for r in firsts]
+            other = DecodeResult(1 - placed.payload, True, 2, 0.9)
+            return [Reading(other, firsts[0].probabilities)] if reads else []
+
+        asked: list[bool] = []
+        vouched: list[bool] = []
+
+        def check(*args, asked=asked, vouched=vouched, real=real_check, **kwargs):
+            asked.append(bool(kwargs["unrivalled_turn"]))
+            verdict = real(*args, **kwargs)
+            vouched.append(verdict.vouched)
+            return verdict
+
+        monkeypatch.setattr(symmetric.reader, "first_looks", first_looks)
+        monkeypatch.setattr(symmetric.checker, "check", check)
+        read = symmetric._decode_at(gray, pyramid, right, 1.0, cam, "detector", True, False)
+        assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
+        assert asked[: len(expected)] == expected and vouched[0] is expected[0]
+        assert len(asked) == 1 if expected[0] else len(asked) >= len(expected)  # vouched: nothing else asked
 
 
 def test_a_weak_reading_is_compared_with_the_reading_at_another_turn_that_aligns_as_well(

@@ -177,9 +177,9 @@ def test_an_unread_print_is_aligned_again_in_a_grid_of_light_and_checked_only_th
             located.result = replace(located.result, ok=False)
         return located
 
-    def verdict(pyramid, H, result, unmorphed, bitwise, *args):
+    def verdict(pyramid, H, result, unmorphed, bitwise, *args, **kwargs):
         grids.append((bitwise, args[3] if len(args) >= 4 else 0))  # blind, whole_frame, relit_from, light_grid, ...
-        return real_verdict(pyramid, H, result, unmorphed, bitwise, *args)
+        return real_verdict(pyramid, H, result, unmorphed, bitwise, *args, **kwargs)
 
     monkeypatch.setattr(locator, "_decode_at", decode_at)
     monkeypatch.setattr(locator.checker, "_verdict", verdict)

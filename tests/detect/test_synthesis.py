@@ -231,8 +231,9 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     confidently, the decoder's own probabilities prefer it to every other code word by
     ``TRUSTED_REPAIR_LOG_ODDS`` and its morph fits the photo as only prints of the drawing do
     (``TRUSTED_MORPH_FIT``); and only for a black-and-white drawing trained for the print's
-    pixels that does not look the same turned (other decoders, and a symmetric drawing read at
-    the wrong turn, read wrong words as surely)."""
+    pixels, and for one that looks the same turned only where no other turn's first look read a
+    word that passes the CRC (other decoders, and a symmetric drawing read at the wrong turn, read
+    wrong words as surely)."""
     from deepmorph_detect.check import (
         CHECK_BELOW_CONFIDENCE,
         TRUSTED_MORPH_FIT,
@@ -267,10 +268,12 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     assert not is_trusted_repair(repaired, TRUSTED_MORPH_FIT - 0.01, t)
     assert not is_trusted_repair(replace(repaired, corrected_bits=0), 0.99, t)
     # nor for a drawing that looks the same turned: at the wrong turn its true morph turned reads
-    # as another word as surely
+    # as another word as surely; unless no other turn's first look read a word
     with monkeypatch.context() as m:
         m.setattr(locator.checker.template, "symmetric_turns", (np.eye(3),))
         assert locator.check_payload(pyramid, det.homography, repaired).bits is not None
+        unrivalled = locator.checker.check(pyramid, det.homography, repaired, unrivalled_turn=True)
+        assert unrivalled.vouched and unrivalled.bits is None
     assert locator.check_payload(pyramid, det.homography, repaired).bits is None
     monkeypatch.setattr(type(model.drawing), "colour", property(lambda self: True))
     in_colour = locator.check_payload(pyramid, det.homography, repaired)
