@@ -154,15 +154,6 @@ class Studio:
                 self._locators[model_id] = Locator(m)
             return self._locators[model_id]
 
-    def warm(self, model_id: str) -> None:
-        """Build ``model_id``'s locator ahead of its first scan (the bundled ghost's takes 0.7 s:
-        a camera's first frame would wait for it). Run on a daemon thread when the studio starts; a
-        model that does not load is left to the scan that asks for it, which says why."""
-        try:
-            self.locator(model_id)
-        except (HttpError, DeepMorphError, OSError):
-            return
-
     def live(self, model_id: str, restart: bool = False) -> SequenceReader:
         """The camera's stream for one model: drawings read in a frame are followed into the next
         and their readings fused (:class:`~deepmorph_detect.reading.SequenceReader`, what
@@ -869,7 +860,6 @@ def create_app(studio: Studio) -> Starlette:
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        threading.Thread(target=studio.warm, args=(BUNDLED_ID,), name="deepmorph-warm", daemon=True).start()
         yield
         studio.jobs.close()  # a running training writes its checkpoint before the studio stops
 

@@ -156,30 +156,6 @@ def test_a_runs_steps_grow_when_training_goes_on_past_them(tmp_path: Path) -> No
     assert (job.step, job.total) == (55, 55)
 
 
-def test_the_bundled_ghosts_locator_is_ready_before_the_first_scan(tmp_path: Path) -> None:
-    """Starting the studio builds the bundled ghost's locator on a thread of its own (0.7 s), so
-    that a camera's first frame is read as quickly as the next; a model that cannot load is left
-    to the scan that asks for it."""
-    import asyncio
-
-    from deepmorph.studio.app import BUNDLED_ID, Studio, create_app
-
-    studio = Studio(tmp_path)
-    assert BUNDLED_ID not in studio._locators
-    app = create_app(studio)
-
-    async def started() -> bool:
-        async with app.router.lifespan_context(app):  # the app's startup, as the server runs it
-            deadline = time.monotonic() + 60
-            while BUNDLED_ID not in studio._locators and time.monotonic() < deadline:
-                await asyncio.sleep(0.05)
-            return BUNDLED_ID in studio._locators
-
-    assert asyncio.run(started())
-    studio.warm("no-such-model")  # says nothing: the scan that asks for it gets the error
-    assert "no-such-model" not in studio._locators
-
-
 def test_listening_beyond_this_machine_warns(tmp_path: Path) -> None:
     import subprocess
     import sys
@@ -661,6 +637,13 @@ def test_a_short_training_runs_progress_reaches_the_page(page, server: Server, t
 
 
 def test_the_scan_tab_reads_the_fake_camera(page, server: Server) -> None:
+    import cv2
+    import numpy as np
+
+    # the model and its photo chain load on their first scan (timed by bench/studio.py, about a
+    # second); what is timed below is reading a live camera, so the ghost is loaded first
+    blank = cv2.imencode(".jpg", np.full((480, 640, 3), 200, np.uint8))[1].tobytes()
+    assert request(server, "/api/models/ghost/scan", token=server.token, data=blank)[0] == 200
     open_studio(page, server, "scan")
     page.wait_for_function("() => document.querySelector('#scan-model').options.length > 0")
     page.select_option("#scan-model", "ghost")
