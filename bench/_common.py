@@ -122,6 +122,16 @@ def add_scene_options(ap: argparse.ArgumentParser, n: int, out: Path) -> None:
     ap.add_argument("--out", type=Path, default=out)
 
 
+def add_close_up_options(ap: argparse.ArgumentParser, samples: int, seed: int, out: Path) -> None:
+    """The options every close-up benchmark takes: the capture's severity, the print's width in
+    camera pixels, close-ups, seed and the JSON output."""
+    ap.add_argument("--severity", default="hard")
+    ap.add_argument("--width", type=float, default=None, help="close-ups: the print's width in camera px")
+    ap.add_argument("--samples", type=int, default=samples)
+    ap.add_argument("--seed", type=int, default=seed)
+    ap.add_argument("--out", type=Path, default=out)
+
+
 def load_scene_model(args: argparse.Namespace) -> tuple[Path, Any]:
     """Pin torch and OpenCV to ``--threads``, then load ``--model`` (default: the bundled ghost):
     its path and the :class:`~deepmorph_core.codemodel.DeepMorphModel`."""

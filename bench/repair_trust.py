@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, frame_size, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, add_close_up_options, environment, frame_size, set_threads, table, write_json  # noqa: E402
 
 NOT_A_PAYLOAD = 2  # a bit value no payload has: the truth of an unrelated image
 
@@ -121,14 +121,10 @@ def summary(records: list[dict[str, Any]], read: int, wrong_payloads: int, sampl
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("bundle", type=Path)
-    ap.add_argument("--severity", default="hard")
-    ap.add_argument("--width", type=float, default=None, help="close-ups: the print's width in camera px")
+    add_close_up_options(ap, 1000, 0, RESULTS / "repair_trust.json")
     ap.add_argument("--frame", type=frame_size, default=None, help="scenes of this size, WxH, instead of close-ups")
     ap.add_argument("--unrelated", action="store_true", help="images that show none of the drawing instead")
     ap.add_argument("--icons", type=Path, default=None, help="other drawings for --unrelated")
-    ap.add_argument("--samples", type=int, default=1000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=RESULTS / "repair_trust.json")
     args = ap.parse_args()
     threads = set_threads(1)
     import cv2
