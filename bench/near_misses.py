@@ -74,7 +74,7 @@ def word_record(locator: Any, aligned: Any, reading: Any, blind: Any, truth: Any
         "looser": False,
     }
     fit = checker.fit_morph(pyramid, alignment.homography, word.payload, alignment)
-    if fit is None or not fit.confirms or fit.gain < checker.least_gain(asked):
+    if fit is None or not checker.morph_fits(fit, asked):
         return record
     in_colour = fit.unmorphed_correlation >= DRAWING_LIKE_ALIGNMENT
     bits = checker.synthesis.evidence(pyramid, fit.homography, code, in_colour, True, 0)

@@ -405,7 +405,7 @@ class PayloadChecker:
         ``light_grid`` 0, ECC's and the per-bit check's smooth light; else the morph fits aligned
         in a grid of light and the bits asked in a ``light_grid`` grid."""
         fit = self.fit_morph(pyramid, homography, result.payload, unmorphed, in_light_field=light_grid > 0)
-        if fit is None or not fit.confirms or (not light_grid and fit.gain < self.least_gain(result)):
+        if not self.morph_fits(fit, result, light_grid):
             return PayloadCheck(replace(result, ok=False), fit, "failed")
         if whole_frame and self.repaired_off_the_drawing(result, fit):
             return PayloadCheck(replace(result, ok=False), fit, "failed")
@@ -517,6 +517,15 @@ class PayloadChecker:
         if self.template.symmetric_turns and not unrivalled_turn:
             return False
         return is_trusted_repair(result, fit.correlation, model.codec.spec.bch_t)
+
+    def morph_fits(self, fit: MorphFit | None, result: DecodeResult, light_grid: int = 0) -> bool:
+        """Whether the photo shows ``result``'s morph at ``fit`` (:meth:`fit_morph`): the alignment
+        converged and the morph gains over the unmorphed drawing (:attr:`MorphFit.confirms`), in
+        ECC's one light (``light_grid`` 0) by at least :meth:`least_gain`. The first thing
+        :meth:`check` asks; a word that fails it is withdrawn as ``failed``."""
+        if fit is None or not fit.confirms:
+            return False
+        return bool(light_grid) or fit.gain >= self.least_gain(result)
 
     def least_gain(self, result: DecodeResult) -> float:
         """The least morph gain a reading must show in ECC's one light beyond
