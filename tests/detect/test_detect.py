@@ -1214,9 +1214,12 @@ def test_a_blind_proposal_aligned_poorly_gets_the_first_looks_only(
     model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A blind proposer's drawing (the universal detector proposes every drawing) aligned below
-    ``BLIND_READ_CORRELATION`` is read by the first looks alone: no second looks, no last look by
+    its bar (``BLIND_READ_CORRELATION_BW`` for a black-and-white drawing, ``BLIND_READ_CORRELATION``
+    for a colour one) is read by the first looks alone: no second looks, no last look by
     synthesis. A drawing's own detector's, or a blind one aligned above the bar, gets them all."""
-    from deepmorph_detect.locate import BLIND_READ_CORRELATION
+    from deepmorph_detect.locate import BLIND_READ_CORRELATION, BLIND_READ_CORRELATION_BW
+
+    assert locator.blind_read_bar == BLIND_READ_CORRELATION_BW > BLIND_READ_CORRELATION  # the ghost is black
 
     placed, gray, _, pyramid, right = easy_print_aligned(model, locator)
     # at the wrong turn the first looks read nothing, so every later look would be tried
@@ -1233,6 +1236,7 @@ def test_a_blind_proposal_aligned_poorly_gets_the_first_looks_only(
         assert not checked.result.ok
         return list(later)
 
-    assert looks_taken(BLIND_READ_CORRELATION - 0.01, blind=True) == []
-    assert "read_by_synthesis" in looks_taken(BLIND_READ_CORRELATION + 0.01, blind=True)
-    assert "read_by_synthesis" in looks_taken(BLIND_READ_CORRELATION - 0.01, blind=False)
+    bar = locator.blind_read_bar
+    assert looks_taken(bar - 0.01, blind=True) == []
+    assert "read_by_synthesis" in looks_taken(bar + 0.01, blind=True)
+    assert "read_by_synthesis" in looks_taken(bar - 0.01, blind=False)

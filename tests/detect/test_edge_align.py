@@ -61,10 +61,12 @@ def test_a_close_up_the_light_bends_aligns_on_its_edges(heart) -> None:
 def test_a_detector_outline_not_read_is_read_again_on_its_edges(
     model: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The chain's order: a detector's outline whose print the photo's own alignment does not
-    read is aligned again on its edges and read there; the whole image framed by its ink (which
-    has no outline of a detector) is not."""
+    """The chain's order: a detector's outline whose colour print the photo's own alignment does
+    not read is aligned again on its edges and read there (the ghost read as a colour drawing
+    would be); a black-and-white drawing's is not, nor the whole image framed by its ink (which
+    has no outline of a detector)."""
     locator = Locator(model)
+    assert not locator.realigns_on_edges  # the ghost is black on white
     placed, gray, cam, pyramid, right = easy_print_aligned(model, locator)
     (aligned,) = locator.aligner.verify(pyramid, locator.detector.detect(gray), gray)
     real = locator.decode_drawing
@@ -82,6 +84,8 @@ def test_a_detector_outline_not_read_is_read_again_on_its_edges(
 
     monkeypatch.setattr(locator, "decode_drawing", unread)
     monkeypatch.setattr(locator.aligner, "on_edges", on_edges)
+    assert all(not r.result.ok for r in locator.decode_each(gray, [aligned], cam, True)) and asked == []
+    locator.realigns_on_edges = True  # as for a colour drawing
     (read,) = locator.decode_each(gray, [aligned], cam, True)
     assert asked == [aligned.candidate]
     assert read.result.ok and np.array_equal(read.result.payload, placed.payload)
