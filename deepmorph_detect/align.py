@@ -97,6 +97,11 @@ class Aligner:
         view_width: the width of the rectified views the thickness is measured in.
         flat_sheet: an outline neither the photo nor flat light aligns is aligned as a flat
             sheet (:meth:`outline_as_flat_sheet`): a colour drawing's, where it read more close-ups.
+        blind_fallback: a blind proposer's outline falls back on OpenCV's wider basin in flat
+            light's quick path (:func:`~deepmorph_detect.refine.refine`'s ``fallback``): a colour
+            drawing's, where that read one print more in 200 scenes. Over 1,500 scenes of
+            four black-and-white drawings it read none the wider searches missed, and cost each
+            other drawing two of OpenCV's solves.
     """
 
     def __init__(
@@ -106,9 +111,11 @@ class Aligner:
         ink_thickness: float,
         view_width: int,
         flat_sheet: bool = True,
+        blind_fallback: bool = True,
     ) -> None:
         self.template = template
         self.flat_sheet = flat_sheet
+        self.blind_fallback = blind_fallback
         self.min_correlation = min_correlation
         self.frame_corners = viewbox_corners(template.viewbox)
         self._ink_thickness = ink_thickness
@@ -192,7 +199,8 @@ class Aligner:
         outline's shape: no flat print makes it (:meth:`bent`). A blind proposer's outline
         (``Candidate.blind``: most of them are other drawings, each turned away in 7-10 ms, most
         of it the wider searches) takes the wider searches in flat light only, after the photo's
-        quick path (which then ends short of OpenCV's fallback, :func:`refine`'s ``fallback``):
+        quick path (which goes without OpenCV's fallback, :func:`refine`'s ``fallback``, as
+        does flat light's quick path unless :attr:`blind_fallback`; the wider searches keep it):
         away from shadows flat light is the photo, and on 200 scenes of the ghost it read the
         same prints in half the frame time. It goes there also when it aligns in the photo
         below :data:`BLIND_SEARCH_BELOW`, and the flat light's alignment replaces that one only
@@ -213,7 +221,7 @@ class Aligner:
 
         photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
         # a blind outline that flat light searches again when the photo's quick path falls short
-        # takes that path without OpenCV's slower fallback: flat light's quick path has it
+        # takes that path without OpenCV's slower fallback
         alignment = search(pyramid, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
         if photo_only:
             return pyramid, alignment
@@ -226,7 +234,9 @@ class Aligner:
         )
         if weak or (aim is not None and alignment.correlation < aim):
             flat = self.in_flat_light(gray, cand.corners)
-            in_flat = search(flat, True)
+            # the wider searches follow: a blind outline's quick path here ends short of OpenCV's
+            # fallback too, unless this aligner keeps it (:attr:`blind_fallback`)
+            in_flat = search(flat, True, fallback=self.blind_fallback or not cand.blind)
             better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
             # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
             if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):

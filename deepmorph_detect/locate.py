@@ -199,8 +199,11 @@ class Locator:
         view_width = model.width * RECTIFY_WIDTH_FACTOR
         thickness = ink_thickness(self.template, view_width)
         self.ink_share = thickness / view_width
-        # the flat sheet read more close-ups of colour drawings, none of black-and-white ones
-        self.aligner = Aligner(self.template, min_correlation, thickness, view_width, flat_sheet=md.colour)
+        # the flat sheet read more close-ups of colour drawings, none of black-and-white ones, and
+        # OpenCV's fallback in flat light's quick path one more colour print, no black-and-white one
+        self.aligner = Aligner(
+            self.template, min_correlation, thickness, view_width, flat_sheet=md.colour, blind_fallback=md.colour
+        )
         # a light that hides a faint colour fill does not hide black ink (decode_on_edges)
         self.realigns_on_edges = md.colour
         #: a blind proposer's drawing aligned below this is read by its first looks only
