@@ -98,10 +98,11 @@ class Aligner:
         flat_sheet: an outline neither the photo nor flat light aligns is aligned as a flat
             sheet (:meth:`outline_as_flat_sheet`): a colour drawing's, where it read more close-ups.
         blind_fallback: a blind proposer's outline falls back on OpenCV's wider basin in flat
-            light's quick path (:func:`~deepmorph_detect.refine.refine`'s ``fallback``): a colour
-            drawing's, where that read one print more in 200 scenes. Over 1,500 scenes of
-            four black-and-white drawings it read none the wider searches missed, and cost each
-            other drawing two of OpenCV's solves.
+            light's quick path and in its sweep (:func:`~deepmorph_detect.refine.refine`'s
+            ``fallback`` and ``sweep_fallback``): a colour drawing's, where the quick path's read
+            one print more in 200 scenes. Over 1,500 scenes of four black-and-white drawings
+            the quick path's read none the wider searches missed, the sweep's none in 2,000,
+            and each other drawing paid for both.
     """
 
     def __init__(
@@ -199,8 +200,8 @@ class Aligner:
         outline's shape: no flat print makes it (:meth:`bent`). A blind proposer's outline
         (``Candidate.blind``: most of them are other drawings, each turned away in 7-10 ms, most
         of it the wider searches) takes the wider searches in flat light only, after the photo's
-        quick path (which goes without OpenCV's fallback, :func:`refine`'s ``fallback``, as
-        does flat light's quick path unless :attr:`blind_fallback`; the wider searches keep it):
+        quick path (which goes without OpenCV's fallback, :func:`refine`'s ``fallback``, as do
+        flat light's quick path and sweep unless :attr:`blind_fallback`):
         away from shadows flat light is the photo, and on 200 scenes of the ghost it read the
         same prints in half the frame time. It goes there also when it aligns in the photo
         below :data:`BLIND_SEARCH_BELOW`, and the flat light's alignment replaces that one only
@@ -216,7 +217,15 @@ class Aligner:
         def search(seen_in: ImagePyramid, wide: bool, fallback: bool = True) -> Alignment | None:
             accept = self.min_correlation if wide else None
             return refine(
-                seen_in, start, self.template, orders=4, accept=accept, sized=cand.sized, aim=aim, fallback=fallback
+                seen_in,
+                start,
+                self.template,
+                orders=4,
+                accept=accept,
+                sized=cand.sized,
+                aim=aim,
+                fallback=fallback,
+                sweep_fallback=self.blind_fallback or not cand.blind,
             )
 
         photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
@@ -235,7 +244,8 @@ class Aligner:
         if weak or (aim is not None and alignment.correlation < aim):
             flat = self.in_flat_light(gray, cand.corners)
             # the wider searches follow: a blind outline's quick path here ends short of OpenCV's
-            # fallback too, unless this aligner keeps it (:attr:`blind_fallback`)
+            # fallback too, and its sweep goes without it, unless this aligner keeps it
+            # (:attr:`blind_fallback`)
             in_flat = search(flat, True, fallback=self.blind_fallback or not cand.blind)
             better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
             # a blind outline aligned well enough in the photo gives way only to one that reaches the aim

@@ -102,24 +102,24 @@ def test_a_print_seen_steeply_is_aligned_from_an_outline_that_falls_short_of_it(
     assert all(aligned_off(photo, truth) == math.inf for photo, truth in photos)
 
 
-def test_a_blind_outline_s_quick_paths_go_without_opencvs_fallback(
+def test_a_black_and_white_drawing_s_blind_outline_mostly_goes_without_opencvs_fallback(
     locator: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """On a photo of noise (nothing aligns, so every search runs), a blind proposer's outline of a
     black-and-white drawing is solved without OpenCV's wider-basin ECC on its quick paths, in the
-    photo and in flat light, and with it in the wider searches (once a stage); an outline from a
-    detector that knows the drawing falls back on it on its quick paths too, and a colour
-    drawing's blind outline in flat light's quick path."""
+    photo and in flat light, and in its sweep (with it only from its other corner orders). An
+    outline from a detector that knows the drawing falls back on it everywhere, and a colour
+    drawing's blind outline everywhere but the photo's quick path."""
     import deepmorph_detect.align as align_module
 
     photo = np.random.default_rng(1).uniform(0.2, 1.0, (480, 640)).astype(np.float32)
     corners = np.array([[200.0, 120], [440, 120], [440, 360], [200, 360]])
-    asked: list[bool] = []
+    asked: list[tuple[bool, bool]] = []
     opencv_solves: list[int] = []
     ecc = cv2.findTransformECC
 
     def recorded(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        asked.append(kwargs.get("fallback", True))
+        asked.append((kwargs.get("fallback", True), kwargs.get("sweep_fallback", True)))
         return refine(*args, **kwargs)
 
     monkeypatch.setattr(align_module, "refine", recorded)
@@ -130,12 +130,12 @@ def test_a_blind_outline_s_quick_paths_go_without_opencvs_fallback(
         opencv_solves.clear()
         cand = Candidate(corners, 0.9, quad_bbox(corners, 640, 480), source="test", sized=blind, blind=blind)
         locator.aligner.align_outline(ImagePyramid(photo), cand, photo)
-        assert asked == [not blind, not blind]  # the photo, then flat light
+        assert asked == [(not blind, not blind)] * 2  # the photo, then flat light
         solves[blind] = len(opencv_solves)
-    assert 0 < solves[True] < solves[False]
-    # an aligner for a colour drawing keeps the fallback in a blind outline's quick path in flat light
+    assert solves[True] < solves[False]
+    # an aligner for a colour drawing keeps the fallback in a blind outline's flat light
     asked.clear()
     cand = Candidate(corners, 0.9, quad_bbox(corners, 640, 480), source="test", sized=True, blind=True)
     colour = Aligner(locator.aligner.template, locator.aligner.min_correlation, 4.0, 256, blind_fallback=True)
     colour.align_outline(ImagePyramid(photo), cand, photo)
-    assert asked == [False, True]
+    assert asked == [(False, True), (True, True)]
