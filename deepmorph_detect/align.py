@@ -213,6 +213,8 @@ class Aligner:
         """
         start = self.homography(cand.corners)
         aim = BLIND_SEARCH_BELOW if cand.blind else None
+        # where OpenCV's fallback runs in flat light: its quick path and its sweep (:attr:`blind_fallback`)
+        falls_back = self.blind_fallback or not cand.blind
 
         def search(seen_in: ImagePyramid, wide: bool, fallback: bool = True) -> Alignment | None:
             accept = self.min_correlation if wide else None
@@ -225,7 +227,7 @@ class Aligner:
                 sized=cand.sized,
                 aim=aim,
                 fallback=fallback,
-                sweep_fallback=self.blind_fallback or not cand.blind,
+                sweep_fallback=falls_back,
             )
 
         photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
@@ -245,8 +247,7 @@ class Aligner:
             flat = self.in_flat_light(gray, cand.corners)
             # the wider searches follow: a blind outline's quick path here ends short of OpenCV's
             # fallback too, and its sweep goes without it, unless this aligner keeps it
-            # (:attr:`blind_fallback`)
-            in_flat = search(flat, True, fallback=self.blind_fallback or not cand.blind)
+            in_flat = search(flat, True, fallback=falls_back)
             better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
             # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
             if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):

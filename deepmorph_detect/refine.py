@@ -503,7 +503,7 @@ def refine(
             drawings, which fall short almost always, do not pay for both searches.
         sweep_fallback: the sweep's best start falls back on OpenCV's wider basin too;
             ``False``: the sweep goes without it, as the ink's starts do (a blind proposal of a
-            black-and-white drawing's: over 1,400 scenes of four such drawings it aligned no
+            black-and-white drawing's: over 2,000 scenes of four such drawings it aligned no
             print, while each other drawing paid for it).
 
     Returns:
