@@ -4,10 +4,11 @@ For each bundle (the bundled ghost and ``--fresh``), ``--n`` scenes at ``--sever
 pixels, 640x480 by default, one print, one other drawing, an ArUco marker of the same printed
 size) are made from the same seed. A model trained with ``--pixels 200`` is timed on frames where
 most of its prints are that wide: on ``--frame 1280x720`` ``medium``'s prints measured 110-400 px
-(a fifth under 200, refused as too small). Each frame is located twice per bundle, alternating
-the order: with the networks run by ONNX Runtime from the bundle's graphs (what ``decode``
-does) and with both networks in PyTorch (what a bundle without usable graphs got before graphs
-were stored). ArUco's ``detectMarkers`` runs on the same frame, and OpenCV's QR
+(a fifth under 200, refused as too small). Each frame is located three times per bundle,
+alternating the order: with the networks run by ONNX Runtime from the bundle's graphs (what
+``decode`` does), the same stopping at the first print read (``decode --first``: one code, as
+QR's ``detectAndDecode`` reads), and with both networks in PyTorch (what a bundle without
+usable graphs got before graphs were stored). ArUco's ``detectMarkers`` runs on the same frame, and OpenCV's QR
 ``detectAndDecode`` once per frame on a same-size frame holding a QR code, so that every median
 is taken over the same minutes.
 
@@ -32,7 +33,9 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, frame_size, set_threads, table, write_json  # noqa: E402
 
-MODES = ("onnx", "torch")
+#: how each bundle's frames are located: the networks (ONNX Runtime from the bundle's graphs, or
+#: PyTorch) and whether the search stops at the first print read (``locate(first=True)``)
+MODES = {"onnx": ("onnx", False), "onnx/first": ("onnx", True), "torch": ("torch", False)}
 # what is recorded per frame
 FIELDS = ("ms", "read", "detector_ms", "decoder_calls", "decoder_ms", "second", "synthesis", "synthesis_ms",
           "bitwise", "check_ms")  # fmt: skip
@@ -70,8 +73,9 @@ class CheckClock(Clock):
         return checked
 
 
-def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
-    """A locator with its networks in ``mode`` and clocks on the networks and the slow paths."""
+def instrumented(model: Any, networks: str) -> tuple[Any, dict[str, Clock]]:
+    """A locator with its networks in ``networks`` (``onnx`` or ``torch``) and clocks on the
+    networks and the slow paths."""
     import torch
 
     from deepmorph_core.graphs import OnnxNetwork
@@ -82,7 +86,7 @@ def instrumented(model: Any, mode: str) -> tuple[Any, dict[str, Clock]]:
 
     locator = Locator(model)
     reader = locator.reader
-    if mode == "torch":
+    if networks == "torch":
         reader.decoder = fused_for_inference(model.decoder)
         if locator.detector is not None:  # the bundle's own network, else the shipped universal one
             own = stored_net(model)
@@ -132,7 +136,7 @@ def main() -> None:
     for k, m in models.items():  # one maker per bundle: its frames follow the same random draws
         maker = SceneMaker(m, args.frame, args.severity, seed=args.seed)
         scenes[k] = [maker.make(drawings=1, distractors=1, aruco=True) for _ in range(args.n)]
-    chains = {(k, mode): instrumented(m, mode) for k, m in models.items() for mode in MODES}
+    chains = {(k, mode): instrumented(m, MODES[mode][0]) for k, m in models.items() for mode in MODES}
     aruco = aruco_detector()
     qr = QrClock(models["ghost"], args.frame, frames=20)
     qr.warm()
@@ -145,11 +149,11 @@ def main() -> None:
     for i in range(args.n):
         order = list(chains) if i % 2 == 0 else list(chains)[::-1]
         for key in order:
-            k, _ = key
+            k, mode = key
             locator, clocks = chains[key]
             scene = scenes[k][i]
             t0 = time.perf_counter()
-            found = locator.locate(scene.image, scene.camera)
+            found = locator.locate(scene.image, scene.camera, first=MODES[mode][1])
             ms = 1000 * (time.perf_counter() - t0)
             truth = [p for p in scene.placements if p.kind == "drawing"]
             r = rows[key]
@@ -214,7 +218,7 @@ def main() -> None:
                       entry["check_ms_mean"], f"{entry['frames_second_looks']}/{args.n}",
                       f"{entry['frames_synthesis']}/{args.n}", entry["ms_median_without_slow_paths"],
                       entry["ms_median_without_bitwise_check"]])  # fmt: skip
-    print(table(["bundle", "networks", "read", "ms median", "ms mean", "x QR", "ArUco ms", "detector ms",
+    print(table(["bundle", "chain", "read", "ms median", "ms mean", "x QR", "ArUco ms", "detector ms",
                  "decoder calls", "decoder ms", "checked bit by bit", "check ms", "second looks", "last look",
                  "ms median w/o 2nd/last looks", "ms median w/o bit check"], lines))  # fmt: skip
     print(f"QR detectAndDecode median {qr_ms:.2f} ms; {args.threads} thread(s), {args.severity}, {args.n} scenes "

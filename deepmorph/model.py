@@ -91,7 +91,9 @@ class Model:
             self._locator = Locator(self.bundle, detector=self._detector, device=self._device)
         return self._locator
 
-    def decode(self, image: ImageLike, *, bgr: bool = False, camera: Camera | None = None) -> list[Located]:
+    def decode(
+        self, image: ImageLike, *, bgr: bool = False, camera: Camera | None = None, first: bool = False
+    ) -> list[Located]:
         """Every drawing of this model in a photo, with its payload, corners and camera pose.
 
         Args:
@@ -103,6 +105,8 @@ class Model:
             bgr: the array's channels are in OpenCV's order.
             camera: calibrated intrinsics (:class:`~deepmorph_detect.camera.Camera`); without
                 them the pose assumes a typical phone camera and says so.
+            first: stop at the first drawing whose payload reads and give it alone, as a
+                scanner looking for one code does; faster where other drawings are in view.
 
         Returns:
             One :class:`~deepmorph_detect.results.Located` per drawing found (``[]`` for none):
@@ -114,7 +118,7 @@ class Model:
         """
         from deepmorph_core.image_io import image_input
 
-        return self.locator.locate(image_input(image, bgr=bgr), camera=camera)
+        return self.locator.locate(image_input(image, bgr=bgr), camera=camera, first=first)
 
     def decode_sequence(
         self,
@@ -125,6 +129,7 @@ class Model:
         hard_decision: bool = False,
         on_frame: Callable[[], None] | None = None,
         on_skip: Callable[[str], None] | None = None,
+        first: bool = False,
     ) -> SequenceReading:
         """Every drawing of this model in a sequence of frames, followed from frame to frame and
         its readings fused: what ``deepmorph decode`` does with a folder or a video.
@@ -137,6 +142,7 @@ class Model:
             on_frame: called once per frame taken (a progress bar).
             on_skip: called with a message for each frame skipped: an unreadable file, or a
                 frame the chain refused.
+            first: each frame's search stops at the first drawing read (:meth:`decode`'s ``first``).
 
         Returns:
             A :class:`~deepmorph_detect.reading.SequenceReading`: ``.frames`` read, the fused
@@ -164,7 +170,7 @@ class Model:
         if sequence is None:
             raise DeepMorphError(f"{path}: no such folder or video")
         return read_sequence(self.locator, sequence.frames(every), camera=camera, soft=not hard_decision,
-                             on_frame=on_frame, on_skip=on_skip, name=str(path))  # fmt: skip
+                             on_frame=on_frame, on_skip=on_skip, name=str(path), first=first)  # fmt: skip
 
     def __repr__(self) -> str:
         return f"deepmorph.Model({self.drawing_name!r}, {self.payload_bits} payload bits)"

@@ -86,6 +86,17 @@ class Aligned:
     pyramid: ImagePyramid
 
 
+@dataclass(frozen=True)
+class QuickLook:
+    """A detector's outline aligned by the photo's quick path (:meth:`Aligner.quick_look`)."""
+
+    alignment: Alignment | None
+    #: it is the outline's alignment: no wider search follows
+    final: bool
+    #: failed, weak, found only by a wider start, or bent: flat light searches again
+    weak: bool
+
+
 class Aligner:
     """Aligns candidates to one drawing's template and keeps those that are the drawing.
 
@@ -147,7 +158,11 @@ class Aligner:
         return any(np.linalg.norm(centre - self.centre(other)) < SAME_DRAWING * size for other in others)
 
     def verify(
-        self, pyramid: ImagePyramid, candidates: list[Candidate], gray: np.ndarray | None = None
+        self,
+        pyramid: ImagePyramid,
+        candidates: list[Candidate],
+        gray: np.ndarray | None = None,
+        looks: list[QuickLook | None] | None = None,
     ) -> list[Aligned]:
         """The candidates that are the drawing, aligned, duplicates (the same drawing twice)
         removed: a later alignment whose centre is within :data:`SAME_DRAWING` of its own
@@ -157,12 +172,13 @@ class Aligner:
         figure) above the whole print: the drawing squeezed into the part can still pass the
         bar, while the whole print's outline aligns much better (0.79 against 0.92). With
         ``gray`` given, a detector outline that does not align well in the photo itself is also
-        aligned in flat light around it."""
+        aligned in flat light around it. ``looks``: the candidates' :meth:`quick_looks`, where
+        they were taken already."""
         kept: list[Aligned] = []
-        for cand in candidates:
+        for cand, look in zip(candidates, looks or [None] * len(candidates), strict=True):
             seen_in = pyramid
             if cand.homography is None:  # a detector's outline: its turn and size may be off, search wider
-                seen_in, alignment = self.align_outline(pyramid, cand, gray)
+                seen_in, alignment = self.align_outline(pyramid, cand, gray, look)
             else:  # the whole frame, framed by its ink: on every photo without a detection, keep it quick
                 alignment = refine(pyramid, cand.homography, self.template)
             if not self.accepts(alignment):
@@ -188,8 +204,70 @@ class Aligner:
         height, width = image_shape[:2]
         return 0 <= x < width and 0 <= y < height and not self.bent(alignment.homography, image_shape)
 
+    def quick_look(self, pyramid: ImagePyramid, cand: Candidate, gray: np.ndarray | None) -> QuickLook:
+        """A detector's outline aligned by the photo's quick path, the first step of
+        :meth:`align_outline`, and whether that is its alignment (``final``: nothing wider
+        follows). The photo alone (no ``gray``) and a faint blind proposal take this path
+        alone; a blind outline that flat light searches again when it falls short takes it
+        without OpenCV's slower fallback."""
+        photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
+        alignment = self._search(pyramid, cand, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
+        if photo_only:
+            return QuickLook(alignment, final=True, weak=False)
+        weak = (
+            not self.accepts(alignment)
+            or alignment.correlation < WEAK_ALIGNMENT
+            or alignment.searched
+            or self.bent(alignment.homography, gray.shape)
+        )
+        if weak:
+            return QuickLook(alignment, final=False, weak=True)
+        return QuickLook(alignment, final=not (cand.blind and alignment.correlation < BLIND_SEARCH_BELOW), weak=False)
+
+    def quick_looks(
+        self, pyramid: ImagePyramid, candidates: list[Candidate], gray: np.ndarray | None
+    ) -> list[QuickLook | None]:
+        """:meth:`quick_look` of each detector outline among ``candidates`` (``None`` for a
+        whole image framed by its ink, which has a homography already)."""
+        return [self.quick_look(pyramid, cand, gray) if cand.homography is None else None for cand in candidates]
+
+    def quick_prints(
+        self, pyramid: ImagePyramid, candidates: list[Candidate], looks: list[QuickLook | None]
+    ) -> list[Aligned]:
+        """The candidates whose quick look is final and accepted, best correlated first, each
+        drawing once: the prints that align at once, to read before any wider search
+        (:meth:`~deepmorph_detect.locate.Locator.locate` with ``first``). Their alignments are
+        the very ones :meth:`verify` keeps from these ``looks``."""
+        quick = [(cand, look.alignment) for cand, look in zip(candidates, looks, strict=True)
+                 if look is not None and look.final and self.accepts(look.alignment)]  # fmt: skip
+        kept: list[Aligned] = []
+        for cand, alignment in sorted(quick, key=lambda found: -found[1].correlation):
+            if not self.seen(alignment.homography, [a.alignment.homography for a in kept]):
+                kept.append(Aligned(cand, alignment, pyramid))
+        return kept
+
+    def _search(self, seen_in: ImagePyramid, cand: Candidate, wide: bool, fallback: bool) -> Alignment | None:
+        """A detector's outline aligned in ``seen_in`` from each of its corner orders
+        (:func:`~deepmorph_detect.refine.refine`), with the wider searches where ``wide``."""
+        return refine(
+            seen_in,
+            self.homography(cand.corners),
+            self.template,
+            orders=4,
+            accept=self.min_correlation if wide else None,
+            sized=cand.sized,
+            aim=BLIND_SEARCH_BELOW if cand.blind else None,
+            fallback=fallback,
+            sweep_fallback=self._falls_back(cand),
+        )
+
+    def _falls_back(self, cand: Candidate) -> bool:
+        """Whether OpenCV's fallback runs in flat light for ``cand``: in its quick path and its
+        sweep (:attr:`blind_fallback`; always for an outline from a detector that knows the drawing)."""
+        return self.blind_fallback or not cand.blind
+
     def align_outline(
-        self, pyramid: ImagePyramid, cand: Candidate, gray: np.ndarray | None
+        self, pyramid: ImagePyramid, cand: Candidate, gray: np.ndarray | None, look: QuickLook | None = None
     ) -> tuple[ImagePyramid, Alignment | None]:
         """A detector's outline aligned: the photo it was aligned in, and the alignment.
 
@@ -210,48 +288,23 @@ class Aligner:
         the drawing takes them in both, which finds a few more prints that do not read. An
         outline (not a faint blind one) aligned in neither is aligned as a flat sheet
         (:meth:`outline_as_flat_sheet`), where this aligner does that (:attr:`flat_sheet`).
+        ``look``: the outline's :meth:`quick_look`, where it was taken already.
         """
-        start = self.homography(cand.corners)
-        aim = BLIND_SEARCH_BELOW if cand.blind else None
-        # where OpenCV's fallback runs in flat light: its quick path and its sweep (:attr:`blind_fallback`)
-        falls_back = self.blind_fallback or not cand.blind
-
-        def search(seen_in: ImagePyramid, wide: bool, fallback: bool = True) -> Alignment | None:
-            accept = self.min_correlation if wide else None
-            return refine(
-                seen_in,
-                start,
-                self.template,
-                orders=4,
-                accept=accept,
-                sized=cand.sized,
-                aim=aim,
-                fallback=fallback,
-                sweep_fallback=falls_back,
-            )
-
-        photo_only = gray is None or (cand.blind and cand.score < FAINT_PROPOSAL)
-        # a blind outline that flat light searches again when the photo's quick path falls short
-        # takes that path without OpenCV's slower fallback
-        alignment = search(pyramid, gray is None or not cand.blind, fallback=photo_only or not cand.blind)
-        if photo_only:
+        look = look or self.quick_look(pyramid, cand, gray)
+        alignment = look.alignment
+        if look.final:
             return pyramid, alignment
+        # weak, or a blind outline below the aim: flat light searches again (a look without gray is final)
+        assert gray is not None
         seen_in, missed = pyramid, not self.accepts(alignment)
-        weak = (
-            missed
-            or alignment.correlation < WEAK_ALIGNMENT
-            or alignment.searched
-            or self.bent(alignment.homography, gray.shape)
-        )
-        if weak or (aim is not None and alignment.correlation < aim):
-            flat = self.in_flat_light(gray, cand.corners)
-            # the wider searches follow: a blind outline's quick path here ends short of OpenCV's
-            # fallback too, and its sweep goes without it, unless this aligner keeps it
-            in_flat = search(flat, True, fallback=falls_back)
-            better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
-            # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
-            if better and (weak or (aim is not None and in_flat.correlation >= aim + WIDE_SEARCH_MARGIN)):
-                seen_in, alignment = flat, in_flat
+        flat = self.in_flat_light(gray, cand.corners)
+        # the wider searches follow: a blind outline's quick path here ends short of OpenCV's
+        # fallback too, and its sweep goes without it, unless this aligner keeps it
+        in_flat = self._search(flat, cand, True, fallback=self._falls_back(cand))
+        better = self.accepts(in_flat) and (missed or in_flat.correlation > alignment.correlation)
+        # a blind outline aligned well enough in the photo gives way only to one that reaches the aim
+        if better and (look.weak or in_flat.correlation >= BLIND_SEARCH_BELOW + WIDE_SEARCH_MARGIN):
+            seen_in, alignment = flat, in_flat
         if self.accepts(alignment) or not self.flat_sheet:
             return seen_in, alignment
         sheet = self.outline_as_flat_sheet(pyramid, cand)

@@ -240,10 +240,13 @@ class Locator:
     ) -> tuple[np.ndarray, Camera, ImagePyramid, list[Aligned]]:
         """:meth:`frame`, and the detector's proposals in ``image`` that align to the drawing."""
         gray, cam, pyramid = self.frame(image, camera)
+        return gray, cam, pyramid, self.aligner.verify(pyramid, self._candidates(image, gray), gray)
+
+    def _candidates(self, image: np.ndarray, gray: np.ndarray) -> list[Candidate]:
+        """The detector's proposals in ``image`` (``gray``: it in the channel the model reads)."""
         # detectors read luminance: a model read in another channel hands them the photo itself
         seen = gray if is_luma(self.model.drawing.channel) else image
-        candidates = self.detector.detect(seen) if self.detector is not None else []
-        return gray, cam, pyramid, self.aligner.verify(pyramid, candidates, gray)
+        return self.detector.detect(seen) if self.detector is not None else []
 
     def aligns(self, image: np.ndarray) -> bool:
         """Whether the detector's proposals in ``image`` align to the drawing at all, read or
@@ -256,7 +259,9 @@ class Locator:
         reading: the homographies the first looks rectify by."""
         return self._proposed(image, None)[3]
 
-    def locate(self, image: np.ndarray, camera: Camera | None = None, soft: bool = True) -> list[Located]:
+    def locate(
+        self, image: np.ndarray, camera: Camera | None = None, soft: bool = True, first: bool = False
+    ) -> list[Located]:
         """Every instance of the drawing in ``image`` (``(H, W)`` or ``(H, W, 3)``), decoded.
 
         A drawing whose payload is not read (``ok`` false) is reported only when it aligns at
@@ -265,11 +270,27 @@ class Locator:
 
         Args:
             camera: intrinsics for the pose; ``None`` assumes the default field of view.
+            first: stop at the first print whose payload reads, and give it alone, as a scanner
+                looking for one code does (OpenCV's QR ``detectAndDecode`` reads one code). The
+                proposals that align at once (:meth:`Aligner.quick_prints
+                <deepmorph_detect.align.Aligner.quick_prints>`) are read first, best aligned
+                first, before any proposal's wider searches: most other drawings in a photo
+                take those searches to be turned away. Where none of them reads, the rest
+                follows as without ``first``, each drawing read once.
         """
-        gray, cam, pyramid, found = self._proposed(image, camera)
-        results = self.decode_each(gray, found, cam, soft)
+        gray, cam, pyramid = self.frame(image, camera)
+        candidates = self._candidates(image, gray)
+        looks = self.aligner.quick_looks(pyramid, candidates, gray)
+        decoded: dict[int, tuple[Alignment, Located, bool]] = {}
+        for aligned in self.aligner.quick_prints(pyramid, candidates, looks) if first else []:
+            located, reported = self.decode_aligned(gray, aligned, cam, soft)
+            if located.result.ok:
+                return [located]
+            decoded[id(aligned.alignment)] = (aligned.alignment, located, reported)
+        found = self.aligner.verify(pyramid, candidates, gray, looks)
+        results = self.decode_each(gray, found, cam, soft, decoded)
         if any(located.result.ok or _read_too_small(located) for located in results):
-            return results
+            return _first_read(results) if first else results
         # Nothing read (nor read and refused as too small): the whole image framed by its ink, a
         # scan or a print filling the frame.
         # Also where the detector's outline aligned but did not read: on a close-up of a drawing
@@ -290,31 +311,48 @@ class Locator:
             if any(located.result.ok for located in on_sheet) or not whole_results:
                 whole_results = on_sheet
         if not found:
-            return whole_results
+            return _first_read(whole_results) if first else whole_results
         read = [located for located in whole_results if located.result.ok]
         # a drawing the whole image read replaces the detector's unread reading of it
-        return read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
+        every = read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
+        return _first_read(every) if first else every
 
-    def decode_each(self, gray: np.ndarray, found: list[Aligned], cam: Camera, soft: bool) -> list[Located]:
-        """Each aligned drawing decoded (:meth:`decode_drawing`), a detector's outline not read
-        there aligned again on the print's edges and decoded (:meth:`decode_on_edges`); one
-        whose payload is not read reported only when :meth:`reports_unread` says so."""
+    def decode_each(
+        self,
+        gray: np.ndarray,
+        found: list[Aligned],
+        cam: Camera,
+        soft: bool,
+        decoded: dict[int, tuple[Alignment, Located, bool]] | None = None,
+    ) -> list[Located]:
+        """Each aligned drawing decoded (:meth:`decode_aligned`), those reported kept.
+        ``decoded``: what was decoded already, by the alignment's ``id`` (with the alignment, so
+        that the id stays its own): each of those is taken from there, not decoded again."""
         results = []
         for aligned in found:
-            cand, alignment = aligned.candidate, aligned.alignment
-            located = self.decode_drawing(
-                gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft, blind=cand.blind
-            )
-            if not located.result.ok and self.aligns_on_edges(cand, alignment):
-                located = self.decode_on_edges(gray, aligned, cam, soft) or located
-            located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
-            located.needs_every_way = self.needs_every_way
-            refused = self.refuses_reading(located)
-            if refused:  # a reading not vouched for at its print's size: too small, never a payload
-                located.result = refused_result(located.result)
-            if located.result.ok or refused or self.reports_unread(located, cand, gray.shape[:2]):
+            known = decoded.get(id(aligned.alignment)) if decoded else None
+            located, reported = known[1:] if known else self.decode_aligned(gray, aligned, cam, soft)
+            if reported:
                 results.append(located)
         return results
+
+    def decode_aligned(self, gray: np.ndarray, aligned: Aligned, cam: Camera, soft: bool) -> tuple[Located, bool]:
+        """An aligned drawing decoded (:meth:`decode_drawing`), a detector's outline not read
+        there aligned again on the print's edges and decoded (:meth:`decode_on_edges`), and
+        whether it is reported: a payload read or refused as too small, or one not read where
+        :meth:`reports_unread` says so."""
+        cand, alignment = aligned.candidate, aligned.alignment
+        located = self.decode_drawing(
+            gray, aligned.pyramid, alignment, cand.score, cam, cand.source, soft, blind=cand.blind
+        )
+        if not located.result.ok and self.aligns_on_edges(cand, alignment):
+            located = self.decode_on_edges(gray, aligned, cam, soft) or located
+        located.needs_px = float(self.model.smallest_print_px)  # narrower prints lose detail
+        located.needs_every_way = self.needs_every_way
+        refused = self.refuses_reading(located)
+        if refused:  # a reading not vouched for at its print's size: too small, never a payload
+            located.result = refused_result(located.result)
+        return located, located.result.ok or refused or self.reports_unread(located, cand, gray.shape[:2])
 
     def aligns_on_edges(self, cand: Candidate, alignment: Alignment) -> bool:
         """Whether a detector's outline whose print was not read is aligned again on the print's
@@ -730,6 +768,12 @@ def refuses_narrow_reading(located: Located, trained_px: int | None, colour: boo
     if not colour:
         return False
     return located.result.corrected_bits > 0 or located.along_tilt_px < COLOUR_FLOOR_SHARE * located.needs_px
+
+
+def _first_read(results: list[Located]) -> list[Located]:
+    """The first of ``results`` whose payload reads, alone; all of them where none reads."""
+    read = [located for located in results if located.result.ok]
+    return read[:1] or results
 
 
 def _read_too_small(located: Located) -> bool:

@@ -111,16 +111,20 @@ class SequenceReader:
         locator: the photo chain of one model.
         camera: calibrated intrinsics, or ``None`` (an assumed phone camera).
         soft: soft-decision (Chase) decoding.
+        first: each frame's search stops at the first print read (:meth:`Locator.locate
+            <deepmorph_detect.locate.Locator.locate>`'s ``first``).
     """
 
-    def __init__(self, locator: Locator, *, camera: Camera | None = None, soft: bool = True) -> None:
+    def __init__(
+        self, locator: Locator, *, camera: Camera | None = None, soft: bool = True, first: bool = False
+    ) -> None:
         from deepmorph_detect.fusion import FrameFuser
         from deepmorph_detect.track import SequenceLocator
 
         self.camera = camera
         self.soft = soft
         self._fuser = FrameFuser(locator.model.codec, locator.check_payload, locator.refuses_reading)
-        self._follow = SequenceLocator(locator)
+        self._follow = SequenceLocator(locator, first=first)
         self.last: tuple[np.ndarray, list[Located]] | None = None
 
     @property
@@ -153,6 +157,7 @@ def read_sequence(
     on_frame: Callable[[], None] | None = None,
     on_skip: SkipHook | None = None,
     name: str = "sequence",
+    first: bool = False,
 ) -> SequenceReading:
     """Read ``frames`` in order with a :class:`SequenceReader`: what ``deepmorph decode`` does
     with a folder or a video.
@@ -167,6 +172,7 @@ def read_sequence(
         on_skip: called with a message for each frame skipped: unreadable, or one the chain
             refused (a frame of another size than the calibration's, say).
         name: the sequence's name in errors.
+        first: each frame's search stops at the first print read (:class:`SequenceReader`).
 
     Returns:
         A :class:`SequenceReading`.
@@ -174,7 +180,7 @@ def read_sequence(
     Raises:
         DeepMorphError: not one frame could be read.
     """
-    reader = SequenceReader(locator, camera=camera, soft=soft)
+    reader = SequenceReader(locator, camera=camera, soft=soft, first=first)
     skipped: list[dict[str, str]] = []
     for label, frame in frames:
         if on_frame is not None:

@@ -104,15 +104,18 @@ class SequenceLocator:
         locator: the model's locator.
         redetect_every: a full :meth:`~deepmorph_detect.locate.Locator.locate` at least this
             often (1: every frame, no tracking).
+        first: each search stops at the first print read (:meth:`~deepmorph_detect.locate.Locator.locate`'s
+            ``first``), and that one is followed.
 
     Call it once per frame, in order. ``tracked`` and ``searched`` count the frames each way.
     """
 
-    def __init__(self, locator: Locator, redetect_every: int = REDETECT_EVERY) -> None:
+    def __init__(self, locator: Locator, redetect_every: int = REDETECT_EVERY, first: bool = False) -> None:
         if redetect_every < 1:
             raise DeepMorphError(f"redetect_every must be at least 1, got {redetect_every}")
         self.locator = locator
         self.redetect_every = redetect_every
+        self.first = first
         self.tracked = 0
         self.searched = 0
         self._previous: list[Located] = []
@@ -127,7 +130,7 @@ class SequenceLocator:
                 self._since_search += 1
                 self.tracked += 1
                 return found
-        found = self.locator.locate(image, camera, soft)
+        found = self.locator.locate(image, camera, soft, first=self.first)
         self._previous = found
         self._since_search = 0
         self.searched += 1

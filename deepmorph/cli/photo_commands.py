@@ -115,6 +115,14 @@ def decode(
         typer.Option("--overlay", help="Write an annotated image (a folder when there are several inputs)."),
     ] = None,
     every: Annotated[int, typer.Option("--every", min=1, help="Use every N-th frame of a video.")] = 1,
+    first: Annotated[
+        bool,
+        typer.Option(
+            "--first",
+            help="Stop at the first drawing read in each image or frame and give it alone, as a scanner "
+            "looking for one code does: faster where other drawings are in view.",
+        ),
+    ] = False,
     hard_only: HardOpt = False,
     detector: DetectorOpt = None,
     threads: ThreadsOpt = None,
@@ -176,7 +184,7 @@ def decode(
         image_task = progress.add_task("images", total=images) if images > 1 else None
         for kind, path, payload in jobs:
             if kind == "image":
-                dets = locator.locate(payload, camera=cam, soft=soft)
+                dets = locator.locate(payload, camera=cam, soft=soft, first=first)
                 results.append({"image": str(path), "detections": [d.to_json() for d in dets]})
                 save_overlay(path, payload, dets)
                 if image_task is not None:
@@ -186,7 +194,7 @@ def decode(
             reading = read_sequence(
                 locator, payload.frames(every), camera=cam, soft=soft, name=str(path),
                 on_frame=lambda task=task: progress.advance(task),
-                on_skip=lambda text: err.print(f"warning: {text}", markup=False, highlight=False),
+                on_skip=lambda text: err.print(f"warning: {text}", markup=False, highlight=False), first=first,
             )  # fmt: skip
             entry = {"sequence": str(path), "frames": reading.frames, "detections": reading.detections}
             if reading.skipped:
