@@ -22,6 +22,10 @@ from torch import Tensor
 from deepmorph_core import geometry as G
 from deepmorph_core.outline import Outline
 
+#: at most this many (pixel, segment) distances are held at once while culling: about one large
+#: arc's box at 256 px, what culling one piece at a time held
+CULL_CHUNK = 1 << 20
+
 
 def _rects(lo: np.ndarray, hi: np.ndarray, pad: np.ndarray, H: int, W: int) -> np.ndarray:
     """Integer pixel rectangles ``(n, 4)`` = x0, y0, x1, y1 covering ``[lo - pad, hi + pad]``."""
@@ -30,13 +34,6 @@ def _rects(lo: np.ndarray, hi: np.ndarray, pad: np.ndarray, H: int, W: int) -> n
     x1 = np.clip(np.ceil(hi[:, 0] + pad) + 1, 0, W)
     y1 = np.clip(np.ceil(hi[:, 1] + pad) + 1, 0, H)
     return np.stack([x0, y0, x1, y1], 1).astype(np.int64)
-
-
-def _pixels(rect: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Row-major pixel coordinates (xs, ys) of a rectangle."""
-    x0, y0, x1, y1 = rect
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    return xs.reshape(-1), ys.reshape(-1)
 
 
 def flat_stroke_sdf(
@@ -92,33 +89,19 @@ def flat_stroke_sdf(
             polylines.append(mean_pts.cpu().numpy())
             reaches.append(pad[arc_owner] + arc_stray.cpu().numpy())
     owners = np.concatenate([line_owner, arc_owner])
-    piece_reach = np.concatenate(reaches)
-    piece_paths = [pl for group in polylines for pl in group]  # (n_points, 2) per piece
-    piece_rects = (
-        np.concatenate(
-            [
-                _rects(pl.min(0, keepdims=True), pl.max(0, keepdims=True), r, H, W)
-                for pl, r in zip(piece_paths, piece_reach)
-            ]
-        )
-        if piece_paths
-        else np.zeros((0, 4), np.int64)
-    )
     # Pixels a piece can reach: within its reach of its mean polyline (not its whole box, which
-    # for a diagonal stroke is mostly empty).
+    # for a diagonal stroke is mostly empty); lines first, then arcs, as the pieces are numbered.
     pair_piece, pair_pixel = [], []
-    for k, rect in enumerate(piece_rects):
-        if rect[2] <= rect[0] or rect[3] <= rect[1]:
-            continue
-        xs, ys = _pixels(rect)
-        near = _polyline_distance(xs + 0.5, ys + 0.5, piece_paths[k]) <= piece_reach[k]
-        if near.any():
-            pair_piece.append(np.full(int(near.sum()), k))
-            pair_pixel.append((ys * W + xs)[near])
-    if not pair_piece:
-        return None
+    first = 0
+    for paths, reach_of in zip(polylines, reaches):
+        piece_k, pixel_k = _reached_pixels(paths, reach_of, H, W)
+        pair_piece.append(piece_k + first)
+        pair_pixel.append(pixel_k)
+        first += len(paths)
     piece = np.concatenate(pair_piece)
     pixel = np.concatenate(pair_pixel)
+    if not len(piece):
+        return None
     # one slot per (stroke, pixel): a stroke's pieces meet there with an exact max
     keys, slot_np = np.unique(owners[piece] * (H * W) + pixel, return_inverse=True)
     slot = torch.from_numpy(slot_np.reshape(-1)).to(device)
@@ -250,15 +233,42 @@ def _inside(grid: Tensor, rings: list[Tensor], evenodd: bool) -> Tensor:
     return (winding % 2 == 1) if evenodd else (winding != 0)
 
 
-def _polyline_distance(x: np.ndarray, y: np.ndarray, path: np.ndarray) -> np.ndarray:
-    """Distance from points to a polyline ``(n, 2)`` (NumPy; for culling only)."""
-    a, b = path[:-1], path[1:]
-    d = b - a
-    denom = np.maximum((d * d).sum(1), 1e-12)
-    t = np.clip(((x[:, None] - a[:, 0]) * d[:, 0] + (y[:, None] - a[:, 1]) * d[:, 1]) / denom, 0.0, 1.0)
-    dx = x[:, None] - (a[:, 0] + t * d[:, 0])
-    dy = y[:, None] - (a[:, 1] + t * d[:, 1])
-    return np.sqrt(dx * dx + dy * dy).min(1)
+def _reached_pixels(paths: np.ndarray, reach: np.ndarray, H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels each polyline reaches: ``(piece, pixel)`` pairs (indices into ``paths``, flat
+    canvas indices), pieces in order, each one's pixels row-major in its padded box.
+
+    ``paths``: ``(n, points, 2)`` polylines; ``reach``: ``(n,)`` how far from its polyline a
+    piece reaches. All pieces' boxes are evaluated together, :data:`CULL_CHUNK` distances at a time
+    (one piece at a time cost a loop of small NumPy calls per piece: a fifth of a colour render)."""
+    segments = paths.shape[1] - 1
+    rects = _rects(paths.min(1), paths.max(1), reach, H, W)
+    widths = np.maximum(rects[:, 2] - rects[:, 0], 0)
+    sizes = widths * np.maximum(rects[:, 3] - rects[:, 1], 0)
+    # per piece, its segments' starts, directions and squared lengths
+    starts = paths[:, :-1]
+    steps = paths[:, 1:] - starts
+    lengths = np.maximum((steps * steps).sum(2), 1e-12)
+    cost = np.cumsum(sizes * segments)
+    pieces, pixels = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    start = 0
+    while start < len(paths):
+        done = cost[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cost, done + CULL_CHUNK, side="right")))
+        ks = np.arange(start, stop)
+        piece = np.repeat(ks, sizes[ks])
+        within = np.arange(len(piece)) - np.repeat(np.cumsum(sizes[ks]) - sizes[ks], sizes[ks])
+        xs = rects[piece, 0] + within % np.maximum(widths[piece], 1)
+        ys = rects[piece, 1] + within // np.maximum(widths[piece], 1)
+        a, d = starts[piece], steps[piece]
+        x, y = (xs + 0.5)[:, None], (ys + 0.5)[:, None]
+        t = np.clip(((x - a[..., 0]) * d[..., 0] + (y - a[..., 1]) * d[..., 1]) / lengths[piece], 0.0, 1.0)
+        dx = x - (a[..., 0] + t * d[..., 0])
+        dy = y - (a[..., 1] + t * d[..., 1])
+        near = np.sqrt(dx * dx + dy * dy).min(1) <= reach[piece]
+        pieces.append(piece[near])
+        pixels.append((ys * W + xs)[near])
+        start = stop
+    return np.concatenate(pieces), np.concatenate(pixels)
 
 
 __all__ = ["flat_stroke_sdf"]
