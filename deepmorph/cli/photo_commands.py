@@ -293,6 +293,12 @@ def bench_scenes_cmd(
     scenes: Annotated[Path, typer.Argument(help="A folder written by `deepmorph synth`.")],
     as_json: JsonOpt = False,
     report_path: Annotated[Optional[Path], typer.Option("--out", help="Also write the report as JSON here.")] = None,
+    first: Annotated[
+        bool,
+        typer.Option(
+            "--first", help="Locate as `decode --first`: the first drawing read per scene (one code, as QR reads)."
+        ),
+    ] = False,
     threads: ThreadsOpt = None,
 ) -> None:
     """Recall, payload success, pose error and speed on synthetic scenes, beside ArUco and QR."""
@@ -308,7 +314,7 @@ def bench_scenes_cmd(
     _, listed = read_scenes(scenes)  # validates the folder before any work
     with _progress("bench") as progress:
         task = progress.add_task("", total=len(listed))
-        report = bench_scenes(m, scenes, on_scene=lambda i: progress.update(task, completed=i))
+        report = bench_scenes(m, scenes, on_scene=lambda i: progress.update(task, completed=i), first=first)
     report["threads"] = n_threads
     if report_path is not None:
         atomic_write(report_path, json.dumps(report, indent=1).encode())

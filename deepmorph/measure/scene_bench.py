@@ -35,8 +35,10 @@ from deepmorph_detect.scene_folders import read_scenes
 from deepmorph_detect.scenes import SceneMaker
 
 
-def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> dict[str, Any]:
-    """Run the chain and the baselines over a scene folder; the report as a dict."""
+def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None, first: bool = False) -> dict[str, Any]:
+    """Run the chain and the baselines over a scene folder; the report as a dict. ``first``:
+    each scene located as ``decode --first`` does (the first print read, alone: one code per
+    frame, as QR's ``detectAndDecode`` reads), so a scene of two prints finds one."""
     index, scenes = read_scenes(folder)
     locator = Locator(model)
     aruco = aruco_detector()
@@ -57,7 +59,7 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
         markers = [p for p in truth["placements"] if p.kind == "aruco"]
         stats["negative_images"] += not drawings
         t0 = time.perf_counter()
-        dets: list[Located] = locator.locate(image, camera=cam)
+        dets: list[Located] = locator.locate(image, camera=cam, first=first)
         t_ours.append(time.perf_counter() - t0)
         stats["detections"] += len(dets)
         for det, p, _ in tally.add(dets, drawings):
@@ -93,6 +95,7 @@ def bench_scenes(model: DeepMorphModel, folder: Path, on_scene: Any = None) -> d
     report = {
         "scenes": len(scenes),
         "severity": index.get("severity"),
+        "first": first,
         "drawings": tally.prints,
         "found": tally.found,
         "decoded": tally.read,

@@ -9,7 +9,7 @@ def format_report(report: dict[str, Any]) -> str:
     """The report as a plain-text table."""
     p, s = report["pose"], report["speed_ms"]
     rows = [
-        ("scenes", report["scenes"], ""),
+        ("scenes", report["scenes"], "the first print read (--first)" if report.get("first") else ""),
         ("drawings / found (recall)", f"{report['drawings']} / {report['found']} ({report['recall']:.1%})", ""),
         ("precision", f"{report['precision']:.1%}", ""),
         ("whole-payload success", f"{report['payload_success']:.1%}", ""),

@@ -425,6 +425,10 @@ def test_cli_synth_and_bench_scenes(tmp_path: Path) -> None:
     assert report["scenes"] == 3 and report["drawings"] == 3
     assert report["recall"] >= 2 / 3 and report["wrong_ok"] == 0
     assert {"deepmorph", "aruco"} <= set(report["pose"]) and report["speed_ms"]["qr_detect_and_decode_median"] > 0
+    assert report["first"] is False
+    res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path / "s"), "--json", "--first"])
+    first = json.loads(res.output[res.output.index("{") :])  # one print per scene: the same prints read
+    assert first["first"] is True and (first["found"], first["decoded"]) == (report["found"], report["decoded"])
     res = runner.invoke(app, ["bench-scenes", str(BUNDLED_MODEL), str(tmp_path)])
     assert res.exit_code == 1 and "not a scene folder" in res.output
     # the same folder through bench-photos, by the labels.csv synth wrote beside the scenes
