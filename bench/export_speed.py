@@ -212,12 +212,12 @@ def main() -> None:
             else None,
         }
         report["chains"][f"{k}/{mode}"] = entry
-        lines.append([k, mode, f"{entry['read']}/{args.n}", entry["ms_median"], entry["ms_mean"], entry["x_qr_median"],
-                      entry["aruco_ms_median"], entry["detector_ms_mean"], entry["decoder_calls_mean"],
-                      entry["decoder_ms_mean"], f"{entry['frames_checked_bit_by_bit']}/{args.n}",
-                      entry["check_ms_mean"], f"{entry['frames_second_looks']}/{args.n}",
-                      f"{entry['frames_synthesis']}/{args.n}", entry["ms_median_without_slow_paths"],
-                      entry["ms_median_without_bitwise_check"]])  # fmt: skip
+        lines.append([k, mode, f"{entry['read']}/{args.n}", entry["ms_median"], entry["ms_mean"],
+                      f"{entry['x_qr_median']:.2f}", entry["aruco_ms_median"], entry["detector_ms_mean"],
+                      entry["decoder_calls_mean"], entry["decoder_ms_mean"],
+                      f"{entry['frames_checked_bit_by_bit']}/{args.n}", entry["check_ms_mean"],
+                      f"{entry['frames_second_looks']}/{args.n}", f"{entry['frames_synthesis']}/{args.n}",
+                      entry["ms_median_without_slow_paths"], entry["ms_median_without_bitwise_check"]])  # fmt: skip
     print(table(["bundle", "chain", "read", "ms median", "ms mean", "x QR", "ArUco ms", "detector ms",
                  "decoder calls", "decoder ms", "checked bit by bit", "check ms", "second looks", "last look",
                  "ms median w/o 2nd/last looks", "ms median w/o bit check"], lines))  # fmt: skip
