@@ -257,8 +257,9 @@ def _reached_pixels(paths: np.ndarray, reach: np.ndarray, H: int, W: int) -> tup
         ks = np.arange(start, stop)
         piece = np.repeat(ks, sizes[ks])
         within = np.arange(len(piece)) - np.repeat(np.cumsum(sizes[ks]) - sizes[ks], sizes[ks])
-        xs = rects[piece, 0] + within % np.maximum(widths[piece], 1)
-        ys = rects[piece, 1] + within // np.maximum(widths[piece], 1)
+        span = widths[piece]  # at least 1: a piece whose box is empty has no pixels here
+        xs = rects[piece, 0] + within % span
+        ys = rects[piece, 1] + within // span
         a, d = starts[piece], steps[piece]
         x, y = (xs + 0.5)[:, None], (ys + 0.5)[:, None]
         t = np.clip(((x - a[..., 0]) * d[..., 0] + (y - a[..., 1]) * d[..., 1]) / lengths[piece], 0.0, 1.0)
