@@ -28,6 +28,8 @@ this is written here, from kornia's blur and a warp of its own (:func:`sampling_
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 from kornia.filters import gaussian_blur2d
@@ -58,13 +60,32 @@ def motion_images(image: np.ndarray) -> np.ndarray:
     the Jacobian of an alignment solve, and what the per-bit check projects out as motion."""
     h, w = image.shape
     gy, gx = np.gradient(np.asarray(image, dtype=np.float64))
-    gx = gx * max(w - 1, 1) / 2.0
-    gy = gy * max(h - 1, 1) / 2.0
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    x = 2.0 * x / max(w - 1, 1) - 1.0
-    y = 2.0 * y / max(h - 1, 1) - 1.0
-    radial = gx * x + gy * y
-    return np.stack([gx * x, gx * y, gx, gy * x, gy * y, gy, -radial * x, -radial * y])
+    gx *= max(w - 1, 1) / 2.0
+    gy *= max(h - 1, 1) / 2.0
+    x, y = _frame_coordinates(h, w)
+    out = np.empty((8, h, w))
+    np.multiply(gx, x, out=out[0])
+    np.multiply(gx, y, out=out[1])
+    out[2] = gx
+    np.multiply(gy, x, out=out[3])
+    np.multiply(gy, y, out=out[4])
+    out[5] = gy
+    radial = out[0] + out[4]
+    np.negative(radial, out=radial)
+    np.multiply(radial, x, out=out[6])
+    np.multiply(radial, y, out=out[7])
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _frame_coordinates(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(1, w)`` x and ``(h, 1)`` y of an ``(h, w)`` frame's pixels, scaled to [-1, 1]
+    (read-only: every alignment step of that size shares them)."""
+    x = 2.0 * np.arange(w, dtype=np.float64)[None] / max(w - 1, 1) - 1.0
+    y = 2.0 * np.arange(h, dtype=np.float64)[:, None] / max(h - 1, 1) - 1.0
+    x.flags.writeable = False
+    y.flags.writeable = False
+    return x, y
 
 
 def _homography(params: Tensor) -> Tensor:

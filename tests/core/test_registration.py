@@ -115,3 +115,20 @@ def test_models_from_before_are_not_registered(ghost: DeepMorphModel) -> None:
         del ghost.meta.train["registered"]
     assert framed.shape == registered.shape
     assert float((framed - registered).abs().mean()) > 1e-3
+
+
+@pytest.mark.parametrize("shape", [(48, 48), (37, 64), (2, 5)])
+def test_motion_images_are_the_homography_parameters_derivatives(shape: tuple[int, int]) -> None:
+    """Each motion image is how the picture changes with one homography parameter: the image
+    gradient times that parameter's flow, in frame coordinates scaled to [-1, 1]."""
+    image = np.random.default_rng(3).random(shape)
+    h, w = shape
+    gy, gx = np.gradient(image)
+    gx, gy = gx * (w - 1) / 2.0, gy * (h - 1) / 2.0
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    x, y = 2.0 * x / (w - 1) - 1.0, 2.0 * y / (h - 1) - 1.0
+    flows = [(x, 0), (y, 0), (1, 0), (0, x), (0, y), (0, 1), (-x * x, -x * y), (-x * y, -y * y)]
+    expected = np.stack([gx * fx + gy * fy for fx, fy in flows])
+    np.testing.assert_allclose(registration.motion_images(image), expected, rtol=1e-12, atol=1e-12)
+    single = image.astype(np.float32)
+    np.testing.assert_array_equal(registration.motion_images(single), registration.motion_images(single.astype(float)))
