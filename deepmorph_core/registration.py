@@ -63,14 +63,22 @@ def motion_images(image: np.ndarray) -> np.ndarray:
     gx *= max(w - 1, 1) / 2.0
     gy *= max(h - 1, 1) / 2.0
     x, y = _frame_coordinates(h, w)
-    out = np.empty((8, h, w))
+    return homography_rows(gx, gy, x, y)
+
+
+def homography_rows(gx: np.ndarray, gy: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``(8, *gx.shape)`` (in ``gx``'s dtype) the change of a picture with each of the eight
+    parameters of a small homography, in the order :func:`_homography` and the alignment solvers
+    compose them: the picture's gradients ``gx``, ``gy`` times each parameter's flow at the
+    points ``x``, ``y`` (broadcast against the gradients)."""
+    out = np.empty((8, *gx.shape), dtype=gx.dtype)
     np.multiply(gx, x, out=out[0])
     np.multiply(gx, y, out=out[1])
     out[2] = gx
     np.multiply(gy, x, out=out[3])
     np.multiply(gy, y, out=out[4])
     out[5] = gy
-    radial = out[0] + out[4]
+    radial = out[0] + out[4]  # gx * x + gy * y
     np.negative(radial, out=radial)
     np.multiply(radial, x, out=out[6])
     np.multiply(radial, y, out=out[7])
@@ -161,4 +169,13 @@ class UnmorphedRegistration(nn.Module):
         return warp(images, self.homographies(images))
 
 
-__all__ = ["BLUR_SIGMA", "ITERATIONS", "SETTLED", "UnmorphedRegistration", "motion_images", "sampling_grid", "warp"]
+__all__ = [
+    "BLUR_SIGMA",
+    "ITERATIONS",
+    "SETTLED",
+    "UnmorphedRegistration",
+    "homography_rows",
+    "motion_images",
+    "sampling_grid",
+    "warp",
+]

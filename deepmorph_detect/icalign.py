@@ -26,6 +26,8 @@ import math
 import cv2
 import numpy as np
 
+from deepmorph_core.registration import homography_rows
+
 
 @functools.lru_cache(maxsize=16)
 def _unit_coordinates(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -86,16 +88,7 @@ class InverseECC:
         gy = (cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=1) * np.float32(0.5 * s)).ravel()
         x, y = _unit_coordinates(h, w)
         # d(template)/d(parameters) at the identity warp, one row per parameter
-        steepest = np.empty((8, h * w), dtype=np.float32)
-        np.multiply(gx, x, out=steepest[0])
-        np.multiply(gx, y, out=steepest[1])
-        steepest[2] = gx
-        np.multiply(gy, x, out=steepest[3])
-        np.multiply(gy, y, out=steepest[4])
-        steepest[5] = gy
-        radial = steepest[0] + steepest[4]  # gx * x + gy * y
-        np.multiply(radial, -x, out=steepest[6])
-        np.multiply(radial, -y, out=steepest[7])
+        steepest = homography_rows(gx, gy, x, y)
         self._steepest = steepest
         zero_mean = (t - t.mean()).ravel()
         self._template = zero_mean
