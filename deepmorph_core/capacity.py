@@ -28,7 +28,7 @@ how well a linear reading of photos of the print tells each readable group's two
 sees how far each variable moves in the photo's pixels, the contrast of the edge it moves and how
 groups crowd each other. A model reads :data:`CHANNEL_SHARE` of the payload that reading carries,
 in codes correcting two bit errors (:data:`ECC_AT_PIXELS`, the codes it was measured with):
-fitted on two drawings of ``bench/pixels_panel.py``'s rule and checked on four more
+fitted on two drawings of ``bench/pixels_panel.py``'s rule and checked on seven more
 (``bench/README.md``). Below that width nothing larger was measured, and the 96-px figure stands.
 """
 
