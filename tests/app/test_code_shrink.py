@@ -175,6 +175,27 @@ def test_the_code_fitted_to_measured_reliabilities_keeps_the_reliable_bits() -> 
     assert code_fitting(noise, smallest, AutoPayload(), rng) is None
 
 
+def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
+    """``halfway``: the largest payload whose code fits halfway (in code bits) between the code
+    now (less one) and the one the reliabilities fit, on the most reliable bits; never smaller
+    than that one, and nothing where nothing is smaller."""
+    spec = choose_codec(24, None, 2)
+    rng = np.random.default_rng(1)
+    rates = np.full(spec.code_bits, 0.5)
+    rates[rng.permutation(spec.code_bits)[:30]] = 0.0005
+    right = _reliabilities(rates, 1000, rng)
+    fitted, _ = code_fitting(right, spec, AutoPayload(), np.random.default_rng(2), print_px=200)
+    half, keep = code_fitting(right, spec, AutoPayload(), np.random.default_rng(2), print_px=200, halfway=True)
+    size = math.ceil((spec.code_bits - 1 + fitted.code_bits) / 2)
+    assert fitted.payload_bits < half.payload_bits < spec.payload_bits and half.code_bits <= size
+    assert choose_codec(half.payload_bits + 1, None, 2).code_bits > size and half.bch_t == 2
+    order = np.argsort(-right.mean(0), kind="stable")
+    assert keep == sorted(int(k) for k in order[: half.code_bits])  # the most reliable bits
+    smallest = choose_codec(1, None, 2)
+    noise = _reliabilities(np.full(smallest.code_bits, 0.5), 100, rng)
+    assert code_fitting(noise, smallest, AutoPayload(), rng, print_px=200, halfway=True) is None
+
+
 #: A few steps with no corruption: the batches read, and the renders, read at ``medium``, do not.
 EASY_THEN_RENDERS = {**FAST, "steps": 30, "renders_tune": 20, "checkpoint_every": 10, "seed": 2}
 
