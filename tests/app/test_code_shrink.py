@@ -200,6 +200,30 @@ def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
 EASY_THEN_RENDERS = {**FAST, "steps": 30, "renders_tune": 20, "checkpoint_every": 10, "seed": 2}
 
 
+@pytest.mark.parametrize("stroke", ["black", "#c03020"])
+def test_only_a_black_and_white_drawings_first_renders_cut_goes_halfway(
+    stroke: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The cuts when training ends ask for halfway only on a black-and-white drawing's first
+    round (measured there); a colour drawing's go the whole way."""
+    import deepmorph.training.codec as codec_module
+
+    asked: list[bool] = []
+    real = codec_module.code_for_renders
+
+    def spy(*args: object, halfway: bool = False, **kwargs: object) -> object:
+        asked.append(halfway)
+        return real(*args, halfway=halfway, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(codec_module, "code_for_renders", spy)
+    svg = tmp_path / "tiny.svg"
+    svg.write_bytes(TINY.replace(b'stroke="black"', f'stroke="{stroke}"'.encode()))
+    train_model(svg, tmp_path / "m.dmm", payload_bits="auto", train=EASY_THEN_RENDERS, validation_samples=(0, 0))
+    colour = DeepMorphModel.load(tmp_path / "m.dmm").drawing.colour
+    assert colour == (stroke != "black") and asked
+    assert asked == [not colour] + [False] * (len(asked) - 1)
+
+
 def test_an_auto_code_that_reads_too_few_renders_is_shrunk_when_training_ends(tiny_svg: Path, tmp_path: Path) -> None:
     """When training ends, an auto code is read from fresh renders; one that reads too few is
     shrunk on its most reliable bits and trained on for ``renders_tune`` steps, at most
