@@ -124,6 +124,14 @@ def largest_smaller(
     return None
 
 
+def code_halfway(spec: CodecSpec, toward_bits: float, auto: AutoPayload, print_px: int | None) -> CodecSpec | None:
+    """The largest payload below ``spec``'s (:func:`largest_smaller`) whose code fits halfway, in
+    code bits, between ``spec``'s (less one) and ``toward_bits``: how far both cuts go when they
+    go halfway (:func:`smaller_code`, and :func:`code_fitting`'s first)."""
+    size = math.ceil((toward_bits + spec.code_bits - 1) / 2)
+    return largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size)
+
+
 def smaller_code(
     errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None
 ) -> tuple[CodecSpec, list[int], float] | None:
@@ -138,8 +146,7 @@ def smaller_code(
         auto: the CRC and BCH the user fixed.
     """
     carried = information(errors)
-    size = math.ceil((carried + spec.code_bits - 1) / 2)
-    new = largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size)
+    new = code_halfway(spec, carried, auto, print_px)
     if new is None:
         return None
     order = torch.argsort(errors.sum(0), stable=True)  # best read first
@@ -197,8 +204,7 @@ def code_fitting(
     if new is None:
         return None
     if halfway:
-        size = math.ceil((spec.code_bits - 1 + new.code_bits) / 2)
-        new = largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size) or new
+        new = code_halfway(spec, new.code_bits, auto, print_px) or new
     return new, sorted(int(k) for k in order[: new.code_bits])
 
 
@@ -284,6 +290,7 @@ __all__ = [
     "SHRINK_BELOW_AT_PIXELS",
     "RenderShrink",
     "code_fitting",
+    "code_halfway",
     "code_for_renders",
     "describe",
     "information",
