@@ -184,7 +184,7 @@ def count_operators(run: Any, steps: int) -> dict[str, float]:
     with Count():
         for _ in range(steps):
             run.step()
-    return {key: value / steps for key, value in counts.items()}
+    return {key: value / max(1, steps) for key, value in counts.items()}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -298,10 +298,15 @@ class DeepMorphModel:
         frame (a print narrower than either loses the detail its bits are in)."""
         return self.print_px or self.width
 
+    def raster_settings(self, width: int | None = None) -> RasterSettings:
+        """The soft rasterizer's settings the model was trained with, at ``width`` (``None``: the
+        model's). A bundle that records no ``flat_fills`` was written before black-and-white
+        fills went flat, and renders them over their whole box as it was trained."""
+        return RasterSettings(**{"flat_fills": None, **self.meta.raster, "width": width or self.width})
+
     def rasterizer(self) -> SoftRasterizer:
         """The soft rasterizer at the model's size and settings."""
-        settings = RasterSettings(**{**self.meta.raster, "width": self.width})
-        return SoftRasterizer(self.drawing.space, settings, channel=self.drawing.channel)
+        return SoftRasterizer(self.drawing.space, self.raster_settings(), channel=self.drawing.channel)
 
     # -- encoding -------------------------------------------------------------------------
 

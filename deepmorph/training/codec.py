@@ -737,7 +737,7 @@ def open_model(
                 defaults.model_dump(exclude_none=True),
                 spec,
                 config.width,
-                {"sharpness": settings.sharpness, "squash": settings.squash, "blend": settings.blend},
+                {k: getattr(settings, k) for k in ("sharpness", "squash", "blend", "flat_fills")},
                 augment.config.model_dump(),
                 config.model_dump(),
                 decoder_config=DecoderConfig(spatial_transformer=config.spatial_transformer, readout=config.readout),

@@ -124,6 +124,7 @@ def test_bundle_round_trip(trained: Path, tmp_path: Path) -> None:
     info = again.info()
     assert info["payload_bits"] == 4 and info["code_bits"] == m.codec.spec.code_bits == 20
     assert info["record"]["finished"] and info["versions"]["torch"]
+    assert again.meta.raster["flat_fills"] is True  # its fills culled near their outlines, as trained
 
 
 @pytest.mark.parametrize(
