@@ -25,12 +25,11 @@ read 0.78 of its batch words, one that read 99.5 % read 0.75. So when training e
 code is also judged as validation will judge it (:func:`code_for_renders`): fresh payloads
 rendered by resvg and read through the medium corruption. A code that reads fewer than
 :data:`RENDER_SHRINK_BELOW` of them is made smaller, towards the size its best-read bits need,
-with the reliabilities the renders measured, to read :data:`RENDER_FIT` of them: a
-black-and-white drawing's the first time halfway there in code bits, later the whole way, and
-each time training goes on for ``renders_tune`` steps (at most :data:`RENDER_ROUNDS` times).
-Halfway, because the bits kept read better once the dropped ones free their variables, which the
-reliabilities measured in the larger code cannot show. A colour drawing's is cut the whole way:
-its hard close-ups read at the edge of the targets, and a larger code there was not measured.
+with the reliabilities the renders measured, to read :data:`RENDER_FIT` of them: the first
+time halfway there in code bits, later the whole way, and each time training goes on for
+``renders_tune`` steps (at most :data:`RENDER_ROUNDS` times). Halfway, because the bits kept read
+better once the dropped ones free their variables, which the reliabilities measured in the larger
+code cannot show (three black-and-white drawings and a colour one read as many close-ups so).
 A user-given size is never changed: its model reads what it reads, and validation says so.
 """
 

@@ -497,8 +497,8 @@ class CodecRun:
     def _check_renders(self) -> None:
         """When training ends, judge an auto-sized code on fresh renders as validation will
         (:func:`~deepmorph.training.code_shrink.code_for_renders`, rank 0's finding given to
-        every rank); one that reads too few is shrunk, a black-and-white drawing's halfway the first
-        time, and trained on for ``renders_tune`` steps."""
+        every rank); one that reads too few is shrunk, halfway the first time, and trained on
+        for ``renders_tune`` steps."""
         cfg, rec = self.cfg, self.record
         rounds = sum(s.measured_on == "renders" for s in rec.shrunk)
         if rounds >= RENDER_ROUNDS:
@@ -506,7 +506,7 @@ class CodecRun:
         found = None
         if self.world.main:
             seed = cfg.seed + RENDER_SEED_OFFSET + len(rec.shrunk)
-            halfway = rounds == 0 and not self.model.drawing.colour  # measured on black and white only
+            halfway = rounds == 0
             found = code_for_renders(self.model, rec.payload_auto, seed, self.device.type, halfway=halfway)
             self.model.encoder.to(self.device)  # reading the renders leaves the networks on the CPU
             self.model.decoder.to(self.device)
