@@ -506,8 +506,7 @@ class CodecRun:
         found = None
         if self.world.main:
             seed = cfg.seed + RENDER_SEED_OFFSET + len(rec.shrunk)
-            halfway = rounds == 0
-            found = code_for_renders(self.model, rec.payload_auto, seed, self.device.type, halfway=halfway)
+            found = code_for_renders(self.model, rec.payload_auto, seed, self.device.type, halfway=rounds == 0)
             self.model.encoder.to(self.device)  # reading the renders leaves the networks on the CPU
             self.model.decoder.to(self.device)
         found = gather_objects(found, self.world)[0]
