@@ -78,8 +78,10 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
         except cv2.error:  # OpenCV's own pixel limit, from the header (deepmorph_core sets it)
             raise DeepMorphError(f"{path}: its header claims too many pixels to decode") from None
     if img is None:
-        why = f" ({said[0].strip().splitlines()[-1][:120]})" if said and said[0].strip() else ""
-        raise DeepMorphError(f"{path}: not an image OpenCV can read (corrupt, or an unsupported format){why}")
+        why = library_said(said[0]) if said else ""
+        raise DeepMorphError(
+            f"{path}: not an image OpenCV can read (corrupt, or an unsupported format{': ' + why if why else ''})"
+        )
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
         raise DeepMorphError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels is too large to decode")
     img = _upright(img, orientation)
@@ -126,6 +128,32 @@ def image_input(source: ImageLike, bgr: bool = False) -> np.ndarray:
     if source.ndim == 3 and source.shape[2] in (3, 4) and not bgr:
         source = source[..., [2, 1, 0, 3][: source.shape[2]]]
     return np.ascontiguousarray(source)
+
+
+#: OpenCV's log line before its message: ``[ERROR:0@1.514] global loadsave.cpp:1377 imdecode_ ``
+_OPENCV_LOG_PREFIX = re.compile(r"^\[\w+:[^\]]*\]\s+global\s+\S+:\d+\s+\S+\s+")
+#: the function ``imdecode_('')`` names itself with, and an exception's source location, code and function
+_OPENCV_NOISE = (
+    re.compile(r"^\w+\('[^']*'\):\s*"),
+    re.compile(r"OpenCV\([^)]*\)\s+\S+:\d+:\s+error:\s+\([^)]*\)\s*"),
+    re.compile(r"\s+in function '[^']*'"),
+)
+
+
+def library_said(stderr: str) -> str:
+    """The last thing an image library wrote on stderr (:func:`_stderr_captured`), as a user
+    reads it: OpenCV's log prefix, source file and function names left out (``[ERROR:0@1.5]
+    global loadsave.cpp:1377 imdecode_ imdecode_(''): can't read header: OpenCV(5.1.0)
+    .../bitstrm.cpp:59: error: (-2:Unspecified error) Unexpected end of input stream in function
+    'readBlock'`` says "can't read header: Unexpected end of input stream"); at most 120
+    characters, ``""`` when it wrote nothing."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    if not lines:
+        return ""
+    text = _OPENCV_LOG_PREFIX.sub("", lines[-1])
+    for noise in _OPENCV_NOISE:
+        text = noise.sub("", text)
+    return text.strip()[:120]
 
 
 @contextmanager

@@ -19,7 +19,7 @@ from deepmorph_core.framing import (
     mask_moments_one,
     render_moments,
 )
-from deepmorph_core.image_io import read_image, save_gray
+from deepmorph_core.image_io import library_said, read_image, save_gray
 from deepmorph_core.kernels import (
     SELECTION_SAMPLE,
     _area_weights,
@@ -123,6 +123,28 @@ def test_blank_and_flat_images_have_no_drawing(ghost) -> None:
     assert align_to_frame(np.full((80, 80), 0.2, np.float32), (96, 96), target) is None
     noise = np.random.default_rng(0).uniform(0.97, 1.0, (80, 80)).astype(np.float32)
     assert align_to_frame(noise, (96, 96), target) is None
+
+
+def test_an_unreadable_image_says_what_the_library_said_without_its_log_prefix(tmp_path) -> None:
+    """OpenCV logs a failed decode with its level, source file, line and function around the
+    message; the one error line keeps the message alone."""
+    gif = tmp_path / "cut.gif"
+    gif.write_bytes(b"GIF89a")
+    with pytest.raises(DeepMorphError) as caught:
+        read_image(gif)
+    said = str(caught.value)
+    assert said.startswith(f"{gif}: not an image OpenCV can read (corrupt, or an unsupported format")
+    assert "[ERROR" not in said and ".cpp" not in said and "in function" not in said
+    opencv = (
+        "[ERROR:0@1.514] global loadsave.cpp:1377 imdecode_ imdecode_(''): can't read header: OpenCV(5.1.0) "
+        "/io/opencv/modules/imgcodecs/src/bitstrm.cpp:59: error: (-2:Unspecified error) Unexpected end of "
+        "input stream in function 'readBlock'\n\n"
+    )
+    assert library_said(opencv) == "can't read header: Unexpected end of input stream"
+    assert library_said("libpng warning: iCCP: known incorrect sRGB profile\n") == (
+        "libpng warning: iCCP: known incorrect sRGB profile"
+    )
+    assert library_said("") == "" and library_said("\n \n") == ""
 
 
 def test_read_image_errors(tmp_path) -> None:
