@@ -17,6 +17,8 @@ what to read.
 
     git worktree add /tmp/before HEAD~1
     .venv/bin/python bench/checkouts.py --a /tmp/before --b . --n 300 --negatives 300
+
+``--first``: both read the first print alone (``locate(first=True)``, ``decode --first``).
 """
 
 from __future__ import annotations
@@ -34,8 +36,9 @@ from _common import set_threads  # noqa: E402
 from _pairs import add_scene_arguments, compare, print_report  # noqa: E402
 
 
-def _worker(root: str, bundle: str | None, detector: str | None, threads: int, conn: Any) -> None:
-    """Serve ``locate`` requests with the packages of the checkout at ``root``."""
+def _worker(root: str, bundle: str | None, detector: str | None, threads: int, first: bool, conn: Any) -> None:
+    """Serve ``locate`` requests with the packages of the checkout at ``root`` (``first``: the
+    first print read alone, as ``decode --first``)."""
     # the editable install's finder would hand out the installed checkout: take it away (the
     # plugins' finders stay), so that every ``deepmorph_*`` import comes from ``root``
     sys.meta_path[:] = [f for f in sys.meta_path if "deepmorph_core" not in _editable_mapping(f)]
@@ -66,7 +69,7 @@ def _worker(root: str, bundle: str | None, detector: str | None, threads: int, c
             return
         image, camera = job
         t0 = time.perf_counter()
-        found = locator.locate(image, camera)
+        found = locator.locate(image, camera, first=True) if first else locator.locate(image, camera)
         ms = 1000 * (time.perf_counter() - t0)
         conn.send((ms, [{"corners": d.corners, "payload": d.result.payload, "ok": bool(d.result.ok)} for d in found]))
 
@@ -90,6 +93,7 @@ def main() -> None:
     ap.add_argument("--b", type=Path, default=Path("."), help="second checkout: the code after (default: this one)")
     ap.add_argument("--bundle", type=Path, default=None, help="bundle both decode with (default: the bundled ghost)")
     ap.add_argument("--detector", default=None, help="detector both use (default: the bundle's)")
+    ap.add_argument("--first", action="store_true", help="both read the first print alone (decode --first)")
     add_scene_arguments(ap, "checkouts.json")
     args = ap.parse_args()
     set_threads(args.threads)
@@ -106,7 +110,7 @@ def main() -> None:
     for k, root in roots.items():
         parent, child = ctx.Pipe()
         bundle = str(args.bundle) if args.bundle else None
-        proc = ctx.Process(target=_worker, args=(root, bundle, args.detector, args.threads, child))
+        proc = ctx.Process(target=_worker, args=(root, bundle, args.detector, args.threads, args.first, child))
         proc.start()
         procs.append(proc)
         conns[k] = parent
@@ -127,6 +131,7 @@ def main() -> None:
         proc.join()
     report["checkouts"] = roots
     report["detector"] = args.detector or "the bundle's"
+    report["first"] = args.first
     print_report(report, rows, roots, "checkout", args.out)
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import inspect
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -37,7 +37,7 @@ from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.photo import to_gray
 from deepmorph_core.plugins import Registry, default_registry
 from deepmorph_core.protocols import Candidate, Detector
-from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, ink_thickness
+from deepmorph_detect.align import MIN_CORRELATION, Aligned, Aligner, QuickLook, ink_thickness
 from deepmorph_detect.camera import Camera, project
 from deepmorph_detect.check import RELIT_MAX_CORRECTIONS, MorphTemplates, PayloadCheck, PayloadChecker
 from deepmorph_detect.fastrender import stretched_renderer, template_renderer
@@ -244,9 +244,22 @@ class Locator:
 
     def _candidates(self, image: np.ndarray, gray: np.ndarray) -> list[Candidate]:
         """The detector's proposals in ``image`` (``gray``: it in the channel the model reads)."""
+        *_, every = self._candidate_stages(image, gray)
+        return every
+
+    def _candidate_stages(self, image: np.ndarray, gray: np.ndarray) -> Iterator[list[Candidate]]:
+        """The detector's proposals in ``image`` as they come: one list, or, from a detector that
+        proposes in stages (the universal detector's photo, then its mirror image:
+        :meth:`UniversalDetector.detect_in_stages <deepmorph_detect.universal.UniversalDetector.detect_in_stages>`),
+        each stage's, the last holding them all."""
         # detectors read luminance: a model read in another channel hands them the photo itself
         seen = gray if is_luma(self.model.drawing.channel) else image
-        return self.detector.detect(seen) if self.detector is not None else []
+        if self.detector is None:
+            yield []
+        elif hasattr(self.detector, "detect_in_stages"):
+            yield from self.detector.detect_in_stages(seen)
+        else:
+            yield self.detector.detect(seen)
 
     def aligns(self, image: np.ndarray) -> bool:
         """Whether the detector's proposals in ``image`` align to the drawing at all, read or
@@ -275,18 +288,29 @@ class Locator:
                 proposals that align at once (:meth:`Aligner.quick_prints
                 <deepmorph_detect.align.Aligner.quick_prints>`) are read first, best aligned
                 first, before any proposal's wider searches: most other drawings in a photo
-                take those searches to be turned away. Where none of them reads, the rest
-                follows as without ``first``, each drawing read once.
+                take those searches to be turned away. A detector that proposes in stages
+                (the universal detector: the photo, then its mirror image) has each stage's
+                read before its next runs. Where none of them reads, the rest follows as
+                without ``first``, each drawing read once.
         """
         gray, cam, pyramid = self.frame(image, camera)
-        candidates = self._candidates(image, gray)
-        looks = self.aligner.quick_looks(pyramid, candidates, gray)
         decoded: dict[int, tuple[Alignment, Located, bool]] = {}
-        for aligned in self.aligner.quick_prints(pyramid, candidates, looks) if first else []:
-            located, reported = self.decode_aligned(gray, aligned, cam, soft)
-            if located.result.ok:
-                return [located]
-            decoded[id(aligned.alignment)] = (aligned.alignment, located, reported)
+        if first:
+            # each stage's quick prints read before the detector's next stage runs; a proposal
+            # a later stage repeats keeps its quick look, and a print read there is not read again
+            taken: dict[bytes, tuple[Candidate, QuickLook | None]] = {}
+            for stage in self._candidate_stages(image, gray):
+                candidates, looks = self._quick_looks(pyramid, stage, gray, taken)
+                for aligned in self.aligner.quick_prints(pyramid, candidates, looks):
+                    if id(aligned.alignment) in decoded:
+                        continue
+                    located, reported = self.decode_aligned(gray, aligned, cam, soft)
+                    if located.result.ok:
+                        return [located]
+                    decoded[id(aligned.alignment)] = (aligned.alignment, located, reported)
+        else:
+            candidates = self._candidates(image, gray)
+            looks = self.aligner.quick_looks(pyramid, candidates, gray)
         found = self.aligner.verify(pyramid, candidates, gray, looks)
         results = self.decode_each(gray, found, cam, soft, decoded)
         if any(located.result.ok or _read_too_small(located) for located in results):
@@ -316,6 +340,34 @@ class Locator:
         # a drawing the whole image read replaces the detector's unread reading of it
         every = read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
         return _first_read(every) if first else every
+
+    def _quick_looks(
+        self,
+        pyramid: ImagePyramid,
+        candidates: list[Candidate],
+        gray: np.ndarray,
+        taken: dict[bytes, tuple[Candidate, QuickLook | None]],
+    ) -> tuple[list[Candidate], list[QuickLook | None]]:
+        """A detector stage's ``candidates`` with their :meth:`Aligner.quick_looks
+        <deepmorph_detect.align.Aligner.quick_looks>`, each outline looked at once: ``taken``
+        holds the earlier stages' candidates and looks, by outline and score, and gains this
+        stage's. A candidate at the place of an earlier one whose quick look aligned it (the
+        universal detector's proposal averaged with its mirror image's) is that earlier one: its
+        print was read there already, and is not read again."""
+        aligned = [
+            (c, look)
+            for c, look in taken.values()
+            if look is not None and look.final and self.aligner.accepts(look.alignment)
+        ]
+        out: list[tuple[Candidate, QuickLook | None]] = []
+        for cand in candidates:
+            key = np.asarray(cand.corners, np.float64).tobytes() + np.float64(cand.score).tobytes()
+            if key not in taken:
+                H = self.aligner.homography(cand.corners)
+                there = [(c, look) for c, look in aligned if self.aligner.seen(H, [self.aligner.homography(c.corners)])]
+                taken[key] = there[0] if there else (cand, self.aligner.quick_looks(pyramid, [cand], gray)[0])
+            out.append(taken[key])
+        return [c for c, _ in out], [look for _, look in out]
 
     def decode_each(
         self,

@@ -17,6 +17,7 @@ The file is a safetensors file: the network's weights under ``detector.``, its O
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
@@ -191,15 +192,28 @@ class UniversalDetector(CentreNetDetector):
         """The network's ink squares mapped to the model's viewBox corners (TL, TR, BR, BL as
         far as the square's order tells; alignment tries the other cyclic orders). With
         :attr:`flip_test`, the photo is read mirrored too and the readings merged
-        (:func:`merged_with_mirrored`)."""
+        (:func:`merged_with_mirrored`): the last of :meth:`detect_in_stages`."""
+        *_, every = self.detect_in_stages(image)
+        return every
+
+    def detect_in_stages(self, image: np.ndarray) -> Iterator[list[Candidate]]:
+        """:meth:`detect`'s proposals as they come: the photo's own reading first, then (with
+        :attr:`flip_test`) every proposal, merged with the mirrored reading's. A caller content
+        with the first print that reads (:meth:`Locator.locate
+        <deepmorph_detect.locate.Locator.locate>` with ``first``) tries the first list before
+        the network runs again; a proposal the merge leaves as it was is the same in both."""
         gray = to_gray(image)
         h, w = gray.shape
         small, scale = self._shrunk(gray)
         found = self._peaks(small, scale)
+        yield self._candidates(found, w, h)
         if self.flip_test:
             in_mirror = self._peaks(np.ascontiguousarray(small[:, ::-1]), scale)
             mirrored = [(unmirrored(quad, small.shape[1] / scale), score) for quad, score in in_mirror]
-            found = merged_with_mirrored(found, mirrored)[: self.max_detections]
+            yield self._candidates(merged_with_mirrored(found, mirrored)[: self.max_detections], w, h)
+
+    def _candidates(self, found: list[tuple[np.ndarray, float]], w: int, h: int) -> list[Candidate]:
+        """Peaks ``(quad, score)`` in a ``w`` x ``h`` photo as blind candidates of this drawing."""
         out = []
         for quad, score in found:
             to_image = cv2.getPerspectiveTransform(self.square.astype(np.float32), quad.astype(np.float32))

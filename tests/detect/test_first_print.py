@@ -53,6 +53,46 @@ def test_the_first_print_is_read_before_the_other_drawing_proposed_above_it_is_s
     assert _payloads(first)[0] in _payloads(every)
 
 
+def test_a_print_read_in_the_photo_itself_leaves_its_mirror_image_unread(
+    universal: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The universal detector reads the photo, then its mirror image: the first print read from
+    the photo's own proposals ends the search before the network runs again."""
+    scene = _scene(universal, seed=2)
+    (truth,) = [p for p in scene.placements if p.kind == "drawing"]
+    runs: list[bool] = []
+    real = universal.detector._peaks
+    monkeypatch.setattr(universal.detector, "_peaks", lambda *a: runs.append(True) or real(*a))
+    every = universal.locate(scene.image)
+    assert len(runs) == 2
+    runs.clear()
+    first = universal.locate(scene.image, first=True)
+    assert len(runs) == 1
+    assert _payloads(first) == [np.asarray(truth.payload, np.uint8).tobytes()]
+    assert _payloads(first)[0] in _payloads(every)
+
+
+def test_a_print_no_earlier_stage_proposes_is_read_in_a_later_one_each_outline_looked_at_once(
+    universal: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where a stage's proposals read nothing, the next stage's are tried; an outline proposed
+    again there keeps the quick look it had."""
+    scene = _scene(universal, seed=1)
+    (truth,) = [p for p in scene.placements if p.kind == "drawing"]
+    gray, _, _ = universal.frame(scene.image, None)
+    every = universal._candidates(scene.image, gray)
+    centre = truth.corners.mean(0)
+    others = [c for c in every if np.linalg.norm(c.corners.mean(0) - centre) > 0.5 * np.ptp(truth.corners[:, 0])]
+    assert others and len(others) < len(every)
+    monkeypatch.setattr(universal.detector, "detect_in_stages", lambda image: iter([others, every]))
+    looked: list[object] = []
+    real = universal.aligner.quick_look
+    monkeypatch.setattr(universal.aligner, "quick_look", lambda p, c, g: looked.append(c) or real(p, c, g))
+    first = universal.locate(scene.image, first=True)
+    assert _payloads(first) == [np.asarray(truth.payload, np.uint8).tobytes()]
+    assert len(looked) == len(every) and {id(c) for c in looked} == {id(c) for c in every}
+
+
 def test_of_two_prints_the_first_read_comes_alone(universal: Locator) -> None:
     scene = _scene(universal, seed=3, drawings=2)
     every = _payloads(universal.locate(scene.image))

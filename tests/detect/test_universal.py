@@ -222,6 +222,32 @@ def test_flip_testing_finds_the_same_prints_in_a_photo_and_in_its_mirror_image()
     assert not same(squares(gray, False), squares(mirror, True))
 
 
+def test_the_detector_proposes_in_stages_the_photos_own_then_merged_with_its_mirror_images() -> None:
+    """``detect`` is the last stage; the first is the photo read once; a proposal the merge
+    leaves alone is the same candidate in both stages."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    detector = Locator(model, detector="universal").detector
+    scene = SceneMaker(model, severity="hard", seed=7).make(drawings=2, distractors=1)
+    gray = scene.image.astype(np.float32).mean(-1) / 255
+
+    def key(c) -> tuple:  # noqa: ANN001
+        return (c.corners.tobytes(), c.score)
+
+    own, merged = detector.detect_in_stages(gray)
+    assert [key(c) for c in merged] == [key(c) for c in detector.detect(gray)]
+    detector.flip_test = False
+    try:
+        (alone,) = detector.detect_in_stages(gray)
+        assert [key(c) for c in alone] == [key(c) for c in own] == [key(c) for c in detector.detect(gray)]
+    finally:
+        detector.flip_test = True
+    # each of the photo's own proposals is in the merged ones, as it was or averaged with its mirror image's
+    assert len(merged) >= len(own)
+    for c in own:
+        side = np.linalg.norm(c.corners - np.roll(c.corners, 1, 0), axis=1).mean()
+        assert min(np.linalg.norm(m.corners.mean(0) - c.corners.mean(0)) for m in merged) < 0.35 * side
+
+
 def test_the_network_is_loaded_once_per_process() -> None:
     assert shared_runner() is shared_runner()
 
