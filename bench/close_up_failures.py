@@ -23,7 +23,9 @@ and check; :meth:`Locator.decode_drawing <deepmorph_detect.locate.Locator.decode
 counts the misses that read there (*read at the truth*: the chain's alignment is to blame) apart
 from those that do not (the reading and its checks are). With it goes the chain's alignment
 error: the mean distance of its best alignment's frame corners from the truth, as a share of
-the frame's width.
+the frame's width; and, for each right word withdrawn, whether its morph fits the photo better
+than the unmorphed drawing there (each refined from that pose as the morph check refines): where
+it does not, the photo does not show the morph to template matching even at the truth.
 """
 
 from __future__ import annotations
@@ -51,27 +53,41 @@ def _reasons(check: Any) -> tuple[str, ...]:
     return check.bits.broken
 
 
-def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None]:
+def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None, float | None]:
     """Whether ``shot`` reads its payload at the simulator's pose, by the chain's reading from an
-    alignment; and the chain's best alignment's corner error (``None``: none aligned)."""
+    alignment; the chain's best alignment's corner error (``None``: none aligned); and how much
+    better the true payload's morph fits the photo than the unmorphed drawing, each refined by
+    the morph check's longer ECC solve from that pose (:meth:`PayloadChecker.fit_morph
+    <deepmorph_detect.check.PayloadChecker.fit_morph>`; ``None``: a solve diverged). At or
+    below 0 the photo does not show the morph to template matching even there."""
     from dataclasses import replace
 
     from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.check import MORPH_WIDTH, RECHECK_ITERATIONS, MorphFit
     from deepmorph_detect.metrics import corner_error
-    from deepmorph_detect.refine import LEVELS, aligned_at
+    from deepmorph_detect.refine import LEVELS, aligned_at, refine_at
 
     gray, camera, pyramid = locator.frame(shot.photo, None)
     # reached at no level of ECC (width 0): the morph check aligns the unmorphed drawing afresh
     truth = replace(aligned_at(pyramid, shot.homography, locator.template, LEVELS[-1]), width=0)
     located = locator.decode_drawing(gray, pyramid, truth, 1.0, camera, "truth", True, True)
     read = bool(located.result.ok and np.array_equal(located.result.payload, shot.payload))
+    checked = locator.checker.pyramid(shot.photo)
+    fit = MorphFit.between(
+        refine_at(checked, shot.homography, locator.template, MORPH_WIDTH, RECHECK_ITERATIONS),
+        refine_at(
+            checked, shot.homography, locator.checker.morphs.of_payload(shot.payload), MORPH_WIDTH, RECHECK_ITERATIONS
+        ),
+    )
+    gain = None if fit is None else fit.gain
     aligned = locator.alignments(shot.photo)
     if not aligned:
-        return read, None
+        return read, None, gain
     frame = viewbox_corners(locator.template.viewbox)
     true_quad = project(shot.homography, frame)
     best = max(aligned, key=lambda a: a.alignment.correlation).alignment.homography
-    return read, corner_error(project(best, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
+    error = corner_error(project(best, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
+    return read, error, gain
 
 
 def classify(
@@ -117,9 +133,10 @@ def classify(
             kind = "no word" if locator.aligns(shot.photo) else "not aligned"
         kinds[kind] += 1
         if at_truth and kind not in ("read", "narrower"):
-            read, error = read_at_truth(locator, shot)
+            read, error, gain = read_at_truth(locator, shot)
             misses.append({"close_up": index, "kind": kind, "read_at_truth": read,
-                           "alignment_error": None if error is None else round(error, 4)})  # fmt: skip
+                           "alignment_error": None if error is None else round(error, 4),
+                           "morph_gain_at_truth": None if gain is None else round(gain, 5)})  # fmt: skip
     return kinds, reasons, misses
 
 
@@ -171,14 +188,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.at_truth:
         print("\nMisses read at the simulator's pose (the chain's alignment to blame), and the chain's")
         print("alignment error (its best alignment's corners from the truth, share of the frame's width):")
-        headers = ["model", "severity", "misses", "read at the truth", "error median, read there", "not read"]
+        print("Right words withdrawn whose morph fits the photo no better than the unmorphed drawing even at")
+        print("that pose (each refined from it as the morph check refines):")
+        headers = ["model", "severity", "misses", "read at the truth", "error median, read there", "not read",
+                   "right word withdrawn", "no morph gain at the truth"]  # fmt: skip
         at_truth = []
         for r in rows:
             there = [m["alignment_error"] for m in r["misses"] if m["read_at_truth"]]
             not_there = [m["alignment_error"] for m in r["misses"] if not m["read_at_truth"]]
-            at_truth.append(
-                [r["model"], r["severity"], len(r["misses"]), r["read_at_truth"], _median(there), _median(not_there)]
-            )
+            withdrawn = [m for m in r["misses"] if m["kind"] == "right word withdrawn"]
+            unseen = sum(m["morph_gain_at_truth"] is None or m["morph_gain_at_truth"] <= 0 for m in withdrawn)
+            at_truth.append([r["model"], r["severity"], len(r["misses"]), r["read_at_truth"], _median(there),
+                             _median(not_there), len(withdrawn), unseen])  # fmt: skip
         print(table(headers, at_truth))
     write_json(args.out, {"benchmark": "close_up_failures", "environment": environment(), "rows": rows,
                           "wall_s": round(time.perf_counter() - start, 1)})  # fmt: skip
