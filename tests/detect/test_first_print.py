@@ -32,6 +32,14 @@ def _payloads(found: list) -> list[bytes]:  # noqa: ANN001
     return [np.asarray(d.result.payload, np.uint8).tobytes() for d in found if d.result.ok]
 
 
+def _calls(monkeypatch: pytest.MonkeyPatch, owner: object, name: str) -> list[tuple]:
+    """The arguments of each call of ``owner.name`` from now on (the method still runs)."""
+    calls: list[tuple] = []
+    real = getattr(owner, name)
+    monkeypatch.setattr(owner, name, lambda *args: calls.append(args) or real(*args))
+    return calls
+
+
 def test_the_first_print_is_read_before_the_other_drawing_proposed_above_it_is_searched(
     universal: Locator, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -39,10 +47,7 @@ def test_the_first_print_is_read_before_the_other_drawing_proposed_above_it_is_s
     searches it in flat light; the first print read does not, and gives the same payload."""
     scene = _scene(universal, seed=1)
     (truth,) = [p for p in scene.placements if p.kind == "drawing"]
-    flat_light: list[bool] = []
-    real = universal.aligner.in_flat_light
-    monkeypatch.setattr(universal.aligner, "in_flat_light", lambda *a: flat_light.append(True) or real(*a))
-
+    flat_light = _calls(monkeypatch, universal.aligner, "in_flat_light")
     every = universal.locate(scene.image)
     assert flat_light, "the other drawing's outline is searched in flat light"
     flat_light.clear()
@@ -60,9 +65,7 @@ def test_a_print_read_in_the_photo_itself_leaves_its_mirror_image_unread(
     the photo's own proposals ends the search before the network runs again."""
     scene = _scene(universal, seed=2)
     (truth,) = [p for p in scene.placements if p.kind == "drawing"]
-    runs: list[bool] = []
-    real = universal.detector._peaks
-    monkeypatch.setattr(universal.detector, "_peaks", lambda *a: runs.append(True) or real(*a))
+    runs = _calls(monkeypatch, universal.detector, "_peaks")
     every = universal.locate(scene.image)
     assert len(runs) == 2
     runs.clear()
@@ -85,10 +88,9 @@ def test_a_print_no_earlier_stage_proposes_is_read_in_a_later_one_each_outline_l
     others = [c for c in every if np.linalg.norm(c.corners.mean(0) - centre) > 0.5 * np.ptp(truth.corners[:, 0])]
     assert others and len(others) < len(every)
     monkeypatch.setattr(universal.detector, "detect_in_stages", lambda image: iter([others, every]))
-    looked: list[object] = []
-    real = universal.aligner.quick_look
-    monkeypatch.setattr(universal.aligner, "quick_look", lambda p, c, g: looked.append(c) or real(p, c, g))
+    calls = _calls(monkeypatch, universal.aligner, "quick_look")
     first = universal.locate(scene.image, first=True)
+    looked = [cand for _, cand, _ in calls]
     assert _payloads(first) == [np.asarray(truth.payload, np.uint8).tobytes()]
     assert len(looked) == len(every) and {id(c) for c in looked} == {id(c) for c in every}
 
