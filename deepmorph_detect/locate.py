@@ -354,8 +354,9 @@ class Locator:
         stage's. A candidate at the place of an earlier one whose quick look aligned it (the
         universal detector's proposal averaged with its mirror image's) is that earlier one: its
         print was read there already, and is not read again."""
+        # the earlier outlines aligned at once, each with its outline's homography (asked per candidate)
         aligned = [
-            (c, look)
+            ((c, look), self.aligner.homography(c.corners))
             for c, look in taken.values()
             if look is not None and look.final and self.aligner.accepts(look.alignment)
         ]
@@ -364,7 +365,7 @@ class Locator:
             key = np.asarray(cand.corners, np.float64).tobytes() + np.float64(cand.score).tobytes()
             if key not in taken:
                 H = self.aligner.homography(cand.corners)
-                there = [(c, look) for c, look in aligned if self.aligner.seen(H, [self.aligner.homography(c.corners)])]
+                there = [earlier for earlier, outline in aligned if self.aligner.seen(H, [outline])]
                 taken[key] = there[0] if there else (cand, self.aligner.quick_looks(pyramid, [cand], gray)[0])
             out.append(taken[key])
         return [c for c, _ in out], [look for _, look in out]
