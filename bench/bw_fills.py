@@ -36,13 +36,9 @@ def measure(path: Path, width: int, batch: int, repeats: int, move: float) -> di
     import torch
 
     from deepmorph_core.morphable import MorphableDrawing
-    from deepmorph_core.raster import RasterSettings, SoftRasterizer
 
     drawing = MorphableDrawing.load(flattened(path.read_text()).encode(), label=path.name, move=move)
-    rasters = {
-        name: SoftRasterizer(drawing.space, RasterSettings(width=width, flat_fills=flat), channel=drawing.channel)
-        for name, flat in SETTINGS.items()
-    }
+    rasters = {name: drawing.rasterizer(width, flat_fills=flat) for name, flat in SETTINGS.items()}
     values = drawing.values_from_unit(drawing.random_unit(batch, seed=1))
     times: dict[str, list[float]] = {name: [] for name in rasters}
     renders: dict[str, torch.Tensor] = {}

@@ -304,9 +304,9 @@ class DeepMorphModel:
         fills went flat, and renders them over their whole box as it was trained."""
         return RasterSettings(**{"flat_fills": None, **self.meta.raster, "width": width or self.width})
 
-    def rasterizer(self) -> SoftRasterizer:
-        """The soft rasterizer at the model's size and settings."""
-        return SoftRasterizer(self.drawing.space, self.raster_settings(), channel=self.drawing.channel)
+    def rasterizer(self, width: int | None = None) -> SoftRasterizer:
+        """The soft rasterizer at the model's settings, at ``width`` (``None``: the model's)."""
+        return SoftRasterizer(self.drawing.space, self.raster_settings(width), channel=self.drawing.channel)
 
     # -- encoding -------------------------------------------------------------------------
 

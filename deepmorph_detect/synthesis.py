@@ -40,7 +40,6 @@ import numpy as np
 import torch
 
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_core.raster import SoftRasterizer
 from deepmorph_core.registration import motion_images
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.light_field import grid_fields
@@ -341,9 +340,7 @@ class MorphSynthesis:
         self.template = template
         self.width = width
         self.renderer = renderer
-        self.rasterizer = SoftRasterizer(
-            model.drawing.space, model.raster_settings(width), channel=model.drawing.channel
-        )
+        self.rasterizer = model.rasterizer(width)
         # a colour drawing's renders stay in colour: printing and capture change each paint's
         # colour differently (faded ink, white balance), so no one gray of the render is the photo's
         self.colour = model.drawing.colour
