@@ -27,7 +27,8 @@ A model trained for prints at least :data:`PIXELS_MEASURED` px wide in the photo
 how well a linear reading of photos of the print tells each readable group's two ends apart, which
 sees how far each variable moves in the photo's pixels, the contrast of the edge it moves and how
 groups crowd each other. A model reads :data:`CHANNEL_SHARE` of the payload that reading carries,
-in codes correcting two bit errors (:data:`ECC_AT_PIXELS`, the codes it was measured with):
+in codes correcting two bit errors (:data:`ECC_AT_PIXELS`, the codes it was measured with) of at
+most :data:`LARGEST_CODE_MEASURED` code bits, as at 96 px:
 fitted on two drawings of ``bench/pixels_panel.py``'s rule and checked on seven more
 (``bench/README.md``). Below that width nothing larger was measured, and the 96-px figure stands.
 """
@@ -147,6 +148,12 @@ class CapacityReport:
                 f"carry {self.channel_payload} payload bits at 99 %; a trained model reads about "
                 f"{CHANNEL_SHARE:.2f} of that"
             )
+            share = math.floor(CHANNEL_SHARE * self.channel_payload + 1e-9)
+            if share > self.payload_bits:
+                lines.append(
+                    f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read "
+                    f"({share} payload bits would need more); above it only a training's validation says what reads"
+                )
         elif uncapped > LARGEST_CODE_MEASURED:
             lines.append(
                 f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read on a "
@@ -385,25 +392,30 @@ def _planned_code(
     """The code bits a model trained for prints ``print_px`` wide reads reliably, and the largest
     payload's code in them (BCH strengths ``ecc``, default :func:`plan_ecc`'s): for the default
     training, :data:`CODE_BITS_PER_GROUP` per readable group; from :data:`PIXELS_MEASURED` px,
-    :data:`CHANNEL_SHARE` of ``channel_payload``, the payload of the drawing's channel. Never less
-    than the default training's plan: a ``--pixels`` model reads prints at least as well."""
+    :data:`CHANNEL_SHARE` of ``channel_payload``, the payload of the drawing's channel, in at most
+    :data:`LARGEST_CODE_MEASURED` code bits (no larger code was measured to read at any width: a
+    colour emoji's channel of 213 bits would otherwise plan 102). Never less than the default
+    training's plan: a ``--pixels`` model reads prints at least as well."""
     default_bits = code_bits_for(readable_groups)
     default = largest_payload(default_bits, crc_bits, ECC_CHOICES if ecc is None else ecc)
     if not at_pixels(print_px):
         return default_bits, default
     if channel_payload is None:
         raise ValueError(f"a plan for prints {print_px} px wide needs the drawing's channel (capacity.with_channel)")
-    spec = _largest_code_within(math.floor(CHANNEL_SHARE * channel_payload + 1e-9), crc_bits, ecc or ECC_AT_PIXELS)
+    share = math.floor(CHANNEL_SHARE * channel_payload + 1e-9)
+    spec = _largest_code_within(share, crc_bits, ecc or ECC_AT_PIXELS, LARGEST_CODE_MEASURED)
     if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
         return default_bits, default
     return (0 if spec is None else spec.code_bits), spec
 
 
-def _largest_code_within(payload_bits: int, crc_bits: int | None, ecc: tuple[int, ...]) -> CodecSpec | None:
+def _largest_code_within(
+    payload_bits: int, crc_bits: int | None, ecc: tuple[int, ...], code_bits: int
+) -> CodecSpec | None:
     """The code (BCH strengths ``ecc``, the first that exists) of the largest payload of at most
-    ``payload_bits``; ``None`` when there is none."""
+    ``payload_bits`` whose code has at most ``code_bits``; ``None`` when there is none."""
     for payload in range(min(payload_bits, MAX_PAYLOAD_BITS), 0, -1):
-        codes = payload_codes(payload, crc_bits, ecc)
+        codes = [spec for spec in payload_codes(payload, crc_bits, ecc) if spec.code_bits <= code_bits]
         if codes:
             return codes[0]
     return None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -188,3 +189,19 @@ def test_auto_refuses_a_drawing_that_carries_nothing(tmp_path: Path) -> None:
     assert not (tmp_path / "c.dmm").exists()
     bad = CliRunner().invoke(app, ["train", str(camera), "--payload-bits", "lots", "--out", str(tmp_path / "c.dmm")])
     assert bad.exit_code == 2
+
+
+def test_a_plan_for_wide_prints_stops_at_the_largest_code_measured() -> None:
+    """A channel far above anything measured (a crowded colour emoji's) plans no more code bits
+    than the 96-px plan may, and says so."""
+    md = MorphableDrawing.load(DRAWING)
+    huge = replace(with_channel(predict(md), md), channel_payload=400)
+    wide = for_print(huge, 250)
+    assert wide.codec is not None and wide.codec.bch_t == 2
+    assert wide.code_bits <= LARGEST_CODE_MEASURED  # the largest t = 2 code within it
+    assert choose_codec(wide.payload_bits + 1, None, 2).code_bits > LARGEST_CODE_MEASURED
+    assert wide.payload_bits < math.floor(CHANNEL_SHARE * 400)
+    assert any(f"stops at {LARGEST_CODE_MEASURED} code bits" in line for line in wide.limits())
+    plain = for_print(replace(huge, channel_payload=40), 250)  # within it: the share, and no such line
+    assert plain.payload_bits == math.floor(CHANNEL_SHARE * 40)
+    assert not any("stops at" in line for line in plain.limits())
