@@ -70,6 +70,11 @@ WEAK = 0.3
 #: A shape whose removal changes the render's luminance by less than this is faint: its edges
 #: barely differ from what lies around them (a colour close to its neighbour's, or to paper).
 FAINT = 0.2
+#: What training kept of a colour drawing's plan (payload bits, ``train --payload-bits auto``) on
+#: the nine colour drawings measured (``bench/README.md``, *Reading colour prints* and *Two colour
+#: drawings nobody chose*): least, median and most. The plan counts shapes that show, not how
+#: faint their edges are in a photo, so it overshoots colour drawings by up to three times.
+COLOUR_KEPT = (0.31, 0.73, 1.0)
 
 
 @dataclass(frozen=True)
@@ -120,6 +125,8 @@ class CapacityReport:
         channel_payload: the payload a linear reading of photos of the print carries at 99 % at
             :data:`PIXELS_MEASURED` px (:func:`deepmorph_core.channel.read_channel`), which the
             plan for ``--pixels`` models starts from; ``None``: not measured.
+        colour: the drawing is in colour: its plan overshoots (:data:`COLOUR_KEPT`), and
+            :meth:`limits` says by how much.
     """
 
     n_variables: int
@@ -133,6 +140,7 @@ class CapacityReport:
     visible_mask: list[bool] = field(default_factory=list)
     print_px: int | None = None
     channel_payload: int | None = None
+    colour: bool = False
 
     def fits(self, spec: CodecSpec) -> bool:
         """Whether a code is within the prediction."""
@@ -159,6 +167,13 @@ class CapacityReport:
                 f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read on a "
                 f"crowded drawing ({self.readable_groups} readable variables would give {uncapped}); above it only "
                 "a training's validation says what reads"
+            )
+        if self.colour and self.payload_bits:
+            least, median, most = COLOUR_KEPT
+            lines.append(
+                f"a colour drawing's plan counts the shapes that show, not how faint their edges are in a photo: "
+                f"on nine colour drawings training kept {least:.2f}-{most:.2f} of it (median {median:.2f}); "
+                "`train --payload-bits auto` cuts a code its renders do not read"
             )
         hidden = self.n_variables - self.visible
         if hidden:
@@ -308,6 +323,7 @@ def predict(
         elements,
         static,
         [bool(v) for v in shown],
+        colour=bool(drawing.colour),
     )
     if at_pixels(print_px):
         report = for_print(with_channel(report, drawing), print_px, crc_bits, ecc)
@@ -442,6 +458,7 @@ __all__ = [
     "CODE_BITS_PER_GROUP",
     "CHANNEL_SHARE",
     "ECC_AT_PIXELS",
+    "COLOUR_KEPT",
     "LARGEST_CODE_MEASURED",
     "PIXELS_MEASURED",
     "CapacityReport",

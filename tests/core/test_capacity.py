@@ -16,6 +16,7 @@ from deepmorph.training.codec import train_model
 from deepmorph_core.capacity import (
     CHANNEL_SHARE,
     CODE_BITS_PER_GROUP,
+    COLOUR_KEPT,
     ECC_CHOICES,
     LARGEST_CODE_MEASURED,
     PIXELS_MEASURED,
@@ -205,3 +206,17 @@ def test_a_plan_for_wide_prints_stops_at_the_largest_code_measured() -> None:
     plain = for_print(replace(huge, channel_payload=40), 250)  # within it: the share, and no such line
     assert plain.payload_bits == math.floor(CHANNEL_SHARE * 40)
     assert not any("stops at" in line for line in plain.limits())
+
+
+def test_a_colour_drawings_plan_says_how_much_training_kept_of_such_plans() -> None:
+    """The count of shapes that show overshoots colour drawings (faint edges in a photo): the
+    report says by how much, where a black-and-white one does not."""
+    coloured = DRAWING.replace(b'stroke="black"', b'stroke="#1f4e9c"')  # a dark blue
+    report = predict(MorphableDrawing.load(coloured))
+    assert report.colour and report.payload_bits > 0
+    least, median, most = COLOUR_KEPT
+    assert 0 < least <= median <= most <= 1
+    assert any(f"training kept {least:.2f}-{most:.2f} of it" in line for line in report.limits())
+    assert report.to_json()["colour"] is True
+    plain = predict(MorphableDrawing.load(DRAWING))
+    assert not plain.colour and not any("colour drawing's plan" in line for line in plain.limits())
