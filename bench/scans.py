@@ -35,16 +35,25 @@ from _common import RESULTS, environment, set_threads, table, write_json  # noqa
 MARGIN = 0.2
 
 
-def scanned(png: bytes, dpi: int, blur_mm: float, noise: float, jpeg: int, seed: int) -> Any:
-    """The print of ``png`` as a flatbed scan shows it: on paper (:data:`MARGIN` each side),
-    blurred by ``blur_mm`` (sigma, on the sheet) at ``dpi``, with Gaussian noise of ``noise``
-    (share of full scale), through JPEG at quality ``jpeg``: an ``(H, W, 3)`` RGB uint8 array."""
+def png_rgb(png: bytes) -> Any:
+    """``png`` as the ``(H, W, 3)`` RGB uint8 array a user's file gives ``Model.decode``."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+
+def scanned(rgb: Any, dpi: int, blur_mm: float, noise: float, jpeg: int, seed: int) -> Any:
+    """The print ``rgb`` (``(H, W, 3)`` uint8, at ``dpi``) as a flatbed scan shows it: on paper
+    (:data:`MARGIN` each side), blurred by ``blur_mm`` (sigma, on the sheet), with Gaussian noise
+    of ``noise`` (share of full scale), through JPEG at quality ``jpeg``: an ``(H, W, 3)`` RGB
+    uint8 array."""
     import cv2
     import numpy as np
 
-    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-    h, w = rgb.shape[:2]
-    pad = round(MARGIN * w)
+    pad = round(MARGIN * rgb.shape[1])
     sheet = cv2.copyMakeBorder(rgb, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=(255, 255, 255)).astype(np.float32)
     sheet = cv2.GaussianBlur(sheet, (0, 0), blur_mm / 25.4 * dpi)
     sheet += np.random.default_rng(seed).normal(0.0, 255.0 * noise, sheet.shape).astype(np.float32)
@@ -104,13 +113,8 @@ def read_scans(path: Path, args: argparse.Namespace) -> dict[str, Any]:
         render, scan = Tally(), Tally()
         for i in range(args.n):
             payload = rng.getrandbits(model.payload_bits)
-            png = model.encode(payload).png(args.width_mm, dpi)
-            for tally, image in ((render, png), (scan, scanned(png, dpi, args.blur_mm, args.noise, args.jpeg, i))):
-                if isinstance(image, bytes):
-                    import cv2
-                    import numpy as np
-
-                    image = cv2.imdecode(np.frombuffer(image, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].copy()
+            rgb = png_rgb(model.encode(payload).png(args.width_mm, dpi))
+            for tally, image in ((render, rgb), (scan, scanned(rgb, dpi, args.blur_mm, args.noise, args.jpeg, i))):
                 start = time.perf_counter()
                 found = model.decode(image)
                 tally.add(found, payload, 1000 * (time.perf_counter() - start))

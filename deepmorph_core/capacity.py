@@ -156,7 +156,7 @@ class CapacityReport:
                 f"carry {self.channel_payload} payload bits at 99 %; a trained model reads about "
                 f"{CHANNEL_SHARE:.2f} of that"
             )
-            share = math.floor(CHANNEL_SHARE * self.channel_payload + 1e-9)
+            share = channel_share(self.channel_payload)
             if share > self.payload_bits:
                 lines.append(
                     f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read "
@@ -418,11 +418,16 @@ def _planned_code(
         return default_bits, default
     if channel_payload is None:
         raise ValueError(f"a plan for prints {print_px} px wide needs the drawing's channel (capacity.with_channel)")
-    share = math.floor(CHANNEL_SHARE * channel_payload + 1e-9)
-    spec = _largest_code_within(share, crc_bits, ecc or ECC_AT_PIXELS, LARGEST_CODE_MEASURED)
+    spec = _largest_code_within(channel_share(channel_payload), crc_bits, ecc or ECC_AT_PIXELS, LARGEST_CODE_MEASURED)
     if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
         return default_bits, default
     return (0 if spec is None else spec.code_bits), spec
+
+
+def channel_share(channel_payload: int) -> int:
+    """The payload bits a ``--pixels`` model is planned from a channel of ``channel_payload``:
+    :data:`CHANNEL_SHARE` of it, rounded down (before any code is fitted to it)."""
+    return math.floor(CHANNEL_SHARE * channel_payload + 1e-9)
 
 
 def _largest_code_within(
