@@ -57,9 +57,11 @@ def scanned(rgb: Any, dpi: int, blur_mm: float, noise: float, jpeg: int, seed: i
     sheet = cv2.copyMakeBorder(rgb, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=(255, 255, 255)).astype(np.float32)
     sheet = cv2.GaussianBlur(sheet, (0, 0), blur_mm / 25.4 * dpi)
     sheet += np.random.default_rng(seed).normal(0.0, 255.0 * noise, sheet.shape).astype(np.float32)
-    ok, buf = cv2.imencode(".jpg", np.clip(sheet, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, jpeg])
+    # OpenCV's JPEG codec takes and gives BGR: a colour scan's chroma is compressed as a scanner's
+    bgr = np.clip(sheet, 0, 255).astype(np.uint8)[..., ::-1]
+    ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, jpeg])
     assert ok
-    return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)[..., ::-1].copy()
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1].copy()
 
 
 class Tally:

@@ -33,6 +33,10 @@ LIGHT_SMOOTHING = 0.06
 #: Where the pixels left out are more than this share of the smoothing's weight, the light is
 #: taken from four times as wide a neighbourhood.
 MIN_WEIGHT = 0.05
+#: The light is smoothed on a grid shrunk so its sigma spans at most this many of the grid's
+#: pixels: the light is smooth at that scale by definition, and a blur as wide as a large print's
+#: (sigma 70 px at 1181 px, 280 px for the wide one) took 23 s on the full crop, 0.1 s shrunk.
+SMOOTHING_GRID_SIGMA = 8.0
 EDGE_STEP = 0.03  # a reflectance step this large between neighbouring pixels is an edge
 DARKEST_REFLECTANCE = 0.05  # the photo is divided by no reflectance darker than this
 
@@ -53,7 +57,22 @@ def smoothed_light(ratio: np.ndarray, weight: np.ndarray, sigma: float) -> np.nd
     """The light on a print from ``ratio`` (photo over reflectance, already multiplied by
     ``weight``, the mask of the pixels it is read at): their Gaussian-weighted mean within
     ``sigma`` pixels (a normalised convolution), or within four times that where the pixels read
-    carry less than :data:`MIN_WEIGHT` of the weight; 1 where none is near at all."""
+    carry less than :data:`MIN_WEIGHT` of the weight; 1 where none is near at all. A ``sigma``
+    over :data:`SMOOTHING_GRID_SIGMA` is applied on a grid shrunk (by area) to bring it there,
+    and the light scaled back up."""
+    shrink = SMOOTHING_GRID_SIGMA / sigma
+    h, w = ratio.shape
+    small = (max(1, round(w * shrink)), max(1, round(h * shrink)))
+    if shrink >= 1.0 or small == (w, h):
+        return _normalised_light(ratio, weight, sigma)
+    ratio_small = cv2.resize(ratio, small, interpolation=cv2.INTER_AREA)
+    weight_small = cv2.resize(weight, small, interpolation=cv2.INTER_AREA)
+    light = _normalised_light(ratio_small, weight_small, SMOOTHING_GRID_SIGMA)
+    return cv2.resize(light, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def _normalised_light(ratio: np.ndarray, weight: np.ndarray, sigma: float) -> np.ndarray:
+    """:func:`smoothed_light` at full resolution."""
     light = cv2.GaussianBlur(ratio, (0, 0), sigma)
     support = cv2.GaussianBlur(weight, (0, 0), sigma)
     wide_light = cv2.GaussianBlur(ratio, (0, 0), 4 * sigma)
@@ -131,4 +150,11 @@ class TemplateLight:
         return found
 
 
-__all__ = ["EDGE_MARGINS", "LIGHT_SMOOTHING", "TemplateLight", "far_from_edges", "smoothed_light"]
+__all__ = [
+    "EDGE_MARGINS",
+    "LIGHT_SMOOTHING",
+    "SMOOTHING_GRID_SIGMA",
+    "TemplateLight",
+    "far_from_edges",
+    "smoothed_light",
+]
