@@ -1,5 +1,9 @@
 """Image files: reading photos and scans (EXIF orientation, pixel limits), writing PNGs.
 
+OpenCV decodes every format but HEIF/HEIC, the format iPhones take photos in; those are
+decoded by libheif (``pillow-heif``, registered with Pillow here), which also applies the
+photo's stored turn.
+
 Reading refuses, with one clear error, what is not an image, what is too large to decode
 (judged from the header, before any pixel is decoded) and what is too small to hold a
 drawing. Writing encodes in memory and then writes atomically, so a failed write never leaves
@@ -13,6 +17,7 @@ import os
 import re
 import sys
 import tempfile
+import textwrap
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,6 +26,7 @@ from typing import Union
 
 import cv2
 import numpy as np
+import pillow_heif
 from PIL import Image
 
 from deepmorph_core.errors import DeepMorphError
@@ -32,6 +38,12 @@ MAX_IMAGE_BYTES = 256 * 1024 * 1024
 
 
 EXIF_ORIENTATION = 0x0112  # the EXIF tag of how a viewer turns the stored pixels
+
+#: The brands of an ISO media file's ``ftyp`` box that say HEIF: an iPhone's ``heic``, its
+#: sequences and the generic image brands. Pillow opens them through libheif, which applies the
+#: stored turn (``irot``/``imir``) and reports the EXIF orientation as 1, so it is not turned twice.
+HEIF_BRANDS = (b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs", b"mif1", b"msf1")
+pillow_heif.register_heif_opener()
 
 
 MIN_IMAGE_SIDE = 16  # pixels: smaller images cannot hold a drawing the detector or decoder could read
@@ -77,6 +89,8 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         except cv2.error:  # OpenCV's own pixel limit, from the header (deepmorph_core sets it)
             raise DeepMorphError(f"{path}: its header claims too many pixels to decode") from None
+    if img is None and is_heif(data):
+        img = _heif_bgr(data, path)
     if img is None:
         why = library_said(said[0]) if said else ""
         raise DeepMorphError(
@@ -100,6 +114,33 @@ def read_image_bgr(path: str | Path) -> np.ndarray:
         alpha = img[..., 3:4].astype(np.float32) / 255.0
         return (img[..., :3].astype(np.float32) * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
     return np.ascontiguousarray(img[..., :3])
+
+
+def is_heif(data: np.ndarray) -> bool:
+    """Whether the file's bytes ``data`` start as a HEIF image (an ISO media ``ftyp`` box with a
+    brand of :data:`HEIF_BRANDS`)."""
+    head = data[:12].tobytes()
+    return len(head) == 12 and head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
+
+
+def _heif_bgr(data: np.ndarray, path: Path) -> np.ndarray:
+    """A HEIF file's bytes decoded by libheif, turned as stored: ``(H, W, 3|4)`` uint8 BGR(A)
+    (10- and 12-bit photos brought to 8 bits).
+
+    Raises:
+        DeepMorphError: a file libheif cannot decode, saying what it said.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(io.BytesIO(data.tobytes())) as img:
+                rgb = np.asarray(img.convert("RGBA" if "A" in img.getbands() else "RGB"))
+    except Image.DecompressionBombError:
+        raise DeepMorphError(f"{path}: its header claims far too many pixels to decode") from None
+    except Exception as exc:  # libheif's errors come as several types; each is a bad file
+        said = textwrap.shorten(str(exc), 120, placeholder=" ...")
+        raise DeepMorphError(f"{path}: a HEIF image libheif cannot decode{': ' + said if said else ''}") from None
+    return np.ascontiguousarray(rgb[..., [2, 1, 0, 3][: rgb.shape[2]]])
 
 
 def image_input(source: ImageLike, bgr: bool = False) -> np.ndarray:

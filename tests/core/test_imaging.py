@@ -260,6 +260,67 @@ def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(t
             read_image_bgr(bomb)
 
 
+def _turned(pixels: np.ndarray, orientation: int) -> np.ndarray:
+    """``pixels`` as a viewer shows them under EXIF ``orientation`` (the tag's definition)."""
+    return {
+        1: lambda a: a,
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1],
+        5: lambda a: np.swapaxes(a, 0, 1),
+        6: lambda a: np.rot90(a, -1),
+        7: lambda a: np.rot90(np.swapaxes(a, 0, 1), 2),
+        8: lambda a: np.rot90(a, 1),
+    }[orientation](pixels)
+
+
+def test_a_heic_photo_is_read_turned_as_stored_once(tmp_path) -> None:
+    """iPhones take HEIC photos, which OpenCV cannot decode: libheif decodes them, turned as
+    the file says (the EXIF tag written as HEIF's own turn), and never turned a second time.
+    Each of the eight orientations reads nearest its own turn of the pixels."""
+    from PIL import Image
+
+    from deepmorph_core.image_io import is_heif, read_image_bgr
+
+    y, x = np.mgrid[0:60, 0:90]
+    pixels = np.stack([2 * x, 4 * y, np.full_like(x, 128)], axis=-1).astype(np.uint8)
+    pixels[5:25, 10:40] = (255, 255, 0)  # a block near one corner: no turn looks like another
+    for orientation in range(1, 9):
+        path = tmp_path / f"o{orientation}.heic"
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        Image.fromarray(pixels).save(path, exif=exif.tobytes(), quality=95)
+        assert is_heif(np.fromfile(path, np.uint8))
+        read = read_image_bgr(path)[..., ::-1].astype(np.float32)
+        errors = {
+            k: float(np.abs(read - _turned(pixels, k)).mean())
+            for k in range(1, 9)
+            if _turned(pixels, k).shape == read.shape
+        }
+        assert min(errors, key=errors.get) == orientation and errors[orientation] < 4.0, (orientation, errors)
+
+
+def test_a_print_photographed_as_heic_reads_its_payload_and_a_cut_heic_says_so(tmp_path) -> None:
+    from PIL import Image
+
+    import deepmorph
+    from deepmorph_core.bundled import BUNDLED_MODEL
+
+    model = deepmorph.load(BUNDLED_MODEL)
+    png = tmp_path / "print.png"
+    png.write_bytes(model.encode(0x3039).png(50, 150))
+    heic = tmp_path / "IMG_0001.HEIC"
+    Image.open(png).save(heic, format="HEIF", quality=80)
+    found = [d for d in model.decode(heic) if d.ok]
+    assert [d.payload.int for d in found] == [0x3039]
+    cut = tmp_path / "cut.heic"
+    cut.write_bytes(heic.read_bytes()[: heic.stat().st_size // 2])
+    with pytest.raises(DeepMorphError) as caught:
+        read_image(cut)
+    said = str(caught.value)
+    assert said.startswith(f"{cut}: a HEIF image libheif cannot decode: ") and "\n" not in said
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     shape=st.tuples(st.integers(1, 40), st.integers(1, 40)),
