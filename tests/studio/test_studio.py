@@ -537,6 +537,25 @@ def test_a_registry_entry_appears_when_an_uploaded_photo_is_decoded(page, server
     screenshot(page, "scan-photo")
 
 
+def test_an_iphone_heic_photo_is_scanned(page, server: Server, tmp_path: Path) -> None:
+    """An iPhone's photos are HEIC: the upload button offers them and the scan reads one."""
+    import numpy as np
+    from PIL import Image
+
+    from deepmorph_core.bundled import BUNDLED_MODEL
+    from deepmorph_core.model import DeepMorphModel
+    from deepmorph_detect.scenes import close_up_photo
+
+    open_studio(page, server, "scan")
+    assert ".heic" in page.get_attribute("#photo-file", "accept").split(",")
+    art = DeepMorphModel.load(BUNDLED_MODEL).code("0x1F2E3D").render(360)
+    photo = tmp_path / "IMG_0042.HEIC"
+    Image.fromarray(close_up_photo(art, "medium", np.random.default_rng(2))[..., ::-1]).save(photo, format="HEIF")
+    status, body = request(server, "/api/models/ghost/scan", token=server.token, data=photo.read_bytes())
+    assert status == 200, body
+    assert [d["payload"]["hex"] for d in json.loads(body)["detections"] if d["ok"]] == ["0x1F2E3D"], body
+
+
 def test_a_printed_pdf_of_the_ghost_in_two_clicks(page, server: Server, tmp_path: Path) -> None:
     clicks = 0
 
