@@ -260,27 +260,13 @@ def test_read_image_follows_exif_orientation_and_refuses_bombs_before_decoding(t
             read_image_bgr(bomb)
 
 
-def _turned(pixels: np.ndarray, orientation: int) -> np.ndarray:
-    """``pixels`` as a viewer shows them under EXIF ``orientation`` (the tag's definition)."""
-    return {
-        1: lambda a: a,
-        2: lambda a: a[:, ::-1],
-        3: lambda a: a[::-1, ::-1],
-        4: lambda a: a[::-1],
-        5: lambda a: np.swapaxes(a, 0, 1),
-        6: lambda a: np.rot90(a, -1),
-        7: lambda a: np.rot90(np.swapaxes(a, 0, 1), 2),
-        8: lambda a: np.rot90(a, 1),
-    }[orientation](pixels)
-
-
 def test_a_heic_photo_is_read_turned_as_stored_once(tmp_path) -> None:
     """iPhones take HEIC photos, which OpenCV cannot decode: libheif decodes them, turned as
     the file says (the EXIF tag written as HEIF's own turn), and never turned a second time.
     Each of the eight orientations reads nearest its own turn of the pixels."""
     from PIL import Image
 
-    from deepmorph_core.image_io import is_heif, read_image_bgr
+    from deepmorph_core.image_io import is_heif, read_image_bgr, upright
 
     y, x = np.mgrid[0:60, 0:90]
     pixels = np.stack([2 * x, 4 * y, np.full_like(x, 128)], axis=-1).astype(np.uint8)
@@ -293,9 +279,9 @@ def test_a_heic_photo_is_read_turned_as_stored_once(tmp_path) -> None:
         assert is_heif(np.fromfile(path, np.uint8))
         read = read_image_bgr(path)[..., ::-1].astype(np.float32)
         errors = {
-            k: float(np.abs(read - _turned(pixels, k)).mean())
+            k: float(np.abs(read - upright(pixels, k)).mean())
             for k in range(1, 9)
-            if _turned(pixels, k).shape == read.shape
+            if upright(pixels, k).shape == read.shape
         }
         assert min(errors, key=errors.get) == orientation and errors[orientation] < 4.0, (orientation, errors)
 
