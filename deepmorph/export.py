@@ -1,9 +1,10 @@
 """``deepmorph export``: a model's networks as ONNX files, with a manifest, for other programs.
 
 :func:`export_model` writes ``decoder.onnx``, ``detector.onnx`` (when the model has a detector
-that can be exported) and ``manifest.json`` into a folder, all or none, and can store the graphs
-in a bundle (an old bundle then needs no export when it is loaded). The graphs are the ones the
-bundle stores, else exported now and checked against PyTorch. The manifest
+that can be exported), ``verifier.onnx`` (when it has a proposal verifier) and ``manifest.json``
+into a folder, all or none, and can store the graphs in a bundle (an old bundle then needs no
+export when it is loaded). The graphs are the ones the bundle stores, else exported now and
+checked against PyTorch. The manifest
 (:func:`manifest`) says what each graph takes and gives, and the numbers a host program needs
 for the steps around them: the template and its geometry, the framing, the code
 (``docs/export.md``).
@@ -26,9 +27,17 @@ from deepmorph_core.reading_channel import channel_name
 from deepmorph_detect.network import INPUT_SIZE, STRIDE
 from deepmorph_detect.read import RECTIFY_WIDTH_FACTOR
 from deepmorph_detect.universal import UniversalDetector, ink_square
+from deepmorph_detect.verifier import (
+    CROP_GROWTH,
+    CROP_PERCENTILES,
+    CROP_RANGE,
+    CROP_SIZE,
+    stored_verifier,
+    verifier_graph,
+)
 
 FORMAT = "deepmorph-export/1"
-FILES = {"decoder": "decoder.onnx", "detector": "detector.onnx"}
+FILES = {"decoder": "decoder.onnx", "detector": "detector.onnx", "verifier": "verifier.onnx"}
 
 
 @dataclass
@@ -79,6 +88,9 @@ def model_graphs(model: DeepMorphModel, registry: Registry | None = None) -> tup
             notes.append(f"no detector: the {meta.name!r} detector has no ONNX graph")
         else:
             model.graphs["detector"] = graph
+    verifier = stored_verifier(model)
+    if verifier is not None and "verifier" not in model.graphs:
+        model.graphs["verifier"] = verifier_graph(verifier)
     return {**{name: model.graphs[name] for name in FILES if name in model.graphs}, **shipped}, notes
 
 
@@ -121,6 +133,7 @@ def manifest(model: DeepMorphModel, graphs: dict[str, StoredGraph]) -> dict[str,
             "max_abs_diff_vs_pytorch": decoder.max_abs_diff,
         },
         "detector": None,
+        "verifier": None,
         "template": {
             "svg": md.to_svg(md.neutral_values()[0]),
             "viewbox": viewbox,
@@ -177,6 +190,33 @@ def manifest(model: DeepMorphModel, graphs: dict[str, StoredGraph]) -> dict[str,
                 "drawing's ink), not the frame corners: map it to template.frame_corners through the "
                 "homography from these points to the quadrilateral",
             }
+    if "verifier" in graphs and model.meta.verifier is not None:
+        ver = graphs["verifier"].meta
+        out["verifier"] = {
+            "file": FILES["verifier"],
+            "sha256": ver.sha256,
+            "opset": ver.opset,
+            "input": {
+                "name": "crops",
+                "shape": [4, 1, CROP_SIZE, CROP_SIZE],
+                "type": "float32",
+                "values": f"the photo's gray (the decoder's channel) inside a detector quadrilateral grown by "
+                f"{CROP_GROWTH} about its corners' mean, warped bilinearly to {CROP_SIZE} x {CROP_SIZE} pixels "
+                "(the quadrilateral's corners at the outer corners of the corner pixels, edges repeated), "
+                f"stretched so that its {CROP_PERCENTILES[0]:g}th and {CROP_PERCENTILES[1]:g}th percentiles are "
+                f"0 and 1, clipped to {list(CROP_RANGE)}; then that crop turned 0, 1, 2 and 3 quarter turns",
+            },
+            "output": {
+                "name": "probability",
+                "shape": [4],
+                "meaning": "the probability that each turn of the crop is this drawing; the proposal's score is "
+                "the largest",
+            },
+            "threshold": model.meta.verifier.threshold,
+            "meaning": "a universal detector's proposal scored below the threshold is another drawing: the wider "
+            "alignment searches can be skipped for it",
+            "max_abs_diff_vs_pytorch": ver.max_abs_diff,
+        }
     return out
 
 

@@ -17,7 +17,7 @@ def deepmorph_register_commands(cli: typer.Typer) -> None:
     """Add ``registry`` (``add``, ``list``, ``show``, ``remove``, ``export``:
     :mod:`deepmorph.cli.registry_commands`), ``studio`` (the local web app:
     :mod:`deepmorph.studio.cli`), then ``decode``, ``synth``, ``bench-scenes``, ``bench-photos``,
-    ``train-detector``, ``export`` and ``demo`` (:mod:`deepmorph.cli.photo_commands`)."""
+    ``train-detector``, ``train-verifier``, ``export`` and ``demo`` (:mod:`deepmorph.cli.photo_commands`)."""
     from deepmorph.cli import photo_commands, registry_commands
     from deepmorph.cli.frame import add_commands
     from deepmorph.studio.cli import studio

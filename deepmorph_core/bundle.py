@@ -189,6 +189,58 @@ class DetectorMeta(BaseModel):
     earlier: list[dict[str, Any]] = Field(default_factory=list)
 
 
+class VerifierCheck(BaseModel):
+    """A proposal verifier measured on scenes held out of its training: the universal
+    detector's proposals there, labelled by the placement nearest each.
+
+    Attributes:
+        scenes: scenes looked at (half medium, half hard).
+        prints, prints_kept: proposals of this drawing's prints, and those scored at or above
+            the threshold.
+        others, others_turned_away: proposals of anything else, and those scored below it.
+        searched_prints, searched_prints_kept, searched_others, searched_others_turned_away:
+            the same among proposals whose quick look is not final: those the verifier decides
+            on (the others never reach it).
+        lowest_print_score: the lowest score of a print's proposal.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    scenes: int = Field(ge=0)
+    prints: int = Field(ge=0)
+    prints_kept: int = Field(ge=0)
+    others: int = Field(ge=0)
+    others_turned_away: int = Field(ge=0)
+    searched_prints: int = Field(ge=0)
+    searched_prints_kept: int = Field(ge=0)
+    searched_others: int = Field(ge=0)
+    searched_others_turned_away: int = Field(ge=0)
+    lowest_print_score: float | None = Field(default=None, ge=0, le=1)
+
+
+class VerifierMeta(BaseModel):
+    """The proposal verifier stored beside the codec networks (``deepmorph train-verifier``,
+    :mod:`deepmorph_detect.verifier`): its weights are the tensors ``verifier.*``.
+
+    Attributes:
+        threshold: a blind proposal scored below it skips the wider searches.
+        config: the training settings.
+        check: how it did on scenes held out of its training.
+        crops: training crops, and how many of them were the drawing's prints.
+        threads, elapsed_s: torch threads and seconds of the whole run.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    threshold: float = Field(gt=0, lt=1)
+    config: dict[str, Any]
+    check: VerifierCheck
+    crops: int = Field(ge=0)
+    print_crops: int = Field(ge=0)
+    threads: int = Field(ge=1)
+    elapsed_s: float = Field(ge=0)
+
+
 class GraphMeta(BaseModel):
     """An ONNX graph stored in a bundle: tensor ``graph.<name>`` holds its bytes; it was exported
     from the network whose weights the bundle files under ``<name>.``.
@@ -241,6 +293,8 @@ class BundleMeta(BaseModel):
     train: dict[str, Any]
     record: TrainingRecord
     detector: DetectorMeta | None = None
+    # bundles written before the verifier existed have none
+    verifier: VerifierMeta | None = None
     tuning: list[dict[str, Any]] = Field(default_factory=list)  # decoder tunings after training, oldest first
     # the last validation of the codec as it now is (after training, tuning or `deepmorph validate`)
     validation: list[ValidationRecord] = Field(default_factory=list, max_length=16)

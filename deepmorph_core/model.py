@@ -100,7 +100,7 @@ class DeepMorphModel:
         encoder, decoder: the networks.
         width: image width (pixels) the decoder reads; height follows the drawing's aspect.
         meta: the bundle metadata (configuration, versions, training record).
-        graphs: ONNX graphs of the networks by name (``decoder``, ``detector``), each checked
+        graphs: ONNX graphs of the networks by name (``decoder``, ``detector``, ``verifier``), each checked
             against PyTorch when it was made; saved with the bundle while their weights stay.
         source: the file the model was loaded from (named in messages), if any.
     """
@@ -113,6 +113,7 @@ class DeepMorphModel:
     meta: BundleMeta
     extra_tensors: dict[str, Tensor] = field(default_factory=dict)
     detector_state: dict[str, Tensor] = field(default_factory=dict)
+    verifier_state: dict[str, Tensor] = field(default_factory=dict)
     graphs: dict[str, StoredGraph] = field(default_factory=dict)
     source: str | None = None
 
@@ -204,13 +205,13 @@ class DeepMorphModel:
         )
         nets = {k: v for k, v in tensors.items() if k.startswith(("encoder.", "decoder."))}
         model.detector_state = {k: v for k, v in tensors.items() if k.startswith("detector.")}
+        model.verifier_state = {k: v for k, v in tensors.items() if k.startswith("verifier.")}
         model.extra_tensors = {
-            k: v
-            for k, v in tensors.items()
-            if k not in nets and k not in model.detector_state and not k.startswith("graph.")
+            k: v for k, v in tensors.items() if k not in nets and not k.startswith(("detector.", "verifier.", "graph."))
         }
-        if meta.detector is not None and not model.detector_state:
-            raise DeepMorphError(f"{path}: not a usable DeepMorph model file (detector weights are missing)")
+        for name, state in (("detector", model.detector_state), ("verifier", model.verifier_state)):
+            if getattr(meta, name) is not None and not state:
+                raise DeepMorphError(f"{path}: not a usable DeepMorph model file ({name} weights are missing)")
         for name, network in (("encoder", model.encoder), ("decoder", model.decoder)):
             given = {k[len(name) + 1 :]: v for k, v in nets.items() if k.startswith(name + ".")}
             check_weights(path, name, network.state_dict(), given)
@@ -221,10 +222,12 @@ class DeepMorphModel:
         return model
 
     def tensors(self) -> dict[str, Tensor]:
-        """The networks' weights as the bundle files them (``encoder.``, ``decoder.``, ``detector.``)."""
+        """The networks' weights as the bundle files them (``encoder.``, ``decoder.``, ``detector.``,
+        ``verifier.``)."""
         tensors = {f"encoder.{k}": v for k, v in self.encoder.state_dict().items()}
         tensors.update({f"decoder.{k}": v for k, v in self.decoder.state_dict().items()})
         tensors.update(self.detector_state)
+        tensors.update(self.verifier_state)
         return tensors
 
     def save(self, path: str | Path, extra: dict[str, Tensor] | None = None) -> None:
@@ -406,6 +409,7 @@ class DeepMorphModel:
             "record": m.record.model_dump(),
             "versions": m.versions,
             "detector": None if m.detector is None else m.detector.model_dump(),
+            "verifier": None if m.verifier is None else m.verifier.model_dump(),
             "tuning": m.tuning,
             "validation": [r.model_dump() for r in m.validation],
             "graphs": {name: graph.meta.model_dump() for name, graph in self.graphs.items()},

@@ -33,6 +33,7 @@ from deepmorph_detect.refine import (
     refine,
     refine_affine,
 )
+from deepmorph_detect.verifier import ProposalVerifier
 
 MIN_CORRELATION = 0.55  # ECC correlation below which a candidate is not this drawing
 # a detector outline aligned in the photo below this is aligned in flat light too, and the better
@@ -114,6 +115,8 @@ class Aligner:
             one print more in 200 scenes. Over 1,500 scenes of four black-and-white drawings
             the quick path's read none the wider searches missed, the sweep's none in 2,000,
             and each other drawing paid for both.
+        verifier: the model's proposal verifier (:mod:`~deepmorph_detect.verifier`), where it
+            stores one: a blind outline it turns away skips the wider searches.
     """
 
     def __init__(
@@ -124,8 +127,10 @@ class Aligner:
         view_width: int,
         flat_sheet: bool = True,
         blind_fallback: bool = True,
+        verifier: ProposalVerifier | None = None,
     ) -> None:
         self.template = template
+        self.verifier = verifier
         self.flat_sheet = flat_sheet
         self.blind_fallback = blind_fallback
         self.min_correlation = min_correlation
@@ -288,6 +293,8 @@ class Aligner:
         the drawing takes them in both, which finds a few more prints that do not read. An
         outline (not a faint blind one) aligned in neither is aligned as a flat sheet
         (:meth:`outline_as_flat_sheet`), where this aligner does that (:attr:`flat_sheet`).
+        A blind outline the model's :attr:`verifier` turns away keeps its quick look: it is
+        another drawing, and those searches were most of a frame's time.
         ``look``: the outline's :meth:`quick_look`, where it was taken already.
         """
         look = look or self.quick_look(pyramid, cand, gray)
@@ -296,6 +303,8 @@ class Aligner:
             return pyramid, alignment
         # weak, or a blind outline below the aim: flat light searches again (a look without gray is final)
         assert gray is not None
+        if cand.blind and self.verifier is not None and self.verifier.turns_away(gray, cand.corners):
+            return pyramid, alignment
         seen_in, missed = pyramid, not self.accepts(alignment)
         flat = self.in_flat_light(gray, cand.corners)
         # the wider searches follow: a blind outline's quick path here ends short of OpenCV's

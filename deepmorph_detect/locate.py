@@ -55,6 +55,7 @@ from deepmorph_detect.refine import LEVELS, Alignment, ImagePyramid, Template
 from deepmorph_detect.results import Located, across_px, along_tilt_px, measure_width, refused_result
 from deepmorph_detect.synthesis import CHECK_WIDTH, MorphSynthesis
 from deepmorph_detect.template_light import TemplateLight
+from deepmorph_detect.verifier import verifier_for
 
 # a drawing whose payload is not read must align this much better to be reported: no payload
 # vouches for it, so another drawing aligning just above the bar is not reported
@@ -169,6 +170,8 @@ class Locator:
         device: where the detector and decoder networks run (``auto``, ``cpu``, ``cuda``:
             :func:`~deepmorph_core.device.resolve_device`); alignment, reading by synthesis and
             the checks run on the CPU whatever it is.
+        use_verifier: use the model's proposal verifier where it stores one
+            (:mod:`~deepmorph_detect.verifier`; ``False``: as a model without one, to compare).
     """
 
     def __init__(
@@ -178,6 +181,7 @@ class Locator:
         min_correlation: float = MIN_CORRELATION,
         registry: Registry | None = None,
         device: str = "cpu",
+        use_verifier: bool = True,
     ) -> None:
         self.model = model
         self.device = resolve_device(device)
@@ -202,8 +206,9 @@ class Locator:
         # the flat sheet read more close-ups of colour drawings, none of black-and-white ones, and
         # OpenCV's fallback in flat light's quick path one more colour print, no black-and-white one
         self.aligner = Aligner(
-            self.template, min_correlation, thickness, view_width, flat_sheet=md.colour, blind_fallback=md.colour
-        )
+            self.template, min_correlation, thickness, view_width, flat_sheet=md.colour, blind_fallback=md.colour,
+            verifier=verifier_for(model, self.device) if use_verifier else None,
+        )  # fmt: skip
         # a light that hides a faint colour fill does not hide black ink (decode_on_edges)
         self.realigns_on_edges = md.colour
         #: a blind proposer's drawing aligned below this is read by its first looks only
@@ -240,9 +245,9 @@ class Locator:
     ) -> tuple[np.ndarray, Camera, ImagePyramid, list[Aligned]]:
         """:meth:`frame`, and the detector's proposals in ``image`` that align to the drawing."""
         gray, cam, pyramid = self.frame(image, camera)
-        return gray, cam, pyramid, self.aligner.verify(pyramid, self._candidates(image, gray), gray)
+        return gray, cam, pyramid, self.aligner.verify(pyramid, self.proposals(image, gray), gray)
 
-    def _candidates(self, image: np.ndarray, gray: np.ndarray) -> list[Candidate]:
+    def proposals(self, image: np.ndarray, gray: np.ndarray) -> list[Candidate]:
         """The detector's proposals in ``image`` (``gray``: it in the channel the model reads)."""
         *_, every = self._candidate_stages(image, gray)
         return every
@@ -309,7 +314,7 @@ class Locator:
                         return [located]
                     decoded[id(aligned.alignment)] = (aligned.alignment, located, reported)
         else:
-            candidates = self._candidates(image, gray)
+            candidates = self.proposals(image, gray)
             looks = self.aligner.quick_looks(pyramid, candidates, gray)
         found = self.aligner.verify(pyramid, candidates, gray, looks)
         results = self.decode_each(gray, found, cam, soft, decoded)

@@ -671,6 +671,18 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
                 + f"{json.dumps(drec['metrics'])}",
             )
         )
+    ver = data["verifier"]
+    if ver is not None:
+        c = ver["check"]
+        rows.append(
+            (
+                "verifier",
+                f"threshold {ver['threshold']:.3g}; held-out scenes {c['scenes']}: prints kept "
+                f"{c['prints_kept']}/{c['prints']}, other proposals turned away "
+                f"{c['others_turned_away']}/{c['others']}; {ver['elapsed_s']:.0f} s "
+                f"({ver['threads']} thread{'s' if ver['threads'] != 1 else ''})",
+            )
+        )
     for run in data["tuning"]:
         rows.append(
             (

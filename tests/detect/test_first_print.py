@@ -83,7 +83,7 @@ def test_a_print_no_earlier_stage_proposes_is_read_in_a_later_one_each_outline_l
     scene = _scene(universal, seed=1)
     (truth,) = [p for p in scene.placements if p.kind == "drawing"]
     gray, _, _ = universal.frame(scene.image, None)
-    every = universal._candidates(scene.image, gray)
+    every = universal.proposals(scene.image, gray)
     centre = truth.corners.mean(0)
     others = [c for c in every if np.linalg.norm(c.corners.mean(0) - centre) > 0.5 * np.ptp(truth.corners[:, 0])]
     assert others and len(others) < len(every)
@@ -109,7 +109,7 @@ def test_quick_looks_taken_first_leave_every_alignment_as_it_was(universal: Loca
     for seed in (1, 4, 13):
         scene = _scene(universal, seed)
         gray, _, pyramid = universal.frame(scene.image, None)
-        candidates = universal._candidates(scene.image, gray)
+        candidates = universal.proposals(scene.image, gray)
         looks = universal.aligner.quick_looks(pyramid, candidates, gray)
         assert any(look is not None and not look.final for look in looks)
         before = universal.aligner.verify(pyramid, candidates, gray, looks)
