@@ -34,7 +34,7 @@ class Counted:
     """Wraps a verifier's ``turns_away``: how often it was asked and said yes."""
 
     def __init__(self, verifier: Any) -> None:
-        self.verifier, self.asked, self.turned = verifier, 0, 0
+        self.asked, self.turned = 0, 0
         self.real = verifier.turns_away
         verifier.turns_away = self
 

@@ -146,31 +146,18 @@ class ProposalVerifier:
     def __init__(self, net: VerifierNet, threshold: float, model: DeepMorphModel | None = None, device: str = "cpu"):
         self.threshold = threshold
         eager = TurnedProbabilities(fused_for_inference(net.eval()))
-        self.run = onnx_or_torch(
-            model, "verifier", _InferenceMode(eager), _examples(2), lambda: verifier_graph(net), device=device,
-            module=lambda: eager,
-        )  # fmt: skip
+        self.run = onnx_or_torch(model, "verifier", eager, _examples(2), lambda: verifier_graph(net), device=device)
 
     def score(self, gray: np.ndarray, corners: np.ndarray) -> float:
         """The probability that the proposal on ``corners`` in ``gray`` is this drawing (the best
         over its crop's quarter turns)."""
         crop = torch.from_numpy(proposal_crop(gray, corners))[None, None]
-        return float(self.run(quarter_turns(crop)).max())
+        with torch.inference_mode():
+            return float(self.run(quarter_turns(crop)).max())
 
     def turns_away(self, gray: np.ndarray, corners: np.ndarray) -> bool:
         """Whether the proposal on ``corners`` scores below the threshold: not this drawing."""
         return self.score(gray, corners) < self.threshold
-
-
-class _InferenceMode:
-    """A module called without autograd, as its ONNX graph is."""
-
-    def __init__(self, module: nn.Module) -> None:
-        self.module = module
-
-    def __call__(self, x: Tensor) -> Tensor:
-        with torch.inference_mode():
-            return self.module(x)
 
 
 def verifier_for(model: DeepMorphModel, device: str = "cpu") -> ProposalVerifier | None:

@@ -467,7 +467,7 @@ def train_verifier_cmd(
     workers: Annotated[int, setting_option("workers", settings=VerifierSettings)] = VERIFIER_DEFAULTS.workers,
     as_json: JsonOpt = False,
 ) -> None:
-    """Train a proposal verifier for a model read with the shipped universal detector (about 5
+    """Train a proposal verifier for a model read with the shipped universal detector (about 8
     minutes on 2 cores): photos with other drawings in them then take less time to read."""
     from deepmorph.training.verifier import VerifierConfig, train_verifier
 

@@ -37,6 +37,7 @@ from deepmorph_detect.verifier import (
     CROP_SIZE,
     VerifierNet,
     proposal_crop,
+    quarter_turns,
     verifier_graph,
     verifier_tensors,
 )
@@ -190,10 +191,9 @@ def scores(net: VerifierNet, crops: np.ndarray) -> np.ndarray:
     """Each crop's score: the best probability over its four quarter turns."""
     if not len(crops):
         return np.zeros(0, np.float32)
-    x = torch.from_numpy(crops)[:, None]
     with torch.inference_mode():
-        turned = torch.stack([torch.sigmoid(net(torch.rot90(x, k, (2, 3)))) for k in range(4)])
-    return turned.amax(0).numpy()
+        probabilities = torch.sigmoid(net(quarter_turns(torch.from_numpy(crops)[:, None])))
+    return probabilities.reshape(4, len(crops)).amax(0).numpy()
 
 
 def threshold_for(print_scores: np.ndarray, most: float = MAX_THRESHOLD) -> float:
