@@ -14,7 +14,7 @@ from PIL import Image
 
 import deepmorph_augment.plugin as augment_plugin
 from deepmorph_augment.jpeg import jpeg_compress
-from deepmorph_augment.kernels import filter_per_sample, line_kernels
+from deepmorph_augment.kernels import filter_per_sample, filter_separable_per_sample, gaussian_kernels, line_kernels
 from deepmorph_core.corruption import AugmentConfig, AugmentConfigError, AugmentPipeline, warp_chosen, warp_white
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.plugins import Registry, load_registry
@@ -248,6 +248,23 @@ def test_grouped_filter_matches_per_sample_convolution() -> None:
         padded = torch.nn.functional.pad(images[i : i + 1], (3, 3, 3, 3), mode="replicate")
         ref = torch.nn.functional.conv2d(padded, kernels[i][None, None])
         torch.testing.assert_close(out[i : i + 1], ref)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_filters_without_gradient_match_the_differentiable_ones(dtype: torch.dtype) -> None:
+    """Scenes and validation filter by OpenCV (no gradient wanted), training by kornia: the same
+    kernels and borders give the same pictures, and the training path keeps its gradient."""
+    images = torch.rand(3, 2, 37, 61, generator=torch.Generator().manual_seed(0), dtype=dtype)
+    lines = line_kernels(torch.tensor([0.0, 6.0, 11.0]), torch.tensor([10.0, 45.0, 120.0]), 13).to(dtype)
+    gaussians = gaussian_kernels(torch.tensor([0.0, 1.5, 4.0], dtype=dtype), 15)
+    for apply, kernels in ((filter_per_sample, lines), (filter_separable_per_sample, gaussians)):
+        fast = apply(images, kernels)
+        tracked = images.clone().requires_grad_(True)
+        differentiable = apply(tracked, kernels)
+        assert differentiable.requires_grad and not fast.requires_grad
+        torch.testing.assert_close(fast, differentiable.detach(), atol=1e-6, rtol=0)
+        differentiable.sum().backward()
+        assert tracked.grad is not None and tracked.grad.abs().sum() > 0
 
 
 def test_line_kernels() -> None:
