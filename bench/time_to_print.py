@@ -6,7 +6,8 @@ variables at the capacity panel's move (2 % of the viewBox width) that the unive
 never saw in training (``held_out`` in ``deepmorph/training/universal.py``). Each is
 trained as the README says (``--payload-bits auto``, every other setting at its default, or
 ``--steps``/``--set KEY=VALUE`` where given) on ``--threads`` (2) threads, with the bundle's
-validation (1000 renders, 200 close-ups) counted in the time, as a user waits for it.
+validation (1000 renders, 200 close-ups) and the proposal verifier training ends with (with
+``--set print_px=200``: ``train --pixels``) counted in the time, as a user waits for them.
 
 **Reading**: ``--n`` scenes (640x480: one or two prints of fresh payloads, one other drawing, an
 ArUco marker in every other scene) at ``medium`` and at ``hard`` are located with the universal
@@ -94,6 +95,12 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
         print(f"  training ended after {phases['validation_start'] - t0:.0f} s (last logged step "
               f"{logged['step']}); validating", flush=True)  # fmt: skip
 
+    def on_verifier(text: str) -> None:
+        if "verifier_start" not in phases:
+            phases["verifier_start"] = time.perf_counter()
+            took = phases["verifier_start"] - t0
+            print(f"  validated after {took:.0f} s; training the proposal verifier", flush=True)
+
     t0 = time.perf_counter()
     summary = train_model(
         svg,
@@ -105,9 +112,12 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
         on_start=on_start,
         on_warning=lambda text: print(f"  warning: {text}", flush=True),
         on_validation=on_validation,
+        on_verifier=on_verifier,
     )
-    total = time.perf_counter() - t0
-    validation_s = total - (phases.get("validation_start", time.perf_counter()) - t0)
+    end = time.perf_counter()
+    total = end - t0
+    verifier_s = end - phases.get("verifier_start", end)
+    validation_s = phases.get("verifier_start", end) - phases.get("validation_start", end)
     return {
         "total_s": total,
         "steps": summary.steps,
@@ -115,6 +125,7 @@ def train(svg: Path, move: float, out: Path, settings: dict[str, Any], curve: in
         "steps_s": summary.elapsed_s,
         "step_ms": summary.elapsed_s / max(1, summary.steps) * 1000,
         "validation_s": validation_s,
+        "verifier_s": verifier_s,
         "validation": [r.model_dump() for r in summary.validation],
         "curve_files": [str(p) for p in keep],
     }
@@ -218,7 +229,7 @@ def main() -> None:
         rows.append([
             name, variables, f"{run['payload_bits']} ({run['code_bits']})", run["steps"], f"{run['step_ms']:.0f}",
             f"{run['steps_s'] / 60:.1f}",
-            f"{run['validation_s'] / 60:.1f}", f"{run['total_s'] / 60:.1f}",
+            f"{run['validation_s'] / 60:.1f}", f"{run.get('verifier_s', 0) / 60:.1f}", f"{run['total_s'] / 60:.1f}",
             f"{med['read_share']:.1%}", f"{hard['read_share']:.1%}",
             f"{med['wide_read_share']:.1%}", f"{hard['wide_read_share']:.1%}", med["wrong"] + hard["wrong"],
         ])  # fmt: skip
@@ -230,8 +241,8 @@ def main() -> None:
                    "settings": settings, "n": args.n, "drawings": results})  # fmt: skip
     print(f"\nTime to print-ready ({settings['threads']} threads; {args.n} scenes per severity, universal detector):")
     print(table(["drawing", "variables", "payload (code) bits", "steps", "ms/step", "steps min", "validation min",
-                 "total min", "medium read", "hard read", "medium, prints it reads", "hard, prints it reads", "wrong"],
-                rows))  # fmt: skip
+                 "verifier min", "total min", "medium read", "hard read", "medium, prints it reads",
+                 "hard, prints it reads", "wrong"], rows))  # fmt: skip
     totals = [r["total_s"] / 60 for r in results.values()]
     print(f"total minutes: median {statistics.median(totals):.1f}, worst {max(totals):.1f}")
 

@@ -208,6 +208,7 @@ def train(
     readout: bool = DEFAULTS.readout,
     early_stop: bool = DEFAULTS.early_stop,
     renders_tune: int = DEFAULTS.renders_tune,
+    verifier: bool | None = DEFAULTS.verifier,
     read_in: ReadIn = DEFAULTS.read_in,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
@@ -247,6 +248,9 @@ def train(
             payloads well enough (:class:`~deepmorph.training.settings.TrainSettings`).
         renders_tune: with ``payload_bits="auto"``, steps trained on after a code that reads
             fewer than 99 % of fresh renders when training ends is made smaller (0: no check).
+        verifier: then train the model's proposal verifier and store it (``deepmorph
+            train-verifier``): photos holding other drawings' prints read faster. ``None``: with
+            ``pixels``.
         read_in: the gray a colour drawing's prints are read in (``auto``: red, green or blue
             where its colours differ at least twice as much there, else luminance); a model not
             read in luminance needs its prints in colour.

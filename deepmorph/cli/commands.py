@@ -393,6 +393,7 @@ def train(
     readout: Annotated[bool, setting_option("readout")] = DEFAULTS.readout,
     early_stop: Annotated[bool, setting_option("early_stop")] = DEFAULTS.early_stop,
     renders_tune: Annotated[int, setting_option("renders_tune")] = DEFAULTS.renders_tune,
+    verifier: Annotated[Optional[bool], setting_option("verifier")] = DEFAULTS.verifier,
     read_in: Annotated[ReadIn, setting_option("read_in")] = DEFAULTS.read_in,
     device: DeviceOpt = DEFAULTS.device,
     shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
@@ -447,6 +448,7 @@ def train(
             validation_samples=_validation_samples(validation),
             on_validation=lambda: err.print("validating on fresh payloads ..."),
             world=world,
+            on_verifier=lambda text: err.print(f"proposal verifier: {text} ..."),
         )
     if not world.main:
         return
@@ -459,7 +461,8 @@ def train(
             payload_bits=summary.payload_bits,
             shrunk=[s.model_dump() for s in summary.shrunk],
         )
-        print_json({**result, "validation": [r.model_dump() for r in summary.validation]})
+        verified = summary.verifier.as_json() if summary.verifier else None
+        print_json({**result, "validation": [r.model_dump() for r in summary.validation], "verifier": verified})
         return
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
@@ -467,6 +470,8 @@ def train(
         f"); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
     _print_validation([r.model_dump() for r in summary.validation])
+    if summary.verifier is not None:
+        out.print(f"verifier: {summary.verifier.text()}")
 
 
 def train_many(

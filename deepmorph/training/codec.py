@@ -27,7 +27,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import torch
@@ -81,6 +81,9 @@ from deepmorph_core.reading_channel import channel_for
 from deepmorph_core.severity import LADDER
 from deepmorph_core.svg.secure import read_svg_bytes
 from deepmorph_core.threads import use_threads
+
+if TYPE_CHECKING:
+    from deepmorph.training.verifier import VerifierSummary
 
 
 class TrainConfig(BaseModel, TrainSettings):
@@ -573,6 +576,7 @@ class TrainingSummary:
     stopped_early: bool = False
     payload_bits: int = 0
     shrunk: list[CodeShrink] = field(default_factory=list)
+    verifier: VerifierSummary | None = None
 
 
 def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
@@ -597,6 +601,7 @@ def train_model(
     validation_samples: tuple[int, int] | None = None,
     on_validation: Callable[[], None] | None = None,
     world: World | None = None,
+    on_verifier: Callable[[str], None] | None = None,
 ) -> TrainingSummary:
     """Train (or resume) a model for a drawing and write its bundle.
 
@@ -626,6 +631,8 @@ def train_model(
         on_validation: called when validation starts (a progress message).
         world: this process's place in a data-parallel run (default: what torchrun's environment
             says; one process without it).
+        on_verifier: called with each stage of the proposal verifier's training, where the
+            settings ask for one (``verifier``; a progress message).
     """
     world = world or world_from_env()
     if not world.main:  # one process speaks: rank 0
@@ -650,14 +657,42 @@ def train_model(
     model.encoder.cpu()  # validated (and used after training) on the CPU, as the photo chain runs
     model.decoder.cpu()
     records: list[ValidationRecord] = []
+    verifier = None
     if world.main:  # rank 0 alone validates (the others have no plot either)
         records = _validate_and_store(
             model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
         )
+        if wants_verifier(config):
+            verifier = _add_verifier(out, config, warn, on_verifier)
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
-        run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk),
+        run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk), verifier,
     )  # fmt: skip
+
+
+def wants_verifier(config: TrainSettings) -> bool:
+    """Whether a training ends by training the model's proposal verifier: as ``verifier`` says,
+    by default (``None``, and in bundles from before it was stored) with ``print_px``."""
+    return config.verifier if config.verifier is not None else config.print_px is not None
+
+
+def _add_verifier(
+    out: Path, config: TrainSettings, warn: Callable[[str], None], on_stage: Callable[[str], None] | None
+) -> VerifierSummary | None:
+    """Train the proposal verifier of the bundle just written at ``out`` and store it there, on
+    the training's threads and seed. A verifier that cannot be trained (its held-out prints
+    scored too low, say) is a warning, and so is an interrupt before it is stored: the codec is
+    written and reads without one."""
+    from deepmorph.training.verifier import VerifierConfig, train_verifier
+
+    try:
+        return train_verifier(out, out, VerifierConfig(seed=config.seed, threads=config.threads), on_stage=on_stage)
+    except DeepMorphError as exc:
+        warn(f"{out}: written without a proposal verifier: {exc}")
+        return None
+    except KeyboardInterrupt:
+        warn(f"{out}: written without a proposal verifier (deepmorph train-verifier {out} --out {out} adds one)")
+        raise
 
 
 def open_model(
@@ -717,6 +752,8 @@ def open_model(
             config = _resolved(TrainConfig(**overrides), (world or World()).size)
             if config.registered is None:
                 config = config.model_copy(update={"registered": config.print_px is not None})
+            if config.verifier is None:
+                config = config.model_copy(update={"verifier": wants_verifier(config)})
             defaults = bound_defaults(**{k: v for k, v in (bounds or {}).items() if v is not None})
             augment = build_pipeline(
                 config.severity,

@@ -225,10 +225,29 @@ def check_of(net: VerifierNet, crops: Crops, threshold: float) -> VerifierCheck:
 
 @dataclass
 class VerifierSummary:
+    """Where a verifier was written, its threshold, its held-out check and the run's seconds."""
+
     bundle: Path
     threshold: float
     check: VerifierCheck
     elapsed_s: float
+
+    def text(self) -> str:
+        """The run in one line, as the commands print it."""
+        c = self.check
+        return (
+            f"threshold {self.threshold:.3g}, {self.elapsed_s:.0f} s; held out: {c.prints_kept}/{c.prints} "
+            f"prints kept, {c.others_turned_away}/{c.others} other proposals turned away"
+        )
+
+    def as_json(self) -> dict[str, object]:
+        """The run as the commands' ``--json`` gives it."""
+        return {
+            "bundle": str(self.bundle),
+            "threshold": self.threshold,
+            "check": self.check.model_dump(),
+            "elapsed_s": round(self.elapsed_s, 1),
+        }
 
 
 def train_verifier(

@@ -128,7 +128,7 @@ TWO_COLOURS = make_svg(
 
 @pytest.mark.parametrize(
     ("drawing", "settings"),
-    [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {}), (TINY, {"print_px": 64})],
+    [(TINY, {"small_prints": 0.25}), (TWO_COLOURS, {}), (TINY, {"print_px": 64, "verifier": False})],
     ids=["black-and-white", "colour", "pixels"],
 )
 def test_the_cuda_path_keeps_its_tensors_on_the_device(drawing: bytes, settings: dict, tmp_path: Path) -> None:
@@ -168,7 +168,7 @@ def test_tuning_the_decoder_keeps_its_tensors_on_the_device(tiny: Path, tmp_path
 
 
 @needs_cuda
-@pytest.mark.parametrize("settings", [{}, {"print_px": 64}], ids=["96 px", "pixels"])
+@pytest.mark.parametrize("settings", [{}, {"print_px": 64, "verifier": False}], ids=["96 px", "pixels"])
 def test_cuda_trains_and_validates_as_the_cpu_does(tiny: Path, tmp_path: Path, settings: dict) -> None:
     """Tolerances: the logged loss of every step within 2e-3 of the CPU's (the same draws: the
     generators stay on the CPU; only float rounding differs); every weight within 2 x lr x steps

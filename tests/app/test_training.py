@@ -662,9 +662,9 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "stopped_early", "payload_bits", "shrunk",
-            "elapsed_s", "metrics", "validation"}  # fmt: skip
+            "elapsed_s", "metrics", "validation", "verifier"}  # fmt: skip
     assert set(data) == keys and [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
-    assert data["payload_bits"] == 4 and data["shrunk"] == []
+    assert data["payload_bits"] == 4 and data["shrunk"] == [] and data["verifier"] is None  # none without --pixels
     assert data["bundle"] == str(out) and data["steps"] == 2 and str(out) in data["written"]
     assert {"step", "loss", "bit_acc"} <= set(data["metrics"]) and data["metrics"]["step"] == 2
     tuned = tmp_path / "t.dmm"
@@ -685,11 +685,13 @@ def test_pixels_puts_the_capture_in_the_cameras_pixels(tiny_svg: Path, tmp_path:
     as the photo chain aligns photos, so only a fifth of that misalignment is left; ``info``
     gives the width as the smallest print."""
     out = tmp_path / "p200.dmm"
-    base = ["train", str(tiny_svg), "--steps", "2", "--batch", "2", "--threads", "1", "--payload-bits", "4"]
+    base = ["train", str(tiny_svg), "--steps", "2", "--batch", "2", "--threads", "1", "--no-verifier"]
+    base += ["--payload-bits", "4"]  # no verifier: tests/app/test_verifier_training.py trains one after the codec
     res = runner.invoke(app, [*base, "--pixels", "200", "--out", str(out), "--validation", "0"])
     assert res.exit_code == 0, res.output
     model = DeepMorphModel.load(out)
     assert model.width == 96 and model.print_px == model.smallest_print_px == 200
+    assert model.meta.train["verifier"] is False and model.meta.verifier is None
     steps = {s["name"]: s["params"] for s in model.meta.augment["steps"]}
     assert steps["blur"]["sigma"] == pytest.approx([0.0, 0.48])  # medium's 0-1 px at 96 px
     assert steps["rotation"]["degrees"] == pytest.approx(0.48)  # medium's 5 degrees, by 96/200, a fifth left

@@ -21,7 +21,7 @@ from deepmorph.training.verifier import (
     train_verifier,
     turned,
 )
-from deepmorph_core.bundled import BUNDLED_MODEL
+from deepmorph_core.bundled import BUNDLED_DRAWING, BUNDLED_MODEL
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.locate import Locator
@@ -176,3 +176,43 @@ def test_export_writes_the_verifier_graph_a_host_program_can_run(trained: Path, 
         assert float(probability.max()) == pytest.approx(
             locator.aligner.verifier.score(gray, placement.corners), abs=1e-5
         )
+
+
+def test_train_ends_with_a_verifier_for_a_print_size(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """``train --pixels``: once the codec is written and validated, its proposal verifier is
+    trained on the training's seed and threads and stored in the same bundle (here with short
+    verifier settings, as the fixture's); ``--json`` reports it. Without ``--pixels`` no verifier
+    is trained unless ``--verifier`` asks, and the bundle stores which was chosen."""
+    import deepmorph.training.verifier as verifier_module
+
+    class Short(VerifierConfig):
+        scenes: int = 4
+        check_scenes: int = 2
+        steps: int = 30
+        batch: int = 16
+        workers: int = 0
+
+    monkeypatch.setattr(verifier_module, "VerifierConfig", Short)
+    base = ["train", str(BUNDLED_DRAWING), "--steps", "2", "--batch", "2", "--threads", "1", "--payload-bits", "4"]
+    base += ["--validation", "0", "--seed", "3"]
+    out = tmp_path / "sized.dmm"
+    result = runner.invoke(app, [*base, "--pixels", "64", "--out", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    reported = json.loads(result.stdout)["verifier"]
+    model = DeepMorphModel.load(out)
+    meta = model.meta.verifier
+    assert meta is not None and model.meta.train["verifier"] is True and "verifier" in model.graphs
+    assert reported["threshold"] == meta.threshold and reported["bundle"] == str(out)
+    assert meta.config["seed"] == 3 and meta.config["scenes"] == 4 and meta.threads == 1
+    assert meta.check.prints_kept == meta.check.prints > 0
+    assert Locator(model).aligner.verifier is not None
+    plain = tmp_path / "plain.dmm"
+    result = runner.invoke(app, [*base, "--out", str(plain)])
+    assert result.exit_code == 0, result.output
+    model = DeepMorphModel.load(plain)
+    assert model.meta.verifier is None and model.meta.train["verifier"] is False
+    asked = tmp_path / "asked.dmm"
+    result = runner.invoke(app, [*base, "--verifier", "--out", str(asked)])
+    assert result.exit_code == 0, result.output
+    assert "verifier: threshold" in result.stdout
+    assert DeepMorphModel.load(asked).meta.verifier is not None
