@@ -6,7 +6,7 @@ whose outline does not align at once takes the wider searches to be turned away
 (:meth:`Aligner.align_outline <deepmorph_detect.align.Aligner.align_outline>`), and those were
 most of a 1280x720 frame's time. A verifier trained for one drawing
 (``deepmorph train-verifier``, :mod:`deepmorph.training.verifier`) looks at the proposal's crop
-once (about 2 ms) and lets the searches go ahead only where it may be this drawing.
+once (0.4 ms with ONNX Runtime) and lets the searches go ahead only where it may be this drawing.
 
 The crop is the proposal's quadrilateral grown by :data:`CROP_GROWTH` about its centre, warped
 to :data:`CROP_SIZE` pixels square and stretched between its 2nd and 98th percentiles. The
