@@ -573,16 +573,18 @@ class MorphSynthesis:
         # the light on the print: contrast and brightness as smooth fields over the drawing
         # (a gradient or a broad shadow), fitted on the word's own render
         models = self._in_light(photo, blurred, fields, grid)
-        residuals = photo.ravel()[None] - models
+        residual = photo.ravel() - models[0]
         changes = models[1:] - models[0]
         # a small misalignment: what a small motion of the word's render explains is evidence
-        # for no bit (projected out of residuals and changes alike)
+        # for no bit (projected out of residual and changes alike by the projector P = I - B B^T)
         basis = self._motion_basis(models[0].reshape(photo.shape))
-        residuals = residuals - (residuals @ basis) @ basis.T
-        changes = changes - (changes @ basis) @ basis.T
-        residual = (residuals**2).sum(axis=1)
-        change = (changes**2).sum(axis=1)
-        return (residual[1:] - residual[0]) / np.maximum(change, 1e-9)
+        residual_moved = residual @ basis
+        changes_moved = changes @ basis
+        # |P(r - d)|^2 - |P r|^2 = |P d|^2 - 2 (P r).(P d), each from products with B, never
+        # projecting the (N_b, h * w) changes themselves, which took three times as long
+        change = np.einsum("ij,ij->i", changes, changes) - np.einsum("ij,ij->i", changes_moved, changes_moved)
+        cross = changes @ residual - changes_moved @ residual_moved
+        return (change - 2.0 * cross) / np.maximum(change, 1e-9)
 
     def read(self, pyramid: ImagePyramid, homography: np.ndarray, probabilities: np.ndarray) -> np.ndarray:
         """Refined ``(N_b,)`` bit probabilities: the CNN's, plus the photo's evidence.
@@ -658,6 +660,7 @@ __all__ = [
     "SYNTH_WIDTH",
     "WEAKEST_BITS",
     "BitEvidence",
+    "GridLight",
     "MorphSynthesis",
     "BIT_RULES",
     "broken_rules",

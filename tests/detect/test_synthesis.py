@@ -32,6 +32,7 @@ from deepmorph_detect.synthesis import (
     MIN_WEAKEST_SUM,
     WEAKEST_BITS,
     BitEvidence,
+    GridLight,
     MorphSynthesis,
     broken_rules,
     disagreement,
@@ -766,6 +767,31 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
         near = face.codec.encode(_near_payloads(payload)[0])
         assert not synthesis.evidence(pyramid, H, near).agrees
     assert np.mean(gains) > 0.03, gains
+
+
+def test_a_bits_evidence_is_its_definition_with_the_motion_projected_out(model: DeepMorphModel, locator: Locator) -> None:
+    """Each bit's evidence is ``(|P(photo - T(c ^ e_j))|^2 - |P(photo - T(c))|^2) / |P(T(c ^ e_j) - T(c))|^2``
+    with ``P`` projecting out what a small motion of the word's render explains, whatever
+    algebra computes it: here the projected residuals are formed explicitly, in the light the
+    synthesis fits, on a real print's renders, with and without a cast shadow's grid."""
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(11))[0]
+    photo, H = _small_print(model, payload, 80, seed=11)
+    synthesis = locator.checker.synthesis
+    code = model.codec.encode(payload)
+    rectified = synthesis.rectified(ImagePyramid(photo), H)
+    soft, _ = synthesis.variants(code)
+    soft = np.stack([[cv2.resize(c, rectified.shape[::-1], interpolation=cv2.INTER_AREA) for c in r] for r in soft])
+    blurred = np.stack([[cv2.GaussianBlur(c, (0, 0), 1.5) for c in r] for r in soft]).reshape(*soft.shape[:2], -1)
+    fields = synthesis._light_fields(rectified.shape)
+    for grid in (None, GridLight.of(soft[0], 1.5, 4)):
+        models = synthesis._in_light(rectified, blurred, fields, grid)
+        basis = synthesis._motion_basis(models[0].reshape(rectified.shape))
+        residuals = rectified.ravel()[None] - models
+        residuals -= (residuals @ basis) @ basis.T
+        changes = models[1:] - models[0]
+        changes -= (changes @ basis) @ basis.T
+        defined = ((residuals[1:] ** 2).sum(1) - (residuals[0] ** 2).sum()) / (changes**2).sum(1)
+        assert np.allclose(synthesis._ask(rectified, blurred, fields, grid), defined, rtol=1e-6, atol=1e-8)
 
 
 def test_some_bits_are_asked_as_the_whole_word_asks_them(
