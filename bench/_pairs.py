@@ -100,12 +100,18 @@ def compare(model: Any, locate: Locate, args: argparse.Namespace) -> tuple[dict[
 
     maker = SceneMaker(model, args.frame, "medium", seed=args.seed + 1000)
     negatives = {k: {"images": args.negatives, "detections": 0, "wrong_ok": 0} for k in CHAINS}
+    negative_ms: dict[str, list[float]] = {k: [] for k in CHAINS}
     for i in range(args.negatives):
         scene = maker.make(drawings=0, distractors=1 + i % 3, aruco=i % 2 == 0)
-        for k in CHAINS:
-            _, found = locate(k, scene.image, scene.camera)
+        for k in CHAINS if i % 2 == 0 else CHAINS[::-1]:
+            ms, found = locate(k, scene.image, scene.camera)
+            negative_ms[k].append(ms)
             negatives[k]["detections"] += len(found)
             negatives[k]["wrong_ok"] += sum(bool(d.result.ok) for d in found)
+    for k, times in negative_ms.items():
+        if times:
+            negatives[k]["ms_median"] = round(float(np.median(times)), 2)
+            negatives[k]["ms_mean"] = round(float(np.mean(times)), 2)
     report["negatives"] = negatives
     return report, rows
 
@@ -116,6 +122,10 @@ def print_report(report: dict[str, Any], rows: list[tuple], names: dict[str, str
     headers = ["severity", label, "found", "read", "wrong ok", "corner px", "ms median", "ms mean", "QR ms"]
     print(table(headers + ["x QR", "x a", "scenes differing"], rows))
     for k in CHAINS:
-        found, images = report["negatives"][k]["detections"], report["negatives"][k]["images"]
-        print(f"{k} ({names[k]}): {found} detections on {images} scenes without the drawing")
+        negatives = report["negatives"][k]
+        found, images = negatives["detections"], negatives["images"]
+        times = ""
+        if "ms_median" in negatives:
+            times = f", median {negatives['ms_median']} ms (mean {negatives['ms_mean']})"
+        print(f"{k} ({names[k]}): {found} detections on {images} scenes without the drawing{times}")
     print(f"wrote {write_json(out, report)}")

@@ -24,6 +24,10 @@ from deepmorph_detect.refine import Template
 # must be wider than the ink, and its cost grows with that width (640x480 at full size 0.3 s;
 # shrunk to 240, 2.6 ms); the ink's moments need no finer image
 FLAT_LIGHT_SIDE = 240
+# ... and the longest side its ink is framed at in the photo's own light (and its paper sheet
+# found at): a 1280x720 photo's ink mask took 11 ms at full size, and a photo without the
+# drawing frames its whole image twice; ECC refines the framing from there
+WHOLE_FRAME_SIDE = 640
 
 #: the source of the candidate that frames the whole image by its ink
 WHOLE_FRAME = "whole-frame"
@@ -64,7 +68,14 @@ class InkFrame:
 
 def whole_frame(gray: np.ndarray, ink: InkFrame, template: Template, frame_corners: np.ndarray) -> list[Candidate]:
     """The ink of the whole image as one candidate, framed by its moments (no rotation):
-    ``[]`` when the image shows no ink."""
+    ``[]`` when the image shows no ink. The ink is found on the image shrunk to at most
+    :data:`WHOLE_FRAME_SIDE` pixels (:func:`at_most`)."""
+    small, to_photo = at_most(gray, WHOLE_FRAME_SIDE)
+    return in_photo_pixels(_framed_by_ink(small, ink, template, frame_corners), to_photo, gray.shape)
+
+
+def _framed_by_ink(gray: np.ndarray, ink: InkFrame, template: Template, frame_corners: np.ndarray) -> list[Candidate]:
+    """:func:`whole_frame` at ``gray``'s own size."""
     norm = normalise_contrast(gray)
     found = None if norm is None else ink_mask(norm)
     if found is None:
@@ -81,6 +92,37 @@ def whole_frame(gray: np.ndarray, ink: InkFrame, template: Template, frame_corne
     return [Candidate(project(H, frame_corners), 0.0, box, homography=H, source=WHOLE_FRAME)]
 
 
+def at_most(gray: np.ndarray, side: int) -> tuple[np.ndarray, np.ndarray]:
+    """``gray`` shrunk (area averaging) so that its longer side is at most ``side`` pixels, and
+    the ``(3, 3)`` map from its pixels back to ``gray``'s (pixel centres to pixel centres; the
+    identity where nothing was shrunk)."""
+    h, w = gray.shape
+    scale = min(1.0, side / max(h, w))
+    if scale == 1.0:
+        return gray, np.eye(3)
+    small = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    sx, sy = w / small.shape[1], h / small.shape[0]
+    return small, np.array([[sx, 0, (sx - 1) / 2], [0, sy, (sy - 1) / 2], [0, 0, 1]])
+
+
+def in_photo_pixels(candidates: list[Candidate], to_photo: np.ndarray, shape: tuple[int, int]) -> list[Candidate]:
+    """``candidates`` found on a shrunk image (:func:`at_most`) in the pixels of the photo of
+    ``shape`` (``(H, W)``), through ``to_photo``."""
+    if np.array_equal(to_photo, np.eye(3)):
+        return candidates
+    h, w = shape
+    return [
+        Candidate(
+            project(to_photo, cand.corners),
+            cand.score,
+            quad_bbox(np.reshape(cand.bbox, (2, 2)) * np.diagonal(to_photo)[:2], w, h),  # pixel edges scale
+            homography=None if cand.homography is None else to_photo @ cand.homography,
+            source=cand.source,
+        )
+        for cand in candidates
+    ]
+
+
 #: The paper sheet of a close-up fills at least this share of the photo.
 MIN_SHEET_SHARE = 0.1
 
@@ -94,8 +136,11 @@ def whole_frame_on_paper(
     A desk as dark as the drawing's ink (a print in light colours on a dark table) sets the
     photo's black point and takes the ink's place in the whole image's ink mask; on the sheet
     alone the drawing's own ink is the darkest. ``[]`` when no sheet fills
-    :data:`MIN_SHEET_SHARE` of the photo, or it shows no ink.
+    :data:`MIN_SHEET_SHARE` of the photo, or it shows no ink. The sheet and its ink are found on
+    the photo shrunk to at most :data:`WHOLE_FRAME_SIDE` pixels, as :func:`whole_frame` finds ink.
     """
+    photo_shape = gray.shape
+    gray, to_photo = at_most(gray, WHOLE_FRAME_SIDE)
     u8 = np.clip(gray * 255 if gray.dtype != np.uint8 else gray, 0, 255).astype(np.uint8)
     _, bright = cv2.threshold(cv2.GaussianBlur(u8, (5, 5), 0), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(bright, connectivity=8)
@@ -109,7 +154,7 @@ def whole_frame_on_paper(
     cv2.drawContours(filled, contours, -1, 1, thickness=cv2.FILLED)
     paper = float(np.median(gray[labels == sheet]))
     on_paper = np.where(filled > 0, gray, np.asarray(paper, dtype=gray.dtype))
-    return whole_frame(on_paper, ink, template, frame_corners)
+    return in_photo_pixels(_framed_by_ink(on_paper, ink, template, frame_corners), to_photo, photo_shape)
 
 
 def whole_frame_in_flat_light(
@@ -133,33 +178,24 @@ def whole_frame_in_flat_light(
     Returns:
         The photo in flat light (``gray`` itself when nothing was framed) and the candidates.
     """
-    h, w = gray.shape
-    scale = min(1.0, FLAT_LIGHT_SIDE / max(h, w))
-    small = gray if scale == 1.0 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    small, to_photo = at_most(gray, FLAT_LIGHT_SIDE)
     paper = paper_light(small, max(ink_share * max(small.shape), 1.0))
-    framed = whole_frame(divided_by_paper(small, paper), ink, template, frame_corners)
+    framed = _framed_by_ink(divided_by_paper(small, paper), ink, template, frame_corners)
+    framed = in_photo_pixels(framed, to_photo, gray.shape)
     if not framed:
         return gray, []
-    to_photo = np.diag([1 / scale, 1 / scale, 1.0])
-    candidates = [
-        Candidate(
-            project(to_photo, cand.corners),
-            cand.score,
-            quad_bbox(np.reshape(cand.bbox, (2, 2)) / scale, w, h),
-            homography=None if cand.homography is None else to_photo @ cand.homography,
-            source=cand.source,
-        )
-        for cand in framed
-    ]
-    if scale != 1.0:
-        paper = cv2.resize(paper, (w, h), interpolation=cv2.INTER_LINEAR)
-    return divided_by_paper(gray, paper), candidates
+    if small is not gray:
+        paper = cv2.resize(paper, gray.shape[::-1], interpolation=cv2.INTER_LINEAR)
+    return divided_by_paper(gray, paper), framed
 
 
 __all__ = [
     "FLAT_LIGHT_SIDE",
     "MIN_SHEET_SHARE",
     "WHOLE_FRAME",
+    "WHOLE_FRAME_SIDE",
+    "at_most",
+    "in_photo_pixels",
     "InkFrame",
     "quad_bbox",
     "whole_frame",

@@ -599,6 +599,30 @@ def test_a_close_up_the_detector_aligns_but_does_not_read_is_read_from_the_whole
     assert found.result.ok and np.array_equal(found.result.payload, payload)
 
 
+def test_a_large_photo_is_framed_by_its_ink_on_the_image_shrunk(model: DeepMorphModel, locator: Locator) -> None:
+    """A photo wider than :data:`WHOLE_FRAME_SIDE` has its whole-frame candidate framed on the
+    image shrunk to that width, mapped back pixel centre to pixel centre: where framing the full
+    image puts it (within a pixel of the shrunk image), and the print filling it reads from it.
+    A photo no wider is framed as it is."""
+    from deepmorph_core.payload import random_payloads
+    from deepmorph_core.render import render_svg
+    from deepmorph_detect.propose import WHOLE_FRAME_SIDE, _framed_by_ink, at_most
+
+    (payload,) = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(9))
+    photo = close_up_photo(render_svg(model.encode(payload), 1000), "easy", np.random.default_rng(9), 1400)
+    gray = to_gray(photo)
+    assert max(gray.shape) > WHOLE_FRAME_SIDE
+    (shrunk,) = whole_frame(gray, locator.ink, locator.template, locator.frame_corners)
+    (full,) = _framed_by_ink(gray, locator.ink, locator.template, locator.frame_corners)
+    pixel = max(gray.shape) / WHOLE_FRAME_SIDE
+    assert np.abs(shrunk.corners - full.corners).max() < pixel
+    assert np.abs(np.subtract(shrunk.bbox, full.bbox)).max() <= 2 * pixel
+    (found,) = DetectorUnread(model).locate(photo)  # the detector's outline not read: the whole frame is
+    assert found.source == "whole-frame" and found.result.ok and np.array_equal(found.result.payload, payload)
+    small, to_photo = at_most(gray[:480, :640], WHOLE_FRAME_SIDE)
+    assert small.shape == (480, 640) and np.array_equal(to_photo, np.eye(3))
+
+
 def test_folded_or_mirrored_outlines_are_not_prints() -> None:
     from deepmorph_detect.align import plausible_outline
 

@@ -769,7 +769,9 @@ def test_a_colour_print_is_asked_in_its_own_colours(face: DeepMorphModel) -> Non
     assert np.mean(gains) > 0.03, gains
 
 
-def test_a_bits_evidence_is_its_definition_with_the_motion_projected_out(model: DeepMorphModel, locator: Locator) -> None:
+def test_a_bits_evidence_is_its_definition_with_the_motion_projected_out(
+    model: DeepMorphModel, locator: Locator
+) -> None:
     """Each bit's evidence is ``(|P(photo - T(c ^ e_j))|^2 - |P(photo - T(c))|^2) / |P(T(c ^ e_j) - T(c))|^2``
     with ``P`` projecting out what a small motion of the word's render explains, whatever
     algebra computes it: here the projected residuals are formed explicitly, in the light the
