@@ -313,7 +313,7 @@ class PayloadChecker:
         CRC collision near the true payload differs from it in six code bits or more; one
         correlation over the whole drawing passes such near misses about half the time, the bits
         rarely. Confident readings without
-        corrections skip it (about 50 ms): a misread that lands on a valid word without
+        corrections skip it (about 55 ms a print): a misread that lands on a valid word without
         corrections has several bits wrong, and those pull its confidence down. So do repairs
         the decoder is as sure of, where the model vouches for them (:meth:`vouches_for_repair`). A drawing a
         blind proposer found (``blind``: the universal detector, which proposes other drawings
