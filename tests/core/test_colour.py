@@ -138,6 +138,30 @@ def test_translucent_layers_composite_as_resvg_does() -> None:
     np.testing.assert_allclose(1 - ink, soft @ np.array([0.299, 0.587, 0.114]), atol=1e-5)
 
 
+def test_colour_runs_are_laid_over_the_paper_by_the_over_operator() -> None:
+    """Each run's squashed coverage times its alpha lays its colour over what lies below:
+    ``image (1 - alpha) + colour alpha``, to float rounding, in value and in gradient (however
+    the rasterizer computes it)."""
+    from deepmorph_core.raster import normalised_squash
+
+    body = """<rect x="2" y="2" width="14" height="14" fill="#ff0000" fill-opacity="0.6"/>
+      <circle cx="14" cy="14" r="7" fill="rgba(0, 0, 255, 0.5)"/>
+      <line x1="2" y1="22" x2="22" y2="2" stroke="#00aa00" stroke-width="2" opacity="0.7"/>"""
+    md = MorphableDrawing.load(make_svg(body), move=0.5)
+    raster = md.rasterizer(64)
+    values = md.values_from_unit(md.random_unit(3, seed=1)).requires_grad_(True)
+    image = torch.ones(3, 3, raster.height, raster.width)
+    for (paint, _), cover in zip(raster._runs, raster._run_covers(values)):
+        alpha = (normalised_squash(cover, raster.settings.squash) * paint.alpha)[:, None]
+        image = image * (1.0 - alpha) + torch.tensor(paint.rgb)[None, :, None, None] * alpha
+    rendered = raster.render_rgb(values)
+    torch.testing.assert_close(rendered, image, rtol=0, atol=1e-6)
+    weights = torch.rand_like(image)
+    (expected,) = torch.autograd.grad((image * weights).sum(), values)
+    (got,) = torch.autograd.grad((rendered * weights).sum(), values)
+    torch.testing.assert_close(got, expected, rtol=1e-4, atol=1e-6)
+
+
 def test_black_and_white_drawings_keep_the_papers_blend() -> None:
     md = MorphableDrawing.load(DATA / "feather" / "airplay.svg", move=0.5)
     assert md.drawing.black_and_white and not md.colour
