@@ -37,7 +37,6 @@ from deepmorph_detect.synthesis import (
     broken_rules,
     disagreement,
     disagreement_in,
-    least_squares,
 )
 
 app = application()  # the command line's own commands and every installed plugin's
@@ -795,20 +794,6 @@ def test_a_bits_evidence_is_its_definition_with_the_motion_projected_out(
         changes -= (changes @ basis) @ basis.T
         defined = ((residuals[1:] ** 2).sum(1) - (residuals[0] ** 2).sum()) / (changes**2).sum(1)
         assert np.allclose(synthesis._ask(rectified, blurred, fields, grid), defined, rtol=1e-6, atol=1e-8)
-
-
-def test_the_light_is_fitted_as_least_squares_fit_it_collinear_inks_included() -> None:
-    """The light fits' solver gives ``np.linalg.lstsq``'s fitted picture, and its smallest
-    coefficients where a colour render's channels are collinear (one gray ink in three channels)."""
-    rng = np.random.default_rng(3)
-    fields = np.stack([np.ones(4000), rng.random(4000), rng.random(4000)], 1)
-    target = rng.random(4000).astype(np.float32)
-    for channels in (rng.random((3, 4000)), np.repeat(rng.random((1, 4000)), 3, axis=0)):
-        design = np.concatenate([fields * c[:, None] for c in channels] + [fields], axis=1)
-        expected = np.linalg.lstsq(design, target, rcond=None)[0]
-        got = least_squares(design, target)
-        np.testing.assert_allclose(design @ got, design @ expected, atol=1e-9)
-        np.testing.assert_allclose(np.linalg.norm(got), np.linalg.norm(expected), rtol=1e-6)
 
 
 def test_some_bits_are_asked_as_the_whole_word_asks_them(
