@@ -163,7 +163,7 @@ class SoftRasterizer(nn.Module):
         for (paint, _), colour, cover in zip(self._runs, colours, self._run_covers(values)):
             alpha = (normalised_squash(cover, self.settings.squash) * paint.alpha)[:, None]
             tint = torch.tensor(colour, dtype=values.dtype, device=values.device)[None, :, None, None]
-            # image (1 - alpha) + tint alpha as one fused op: the broadcast products took 5.5 ms a
+            # image (1 - alpha) + tint alpha as one fused op: the broadcast products took 3.1 ms a
             # run for 43 colour renders at 96 px on a CPU thread, lerp 0.4 (equal to 6e-8)
             image = torch.lerp(image, tint.expand_as(image), alpha)
         return image
