@@ -34,6 +34,7 @@ from deepmorph_detect.synthesis import (
     BitEvidence,
     GridLight,
     MorphSynthesis,
+    _blurred,
     broken_rules,
     disagreement,
     disagreement_in,
@@ -780,10 +781,8 @@ def test_a_bits_evidence_is_its_definition_with_the_motion_projected_out(
     photo, H = _small_print(model, payload, 80, seed=11)
     synthesis = locator.checker.synthesis
     code = model.codec.encode(payload)
-    rectified = synthesis.rectified(ImagePyramid(photo), H)
-    soft, _ = synthesis.variants(code)
-    soft = np.stack([[cv2.resize(c, rectified.shape[::-1], interpolation=cv2.INTER_AREA) for c in r] for r in soft])
-    blurred = np.stack([[cv2.GaussianBlur(c, (0, 0), 1.5) for c in r] for r in soft]).reshape(*soft.shape[:2], -1)
+    rectified, soft, _, _ = synthesis._asked_in(ImagePyramid(photo), H, synthesis.variants(code), True)
+    blurred = _blurred(soft, 1.5).reshape(*soft.shape[:2], -1)
     fields = synthesis._light_fields(rectified.shape)
     for grid in (None, GridLight.of(soft[0], 1.5, 4)):
         models = synthesis._in_light(rectified, blurred, fields, grid)
