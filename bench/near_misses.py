@@ -13,7 +13,8 @@ wide), 1 thread. At each close-up the photo chain reads as it does (the bundle's
 the universal one); at the first drawing it aligned, the two first looks (the view as it is, and
 framed by the template's ink) are decoded CRC-blind, and each word they give is checked there.
 The table: close-ups, read by the chain; right words checked and withdrawn; near misses, per
-close-up, and passed by the check; the wrong payloads per 10,000 close-ups that rate gives from
+close-up, and passed by the check; right words and near misses passed on a few of their bits
+(``PayloadChecker.screens``); the wrong payloads per 10,000 close-ups that rate gives from
 these looks (passed near misses x ``2**-crc_bits``); and, with the three bit bars loosened one
 notch (``synthesis.MAX_CONTRADICTED`` + 1, ``MIN_WEAKEST_SUM`` down to 0, ``MAX_DEVIATION`` x 1.5,
 the rival rule still asked), the right words and near misses that would pass besides. The JSON
@@ -71,6 +72,7 @@ def word_record(locator: Any, aligned: Any, reading: Any, blind: Any, truth: Any
         "corrected_bits": int(word.corrected_bits),
         "confidence": round(float(word.confidence), 5),
         "status": verdict.status,
+        "screened": verdict.screened,
         "looser": False,
     }
     fit = checker.fit_morph(pyramid, alignment.homography, word.payload, alignment)
@@ -146,6 +148,8 @@ def measure(bundle: Path, args: argparse.Namespace) -> tuple[dict[str, Any], lis
         "near_misses": len(near),
         "near_per_close_up": round(len(near) / args.samples, 3),
         "near_passed": passed_near,
+        "right_screened": sum(w["screened"] for w in right),
+        "near_screened": sum(w["screened"] for w in near),
         "wrong_per_10k": round(1e4 * passed_near / args.samples * 2.0**-model.codec.spec.crc_bits, 3),
         "looser_right_gained": sum(w["looser"] and w["status"] != "passed" for w in right),
         "looser_near_passed": sum(w["looser"] and w["status"] != "passed" for w in near),
@@ -169,6 +173,7 @@ def main() -> None:
     columns = {"bundle": "bundle", "close_ups": "close-ups", "read": "read by the chain",
                "right_words": "right words", "right_withdrawn": "withdrawn", "near_misses": "near misses",
                "near_per_close_up": "per close-up", "near_passed": "passed",
+               "right_screened": "right passed on a few bits", "near_screened": "near passed on a few bits",
                "wrong_per_10k": "wrong per 10k close-ups", "looser_right_gained": "looser: right gained",
                "looser_near_passed": "near misses passed"}  # fmt: skip
     size = f", prints {args.width:g} px" if args.width else ""

@@ -11,9 +11,10 @@ log-odds, ``DecodeResult.rival_log_odds``, computed here for every word), its mo
 the verdict (passed with or without the per-bit check, or withdrawn).
 
 The table: photos read, photos that gave a wrong payload, wrong words that reached the check
-with their highest log-odds and confidence, wrong words the check passed, and right words passed
+with their highest log-odds and confidence, wrong words the check passed, right words passed
 without the per-bit check although the code corrected them
-(``PayloadChecker.vouches_for_repair``). The JSON keeps every record.
+(``PayloadChecker.vouches_for_repair``), and right and wrong words passed on a few of their bits
+(``PayloadChecker.screens``). The JSON keeps every record.
 
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --width 240 --samples 5000 --seed 41
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --frame 1280x720 --samples 400
@@ -90,6 +91,7 @@ def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any])
                 "light_grid": int(light_grid),
                 "status": out.status,
                 "bit_by_bit": out.bits is not None,
+                "screened": out.screened,
             }
         )
         return out
@@ -114,7 +116,9 @@ def summary(records: list[dict[str, Any]], read: int, wrong_payloads: int, sampl
         "wrong_max_confidence": max((r["confidence"] for r in wrong), default=None),
         "wrong_passed": sum(1 for r in records if not r["right"] and r["status"] == "passed"),
         "repaired_right_passed": len(spared),
-        "repaired_right_spared": sum(1 for r in spared if not r["bit_by_bit"]),
+        "repaired_right_spared": sum(1 for r in spared if not r["bit_by_bit"] and not r["screened"]),
+        "right_screened": sum(1 for r in first if r["right"] and r["screened"]),
+        "wrong_screened": sum(1 for r in first if not r["right"] and r["screened"]),
     }
 
 
@@ -152,7 +156,8 @@ def main() -> None:
                "words_checked": "words checked", "wrong_words": "wrong words",
                "wrong_max_log_odds": "their max log-odds", "wrong_max_confidence": "their max confidence",
                "wrong_passed": "wrong passed", "repaired_right_passed": "right repaired passed",
-               "repaired_right_spared": "of them spared the bits"}  # fmt: skip
+               "repaired_right_spared": "of them spared the bits", "right_screened": "right passed on a few bits",
+               "wrong_screened": "wrong passed on a few bits"}  # fmt: skip
     print(f"{kind}{size}, {'' if args.unrelated else args.severity + ', '}seed {args.seed}, {threads} thread")
     print(table(["bundle", *columns.values()], [[args.bundle.stem, *(row[k] for k in columns)]]))
     report = {

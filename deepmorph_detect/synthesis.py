@@ -453,6 +453,26 @@ class MorphSynthesis:
         shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {}, light_grid)
         return shown
 
+    def drawn_on(self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, bits: np.ndarray) -> np.ndarray:
+        """``(len(bits),)`` what :meth:`shown_on` says of the bits ``bits`` of ``code``, with the
+        word and its one-bit variants drawn by the real renderer instead of the soft rasterizer:
+        half the time for a few bits (Skia draws one in about 0.5 ms, the soft rasterizer's fixed
+        cost is about 8 ms a batch), and with nothing of the soft rasterizer's error to correct,
+        the word's own render being the first of them. A variant the renderer draws no
+        differently from the word shows 0. Black-and-white drawings only: the renderer draws in
+        one gray (:meth:`PayloadChecker.screens <deepmorph_detect.check.PayloadChecker.screens>`)."""
+        if self.colour:
+            raise ValueError("a colour drawing's bits are asked in its colours, which the real renderer does not give")
+        code = np.asarray(code, dtype=np.uint8)
+        codes = np.repeat(code[None], len(bits) + 1, axis=0)
+        codes[np.arange(1, len(bits) + 1), np.asarray(bits, dtype=np.int64)] ^= 1
+        values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
+        viewbox = self.template.viewbox
+        drawn = np.stack([self.renderer(self.model.drawing.to_svg(v), self.width, viewbox) for v in values])
+        photo, renders, real, _ = self._asked_in(pyramid, homography, (drawn[:, None], drawn[0]), False)
+        shown, _, _ = self._asked(photo / self.shadows(photo, renders[0]), renders, real, False, {}, exact=True)
+        return shown
+
     def _asked_in(
         self, pyramid: ImagePyramid, homography: np.ndarray, renders: tuple[np.ndarray, np.ndarray], in_colour: bool
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
@@ -478,13 +498,15 @@ class MorphSynthesis:
         colour: bool,
         at_blur: dict[float, tuple[np.ndarray, np.ndarray, GridLight | None]],
         light_grid: int = 0,
+        exact: bool = False,
     ) -> tuple[np.ndarray, float, float]:
         """:meth:`evidence` of ``photo`` from the renders :meth:`variants` gives (``soft`` in the
         colours asked, ``colour``), sized as the photo: ``(N_b,)`` evidence, the fit of the word's
         render and the print's blur. ``at_blur`` keeps, per blur, the blurred renders and the
         evidence of the word's own real render and the grid light, none of which depend on the
         photo (one dict per ``light_grid``). ``light_grid``: the bits are asked in a light of
-        that grid's fields."""
+        that grid's fields. ``exact``: ``real`` is ``soft``'s first render, so no error of the
+        soft rasterizer is corrected."""
         fields = self._light_fields(photo.shape)
 
         def looks(render: np.ndarray) -> np.ndarray:
@@ -498,7 +520,11 @@ class MorphSynthesis:
         if sigma not in at_blur:
             blurred = _blurred(soft, sigma).reshape(*soft.shape[:2], -1)
             grid = GridLight.of(soft[0], sigma, light_grid) if light_grid else None
-            own = self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields, grid)
+            own = (
+                np.ones(len(soft) - 1)
+                if exact
+                else self._ask(cv2.GaussianBlur(real, (0, 0), sigma), blurred, fields, grid)
+            )
             at_blur[sigma] = blurred, own, grid
         blurred, own, grid = at_blur[sigma]
         said = self._ask(photo, blurred, fields, grid)

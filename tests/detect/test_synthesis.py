@@ -282,6 +282,54 @@ def test_a_repair_the_decoder_is_sure_of_skips_the_per_bit_check(
     assert in_colour.bits is not None
 
 
+def test_a_weak_word_passes_on_its_corrected_and_least_sure_bits_and_a_near_miss_takes_the_whole_check(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A weak word of a black-and-white `--pixels` model is first asked about the bits the code
+    corrected and the ``SCREEN_LEAST_SURE`` its decoder was least sure of: the true word passes
+    there without the whole per-bit check; a near miss, which differs where the code corrected,
+    does not, and the whole check contradicts it. Not asked without the decoder's probabilities,
+    nor of a model trained for a 96-px frame or in colour."""
+    from deepmorph_detect.check import SCREEN_LEAST_SURE
+
+    scene = SceneMaker(model, severity="medium", seed=4).make(drawings=1)
+    truth = scene.placements[0]
+    pyramid = ImagePyramid(to_gray(scene.image))
+    (det,) = locator.locate(scene.image, camera=scene.camera)
+    code = model.codec.encode(truth.payload)
+    # the decoder's probabilities: the true word's bits, more or less sure, the least sure misread
+    sure = np.random.default_rng(2).uniform(0.6, 0.99, len(code))
+    probabilities = np.where(code > 0, sure, 1 - sure).astype(np.float32)
+    probabilities[5] = 0.55 if code[5] == 0 else 0.45
+    weak = DecodeResult(truth.payload, True, 1, 0.9, rival_log_odds=3.0)
+
+    def checked(result: DecodeResult, probs: np.ndarray | None = probabilities) -> PayloadCheck:
+        return locator.checker.check(pyramid, det.homography, result, probabilities=probs)
+
+    assert checked(weak).bits is not None  # the ghost reads from a 96-px frame: the whole check
+    monkeypatch.setattr(type(model), "print_px", property(lambda self: 200))  # as if trained with --pixels 200
+    right = checked(weak)
+    assert right.status == "passed" and right.screened and right.bits is None and not right.settled
+    assert checked(weak, None).bits is not None  # without the decoder's probabilities: the whole check
+    asked: list[np.ndarray] = []
+    drawn_on = locator.checker.synthesis.drawn_on
+    monkeypatch.setattr(
+        locator.checker.synthesis, "drawn_on", lambda *a, **k: asked.append(np.asarray(a[3])) or drawn_on(*a, **k)
+    )
+    near = next(
+        p
+        for p in _near_payloads(truth.payload)
+        if (f := locator.checker.fit_morph(pyramid, det.homography, p)) and f.confirms
+    )
+    differ = np.flatnonzero(model.codec.encode(near) != code)
+    missed = checked(replace(weak, payload=near, corrected_bits=1))
+    # the near miss was asked where it differs from what the decoder read, and failed there
+    assert set(differ) <= set(asked[0].tolist()) and len(asked[0]) <= len(differ) + SCREEN_LEAST_SURE
+    assert missed.status == "contradicted" and not missed.screened and missed.bits is not None
+    monkeypatch.setattr(type(model.drawing), "colour", property(lambda self: True))
+    assert not checked(weak).screened
+
+
 def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     """Two bits contradicted is allowed; not when several more are barely supported (the
     evidence on a blurred, steeply tilted print is noise of about +-0.6)."""
@@ -822,6 +870,41 @@ def test_some_bits_are_asked_as_the_whole_word_asks_them(
         whole = colour.evidence(ImagePyramid(photo), H, code, in_colour=in_colour)
         assert np.allclose(
             colour.shown_on(ImagePyramid(photo), H, code, some, in_colour), whole.evidence[some], atol=0.03
+        )
+
+
+def test_bits_drawn_by_the_real_renderer_say_what_the_soft_rasterizer_s_say(
+    model: DeepMorphModel, locator: Locator, face: DeepMorphModel
+) -> None:
+    """The screen's evidence (``drawn_on``: the word and its one-bit variants drawn by the real
+    renderer) tells the printed word's bits from a near word's as the soft rasterizer's does, bit
+    for bit within a tenth of a bit's change; a variant the renderer draws no differently shows 0,
+    not support; and a colour drawing's bits are not asked so."""
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(4))[0]
+    photo, H = _small_print(model, payload, 80, seed=4)
+    synthesis, pyramid = locator.checker.synthesis, ImagePyramid(photo)
+    code = model.codec.encode(payload)
+    every = np.arange(len(code))
+    soft = synthesis.shown_on(pyramid, H, code, every)
+    drawn = synthesis.drawn_on(pyramid, H, code, every)
+    assert drawn.min() > 0.3 and np.median(np.abs(drawn - soft)) < 0.1
+    near_payload = _near_payloads(payload)[2]
+    near = model.codec.encode(near_payload)
+    differ = np.flatnonzero(near != code)
+    at = locator.checker.fit_morph(pyramid, H, near_payload).homography
+    drawn_near, soft_near = synthesis.drawn_on(pyramid, at, near, differ), synthesis.shown_on(pyramid, at, near, differ)
+    assert drawn_near.sum() < 0 and drawn_near.min() < -0.5  # the photo shows the printed word's there
+    assert np.median(np.abs(drawn_near - soft_near)) < 0.1
+    renderer = synthesis.renderer
+    synthesis.renderer = lambda svg, width, viewbox: renderer(model.drawing.to_svg(model.morph_values(
+        torch.from_numpy(code[None].astype(np.float32)))[0]), width, viewbox)  # fmt: skip
+    try:
+        assert np.all(synthesis.drawn_on(pyramid, H, code, differ) == 0)  # every variant drawn as the word
+    finally:
+        synthesis.renderer = renderer
+    with pytest.raises(ValueError, match="colour"):
+        _face_synthesis(face).drawn_on(
+            pyramid, H, face.codec.encode(random_payloads(1, 12, np.random.default_rng(7))[0]), differ[:1]
         )
 
 
