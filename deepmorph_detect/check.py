@@ -7,8 +7,8 @@ the print (what a CRC collision on clutter gives) fails this almost always; a ne
 the true payload fails it only sometimes. A payload read with corrections, or with low
 confidence, is then checked bit by bit (:mod:`deepmorph_detect.synthesis`), which catches near
 misses; where the decoder is trusted (:meth:`PayloadChecker.screens`), first on the few bits
-where a near miss would differ. The alignment to the decoded morph is also exact where the unmorphed one absorbed the
-morph, so the pose comes from it.
+where a near miss would differ. The alignment to the decoded morph is also exact where the
+unmorphed one absorbed the morph, so the pose comes from it.
 """
 
 from __future__ import annotations

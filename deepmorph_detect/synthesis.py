@@ -456,8 +456,9 @@ class MorphSynthesis:
     def drawn_on(self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, bits: np.ndarray) -> np.ndarray:
         """``(len(bits),)`` what :meth:`shown_on` says of the bits ``bits`` of ``code``, with the
         word and its one-bit variants drawn by the real renderer instead of the soft rasterizer:
-        half the time for a few bits (Skia draws one in about 0.5 ms, the soft rasterizer's fixed
-        cost is about 8 ms a batch), and with nothing of the soft rasterizer's error to correct,
+        about three quarters of the time for ten bits (Skia draws one in about 0.5 ms with its
+        SVG, where the soft rasterizer's fixed cost is about 8 ms a batch), and with nothing of
+        the soft rasterizer's error to correct,
         the word's own render being the first of them. A variant the renderer draws no
         differently from the word shows 0. Black-and-white drawings only: the renderer draws in
         one gray (:meth:`PayloadChecker.screens <deepmorph_detect.check.PayloadChecker.screens>`)."""

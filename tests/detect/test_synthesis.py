@@ -874,7 +874,7 @@ def test_some_bits_are_asked_as_the_whole_word_asks_them(
 
 
 def test_bits_drawn_by_the_real_renderer_say_what_the_soft_rasterizer_s_say(
-    model: DeepMorphModel, locator: Locator, face: DeepMorphModel
+    model: DeepMorphModel, locator: Locator, face: DeepMorphModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The screen's evidence (``drawn_on``: the word and its one-bit variants drawn by the real
     renderer) tells the printed word's bits from a near word's as the soft rasterizer's does, bit
@@ -895,13 +895,12 @@ def test_bits_drawn_by_the_real_renderer_say_what_the_soft_rasterizer_s_say(
     drawn_near, soft_near = synthesis.drawn_on(pyramid, at, near, differ), synthesis.shown_on(pyramid, at, near, differ)
     assert drawn_near.sum() < 0 and drawn_near.min() < -0.5  # the photo shows the printed word's there
     assert np.median(np.abs(drawn_near - soft_near)) < 0.1
-    renderer = synthesis.renderer
-    synthesis.renderer = lambda svg, width, viewbox: renderer(model.drawing.to_svg(model.morph_values(
-        torch.from_numpy(code[None].astype(np.float32)))[0]), width, viewbox)  # fmt: skip
-    try:
-        assert np.all(synthesis.drawn_on(pyramid, H, code, differ) == 0)  # every variant drawn as the word
-    finally:
-        synthesis.renderer = renderer
+    word = model.drawing.to_svg(model.morph_values(torch.from_numpy(code[None].astype(np.float32)))[0])
+    with monkeypatch.context() as m:  # every variant drawn as the word
+        m.setattr(
+            synthesis, "renderer", lambda svg, width, viewbox, draw=synthesis.renderer: draw(word, width, viewbox)
+        )
+        assert np.all(synthesis.drawn_on(pyramid, H, code, differ) == 0)
     with pytest.raises(ValueError, match="colour"):
         _face_synthesis(face).drawn_on(
             pyramid, H, face.codec.encode(random_payloads(1, 12, np.random.default_rng(7))[0]), differ[:1]
