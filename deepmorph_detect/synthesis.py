@@ -365,15 +365,20 @@ class MorphSynthesis:
     def _rendered(self, code: np.ndarray, bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`variants` of only the one-bit variants of ``bits`` (indices into ``code``):
         ``(len(bits) + 1, C, h, w)`` and ``(h, w)``."""
-        codes = np.repeat(code[None], len(bits) + 1, axis=0)
-        codes[np.arange(1, len(bits) + 1), bits] ^= 1
-        values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
+        values = self._variant_values(code, bits)
         with torch.no_grad():
             soft = (self.rasterizer.render_rgb(values) if self.colour else 1.0 - self.rasterizer(values)).numpy()
         real = self.renderer(self.model.drawing.to_svg(values[0]), soft.shape[3], self.template.viewbox)
         if real.shape != soft.shape[2:]:
             real = cv2.resize(real, soft.shape[:1:-1], interpolation=cv2.INTER_AREA)
         return soft, real
+
+    def _variant_values(self, code: np.ndarray, bits: np.ndarray) -> torch.Tensor:
+        """``(len(bits) + 1, n_vars)`` the morph values of ``code`` and of each of its one-bit
+        variants at ``bits``, in that order."""
+        codes = np.repeat(np.asarray(code, dtype=np.uint8)[None], len(bits) + 1, axis=0)
+        codes[np.arange(1, len(bits) + 1), np.asarray(bits, dtype=np.int64)] ^= 1
+        return self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
 
     def _light_fields(self, shape: tuple[int, int]) -> np.ndarray:
         """``(h * w, k)`` smooth basis functions (polynomials in x, y up to degree
@@ -448,30 +453,38 @@ class MorphSynthesis:
         rest only where those show the rival's (:meth:`PayloadChecker.rival_deviation
         <deepmorph_detect.check.PayloadChecker.rival_deviation>`)."""
         code = np.asarray(code, dtype=np.uint8)
-        bits = np.asarray(bits, dtype=np.int64)
-        photo, soft, real, colour = self._asked_in(pyramid, homography, self._rendered(code, bits), in_colour)
-        shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {}, light_grid)
-        return shown
+        renders = self._rendered(code, np.asarray(bits, dtype=np.int64))
+        return self._shown(pyramid, homography, renders, in_colour, light_grid)
 
     def drawn_on(self, pyramid: ImagePyramid, homography: np.ndarray, code: np.ndarray, bits: np.ndarray) -> np.ndarray:
         """``(len(bits),)`` what :meth:`shown_on` says of the bits ``bits`` of ``code``, with the
         word and its one-bit variants drawn by the real renderer instead of the soft rasterizer:
         about three quarters of the time for ten bits (Skia draws one in about 0.5 ms with its
         SVG, where the soft rasterizer's fixed cost is about 8 ms a batch), and with nothing of
-        the soft rasterizer's error to correct,
-        the word's own render being the first of them. A variant the renderer draws no
-        differently from the word shows 0. Black-and-white drawings only: the renderer draws in
-        one gray (:meth:`PayloadChecker.screens <deepmorph_detect.check.PayloadChecker.screens>`)."""
+        the soft rasterizer's error to correct, the word's own render being the first of them. A
+        variant the renderer draws no differently from the word shows 0. Black-and-white drawings
+        only: the renderer draws in one gray (:meth:`PayloadChecker.screens
+        <deepmorph_detect.check.PayloadChecker.screens>`)."""
         if self.colour:
             raise ValueError("a colour drawing's bits are asked in its colours, which the real renderer does not give")
-        code = np.asarray(code, dtype=np.uint8)
-        codes = np.repeat(code[None], len(bits) + 1, axis=0)
-        codes[np.arange(1, len(bits) + 1), np.asarray(bits, dtype=np.int64)] ^= 1
-        values = self.model.morph_values(torch.from_numpy(codes.astype(np.float32)))
         viewbox = self.template.viewbox
+        values = self._variant_values(code, bits)
         drawn = np.stack([self.renderer(self.model.drawing.to_svg(v), self.width, viewbox) for v in values])
-        photo, renders, real, _ = self._asked_in(pyramid, homography, (drawn[:, None], drawn[0]), False)
-        shown, _, _ = self._asked(photo / self.shadows(photo, renders[0]), renders, real, False, {}, exact=True)
+        return self._shown(pyramid, homography, (drawn[:, None], drawn[0]), False, exact=True)
+
+    def _shown(
+        self,
+        pyramid: ImagePyramid,
+        homography: np.ndarray,
+        renders: tuple[np.ndarray, np.ndarray],
+        in_colour: bool,
+        light_grid: int = 0,
+        exact: bool = False,
+    ) -> np.ndarray:
+        """:meth:`shown_on`'s and :meth:`drawn_on`'s evidence from ``renders`` (the word's and its
+        variants', and the word's real render): asked with a cast shadow's light divided out."""
+        photo, soft, real, colour = self._asked_in(pyramid, homography, renders, in_colour)
+        shown, _, _ = self._asked(photo / self.shadows(photo, soft[0]), soft, real, colour, {}, light_grid, exact)
         return shown
 
     def _asked_in(
