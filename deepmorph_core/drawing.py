@@ -132,18 +132,16 @@ class Drawing:
         """Whether every paint is opaque black or white (the paper's drawings)."""
         return all(paint.black_or_white for paint in self.palette)
 
-    def write(self, root: etree._Element, twin: dict[etree._Element, etree._Element]) -> str:
-        """The document under ``root`` (this drawing's tree, or a copy of it with a morph
-        written in; ``twin`` maps this drawing's elements to that copy's) as SVG text holding
-        only what DeepMorph models (:func:`deepmorph_core.svg.policy.sanitized`)."""
+    def sanitized(self, copies: dict[etree._Element, etree._Element] | None = None) -> etree._ElementTree:
+        """A fresh tree of this drawing holding only what DeepMorph models
+        (:func:`deepmorph_core.svg.policy.sanitized`); ``copies``, where given, is filled with
+        each of its primitives' and groups' elements (and the root) mapped to its copy in it."""
         shapes = {}
         for prim in self.primitives:
-            node = twin[prim.element]
-            tag = etree.QName(node).localname
-            shapes[node] = (*policy.GEOMETRY.get(tag, ()), *getattr(prim.primitive, "attributes", ()))
-        styles = {twin[el]: style for el, style in self.styles.items() if el in twin}
-        definitions = [twin[self.gradients.elements[i]] for i in self.gradients.used]
-        return etree.tostring(policy.sanitized(root, shapes, styles, definitions), encoding="unicode")
+            tag = etree.QName(prim.element).localname
+            shapes[prim.element] = (*policy.GEOMETRY.get(tag, ()), *getattr(prim.primitive, "attributes", ()))
+        definitions = [self.gradients.elements[i] for i in self.gradients.used]
+        return policy.sanitized(self.root, shapes, self.styles, definitions, copies)
 
     def pixel_size(self, width: int) -> tuple[int, int]:
         """``(height, width)`` in pixels for a raster ``width`` pixels wide (aspect kept).

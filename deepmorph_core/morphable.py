@@ -141,6 +141,10 @@ class MorphableDrawing:
         """One morph ``(N_v,)`` written back as an SVG document."""
         return self.space.write_svg(values)
 
+    def to_svgs(self, values: Tensor) -> list[str]:
+        """:meth:`to_svg` of each of ``(B, N_v)`` morphs, written together (quicker)."""
+        return self.space.write_svgs(values)
+
     @property
     def ink_level(self) -> float:
         """The luminance (or :attr:`channel`) of the darkest paint as printed on white (0 for black ink): what a
@@ -170,8 +174,7 @@ class MorphableDrawing:
         colour with ``rgb``, of ``(B, N_v)`` values at ``width`` pixels, on the CPU."""
         h, w = self.drawing.pixel_size(width)
         out = np.empty((values.shape[0], 3 if rgb else 1, h, w), dtype=np.float32)
-        for i in range(values.shape[0]):
-            svg = self.to_svg(values[i].detach().cpu())
+        for i, svg in enumerate(self.to_svgs(values.detach().cpu())):
             if rgb:
                 out[i] = render_svg_rgb(svg, w).transpose(2, 0, 1)
             else:

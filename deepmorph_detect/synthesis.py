@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import cv2
@@ -44,6 +45,7 @@ from deepmorph_core.registration import motion_images
 from deepmorph_detect.fastrender import Renderer, render_svg_resvg
 from deepmorph_detect.light_field import grid_fields
 from deepmorph_detect.refine import ImagePyramid, Template, correlation, refine_at, warp_to_template
+from deepmorph_detect.tall_solves import least_squares, orthonormal_columns
 from deepmorph_detect.template_light import DARKEST_REFLECTANCE, far_from_edges, smoothed_light
 
 SYNTH_WIDTH = 64  # width (px) of the rectified photo and of the renders (wider reads fewer small prints, slower)
@@ -383,17 +385,12 @@ class MorphSynthesis:
     def _light_fields(self, shape: tuple[int, int]) -> np.ndarray:
         """``(h * w, k)`` smooth basis functions (polynomials in x, y up to degree
         :data:`LIGHT_DEGREE`) for the light's contrast and brightness across the print."""
-        h, w = shape
-        y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-        x = (2 * x / max(w - 1, 1) - 1).ravel()
-        y = (2 * y / max(h - 1, 1) - 1).ravel()
-        return np.stack([x**i * y**j for i in range(LIGHT_DEGREE + 1) for j in range(LIGHT_DEGREE + 1 - i)], axis=1)
+        return _light_fields_of(tuple(shape))
 
     def _motion_basis(self, model: np.ndarray) -> np.ndarray:
         """``(h * w, 8)`` orthonormal basis of the changes that a small motion (the eight
         parameters of a homography, linearised) makes to ``model``."""
-        basis, _ = np.linalg.qr(motion_images(model).reshape(8, -1).T)
-        return basis
+        return orthonormal_columns(motion_images(model).reshape(8, -1).T)
 
     def rectified(self, pyramid: ImagePyramid, homography: np.ndarray) -> np.ndarray:
         """The photo through ``homography`` (SVG units -> image px), at :attr:`width`."""
@@ -469,7 +466,7 @@ class MorphSynthesis:
             raise ValueError("a colour drawing's bits are asked in its colours, which the real renderer does not give")
         viewbox = self.template.viewbox
         values = self._variant_values(code, bits)
-        drawn = np.stack([self.renderer(self.model.drawing.to_svg(v), self.width, viewbox) for v in values])
+        drawn = np.stack([self.renderer(svg, self.width, viewbox) for svg in self.model.drawing.to_svgs(values)])
         return self._shown(pyramid, homography, (drawn[:, None], drawn[0]), False, exact=True)
 
     def _shown(
@@ -562,7 +559,7 @@ class MorphSynthesis:
         for _ in range(LIGHT_ROUNDS):
             # a colour render's channels and the constant can be collinear (few inks): the
             # fitted picture is unique all the same
-            mix, *_ = np.linalg.lstsq(inks.T, (photo / light).ravel(), rcond=None)
+            mix = least_squares(inks.T, (photo / light).ravel())
             model = (mix @ inks).reshape(h, w)
             weight = (flat * (model > LIGHT_READ_SHARE * float(model.max()))).astype(np.float32)
             ratio = (photo / np.maximum(model, DARKEST_REFLECTANCE) * weight).astype(np.float32)
@@ -583,7 +580,7 @@ class MorphSynthesis:
         colours that the capture changed (faded ink, white balance, the camera's tint), so a
         colour print is fitted as its own mix rather than as one fixed gray."""
         design = np.concatenate([fields * channel[:, None] for channel in render] + [fields], axis=1)
-        coef, *_ = np.linalg.lstsq(design, photo.ravel(), rcond=None)
+        coef = least_squares(design, photo.ravel())
         return coef.reshape(len(render) + 1, fields.shape[1])
 
     def _in_light(
@@ -664,6 +661,19 @@ class MorphSynthesis:
                 break
             bits = new
         return soft.astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _light_fields_of(shape: tuple[int, int]) -> np.ndarray:
+    """:meth:`MorphSynthesis._light_fields` of ``shape``, made once per size (read-only): every
+    ask of a photo rectified to the same size uses the same fields."""
+    h, w = shape
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    x = (2 * x / max(w - 1, 1) - 1).ravel()
+    y = (2 * y / max(h - 1, 1) - 1).ravel()
+    fields = np.stack([x**i * y**j for i in range(LIGHT_DEGREE + 1) for j in range(LIGHT_DEGREE + 1 - i)], axis=1)
+    fields.flags.writeable = False
+    return fields
 
 
 def _blurred(renders: np.ndarray, sigma: float) -> np.ndarray:

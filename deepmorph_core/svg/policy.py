@@ -221,6 +221,7 @@ def sanitized(
     shapes: dict[etree._Element, Iterable[str]],
     style_of: dict[etree._Element, str],
     gradients: Iterable[etree._Element] = (),
+    copies: dict[etree._Element, etree._Element] | None = None,
 ) -> etree._ElementTree:
     """A fresh document holding only what DeepMorph models of ``root``.
 
@@ -232,6 +233,8 @@ def sanitized(
             (empty: none written).
         gradients: the gradients the shapes' paints use, written first in a ``<defs>`` with
             their geometry, stops and ``#id`` links only.
+        copies: filled, where given, with each kept shape, container and ``root`` itself mapped
+            to its copy in the new tree (to write morphs into the copy).
 
     Returns:
         The new tree: ``<svg>`` (its frame, namespaces for SVG and ``dm:``), ``<g>`` for every
@@ -245,11 +248,13 @@ def sanitized(
         if root.get(name) is not None:
             out_root.set(name, root.get(name))
     _copy_modelled_attributes(root, out_root, (), style_of.get(root, ""))
+    if copies is not None:
+        copies[root] = out_root
     if gradients:
         defs = etree.SubElement(out_root, f"{{{SVG_NS}}}defs")
         for gradient in gradients:
             _copy_gradient(gradient, defs, style_of)
-    _copy_children(root, out_root, shapes, style_of)
+    _copy_children(root, out_root, shapes, style_of, copies)
     return etree.ElementTree(out_root)
 
 
@@ -263,6 +268,7 @@ def _copy_children(
     dst: etree._Element,
     shapes: dict[etree._Element, Iterable[str]],
     style_of: dict[etree._Element, str],
+    copies: dict[etree._Element, etree._Element] | None = None,
 ) -> None:
     dst.text = _layout(src.text)
     last = None
@@ -282,10 +288,14 @@ def _copy_children(
         if child in shapes:
             node = etree.SubElement(dst, f"{{{SVG_NS}}}{name}")
             _copy_modelled_attributes(child, node, shapes[child], style_of.get(child, ""))
+            if copies is not None:
+                copies[child] = node
         elif name in CONTAINERS:
             node = etree.SubElement(dst, f"{{{SVG_NS}}}g")
             _copy_modelled_attributes(child, node, (), style_of.get(child, ""))
-            _copy_children(child, node, shapes, style_of)
+            if copies is not None:
+                copies[child] = node
+            _copy_children(child, node, shapes, style_of, copies)
         elif name in TEXT_ELEMENTS and child.text and child.text.strip():
             node = etree.SubElement(dst, f"{{{SVG_NS}}}{name}")
             node.text = "".join(child.itertext())  # text only, any markup inside dropped

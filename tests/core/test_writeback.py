@@ -69,3 +69,19 @@ def test_neutral_morph_changes_nothing() -> None:
     neutral = md.neutral_values()[0]
     neutral[[i for i, v in enumerate(md.variables) if v.role == "scale"]] = 0.0  # factor 1
     assert md.to_svg(neutral) == original
+
+
+def test_morphs_written_together_are_each_as_written_alone() -> None:
+    # to_svgs writes each morph into one sanitized copy in turn: what one morph adds (a
+    # rotation's transform, a group's matrix, new radii) must not stay for the next
+    md = MorphableDrawing.load(EVERY_KIND)
+    original = etree.tostring(md.drawing.root.getroottree(), encoding="unicode")
+    values = md.values_from_unit(md.random_unit(3, seed=5).double())
+    neutral = md.neutral_values()[0].double()
+    neutral[[i for i, v in enumerate(md.variables) if v.role == "scale"]] = 0.0
+    morphs = torch.stack([values[0], neutral, values[1], values[2]])
+    together = md.to_svgs(morphs)
+    assert together == [MorphableDrawing.load(EVERY_KIND).to_svg(m) for m in morphs]
+    assert "rotate(" in together[0] and "matrix(" in together[0]
+    assert together[1] == original
+    assert len(set(together)) == 4
