@@ -5,7 +5,8 @@ lands on another code word, and that word's CRC passes by chance (one in ``2**cr
 second is independent of the photo, so the first can be studied on its own: decoded with the CRC
 set aside, every misread close-up gives a *near miss*, a wrong code word exactly like the wrong
 payloads the chain could give, about 256 times as often as they happen. Each near miss is asked
-the payload check (``PayloadChecker.check``, as if its CRC had passed), and so is each right word.
+the payload check (``PayloadChecker.check``) as if its CRC had passed: as the code word the
+correction reached, CRC bits as read (:func:`colliding`), and so is each right word.
 
 One or more bundles; ``--samples`` close-ups of fresh payloads each
 (``deepmorph_detect.photo_validation.close_ups``, the print about ``--width`` camera pixels
@@ -28,6 +29,8 @@ from __future__ import annotations
 import argparse
 import copy
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -41,15 +44,60 @@ LOOSER_CONTRADICTED, LOOSER_WEAKEST_SUM, LOOSER_DEVIATION_FACTOR = 1, 0.0, 1.5
 
 def crc_blind(codec: Any) -> Any:
     """A copy of ``codec`` whose CRC passes every word: it returns the code word the error
-    correction reaches (the first the soft search finds), right or wrong."""
+    correction reaches (the first the soft search finds), right or wrong, and keeps that word
+    (its payload and CRC bits as read, before whitening) in ``reached``."""
     blind = copy.copy(codec)
-    blind._crc_ok = lambda word: True  # noqa: SLF001 - the one check this copy sets aside
+    blind.reached = None
+
+    def passes(word: Any) -> bool:
+        if blind.reached is None:  # the first word asked is the one returned; rivals follow
+            blind.reached = word.copy()
+        return True
+
+    def decode(probs: Any, soft: bool = True) -> Any:
+        blind.reached = None
+        return type(codec).decode(blind, probs, soft)
+
+    blind._crc_ok = passes  # noqa: SLF001 - the one check this copy sets aside
+    blind.decode = decode
     return blind
 
 
+@contextmanager
+def colliding(codec: Any, reached: Any) -> Iterator[None]:
+    """``codec`` with the CRC bits of ``reached`` (a code word :func:`crc_blind` reached) taken
+    as its payload's CRC: the collision a wrong payload needs. The word is then encoded, drawn
+    and checked as the code word the correction reached. Re-encoded with its true CRC instead,
+    a near miss would also differ from what the decoder read in about half its CRC and parity
+    bits, which the photo contradicts and which no real collision has."""
+    import numpy as np
+
+    p, crc_bits = codec.spec.payload_bits, codec.spec.crc_bits
+    payload, crc = reached[:p].copy(), reached[p : p + crc_bits].copy()
+    own = codec._crc_bits_of  # noqa: SLF001
+
+    def crc_of(bits: Any) -> Any:
+        return crc.copy() if np.array_equal(bits, payload) else own(bits)
+
+    codec._crc_bits_of = crc_of  # noqa: SLF001
+    try:
+        yield
+    finally:
+        del codec._crc_bits_of  # noqa: SLF001 - the class's own again
+
+
 def word_record(locator: Any, aligned: Any, reading: Any, blind: Any, truth: Any) -> dict[str, Any] | None:
-    """The word ``reading`` decodes to CRC-blind at ``aligned``, checked as if its CRC had passed,
-    with its per-bit evidence; ``None`` where the code reaches no word."""
+    """The word ``reading`` decodes to CRC-blind at ``aligned``, checked as if its CRC had passed
+    (:func:`colliding`), with its per-bit evidence; ``None`` where the code reaches no word."""
+    word = blind.decode(reading.probabilities, soft=True)
+    if word.corrected_bits < 0:
+        return None
+    with colliding(locator.model.codec, blind.reached):
+        return _checked(locator, aligned, reading, word, truth)
+
+
+def _checked(locator: Any, aligned: Any, reading: Any, word: Any, truth: Any) -> dict[str, Any]:
+    """:func:`word_record` of the decoded ``word``, its CRC passing."""
     import numpy as np
 
     from deepmorph_core.codec import DecodeResult
@@ -57,10 +105,10 @@ def word_record(locator: Any, aligned: Any, reading: Any, blind: Any, truth: Any
     from deepmorph_detect.synthesis import broken_rules
 
     codec, checker = locator.model.codec, locator.checker
-    word = blind.decode(reading.probabilities, soft=True)
-    if word.corrected_bits < 0:
-        return None
     code = codec.encode(word.payload)
+    read_as = np.asarray(reading.probabilities) > 0.5
+    if np.count_nonzero(code != read_as) != word.corrected_bits:
+        raise AssertionError("the word checked is not the code word the correction reached")
     log_odds = codec.rival_log_odds(code, reading.probabilities) if word.corrected_bits else 0.0
     asked = DecodeResult(word.payload, True, word.corrected_bits, word.confidence, log_odds)
     pyramid, alignment = aligned.pyramid, aligned.alignment
