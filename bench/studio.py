@@ -1,4 +1,4 @@
-"""How fast ``deepmorph studio`` serves its first page, and how much memory it holds.
+"""How fast ``deepmorph studio`` serves its first page and reads a camera, and the memory it holds.
 
 Each round starts ``python -m deepmorph studio --no-browser`` as a user would (a fresh process,
 a fresh data folder, a free port) and times, from the process's start: the first page
@@ -7,7 +7,14 @@ and its first photo decoded (``POST /api/models/ghost/scan``: the model and the 
 on first use). The resident memory (VmRSS) is read idle after the first page and idle again
 after that first scan. The table gives the median of ``--repeats`` rounds.
 
+With ``--camera``, each round also opens the scan tab in headless Chromium (Playwright, Debian's
+``chromium``) whose fake camera loops a clip of a ghost print coming into view on a desk
+(``bench/_camera.py``: 15 frames/s, 640x480), starts the camera with the ghost and watches four
+loops: the page's frames per second, those over the frames showing the print, and the longest
+time from the print coming into view to its payload on the page. Targets: 10 frames/s, 1 s.
+
     .venv/bin/python bench/studio.py --repeats 5
+    .venv/bin/python bench/studio.py --repeats 3 --camera
 """
 
 from __future__ import annotations
@@ -25,10 +32,13 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+from _camera import CHROMIUM, camera_args, scan_live, write_camera_clip
 from _common import RESULTS, environment, table, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_FIRST_PAGE_S = 2.0
+TARGET_CAMERA_FPS = 10.0
+TARGET_PAYLOAD_SHOWN_S = 1.0
 
 
 def _free_port() -> int:
@@ -59,7 +69,21 @@ def _photo() -> bytes:
     return buf.tobytes()
 
 
-def one_round(photo: bytes) -> dict[str, float]:
+def _camera_round(url: str, clip: Path) -> dict[str, float]:
+    """The scan tab over the fake camera (``clip``) at the studio's printed ``url``."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=camera_args(clip))
+        try:
+            page = browser.new_context(viewport={"width": 1200, "height": 860}).new_page()
+            scan = scan_live(page, url)
+        finally:
+            browser.close()
+    return {"camera_fps": scan.fps, "camera_print_fps": scan.print_fps, "payload_shown_s": max(scan.delays_s)}
+
+
+def one_round(photo: bytes, clip: Path | None = None) -> dict[str, float]:
     port = _free_port()
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     with tempfile.TemporaryDirectory() as data:
@@ -102,19 +126,26 @@ def one_round(photo: bytes) -> dict[str, float]:
                 response.read()
             time.sleep(1.0)
             loaded = _rss_mb(process.pid)
+            camera = _camera_round(url, clip) if clip is not None else {}
         finally:
             process.terminate()
             process.wait(timeout=30)
-    return {"first_page_s": first_page, "idle_rss_mb": idle, "first_scan_s": first_scan, "loaded_rss_mb": loaded}
+    started_up = {"first_page_s": first_page, "idle_rss_mb": idle, "first_scan_s": first_scan, "loaded_rss_mb": loaded}
+    return {**started_up, **camera}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--camera", action="store_true", help="also read a fake camera in the scan tab (Chromium)")
     ap.add_argument("--out", type=Path, default=RESULTS / "studio.json")
     args = ap.parse_args()
+    if args.camera and not Path(CHROMIUM).is_file():
+        raise SystemExit(f"--camera needs Chromium at {CHROMIUM} (apt-get install chromium, or DEEPMORPH_CHROMIUM)")
     photo = _photo()
-    rounds = [one_round(photo) for _ in range(args.repeats)]
+    with tempfile.TemporaryDirectory() as folder:
+        clip = write_camera_clip(Path(folder) / "ghost.y4m") if args.camera else None
+        rounds = [one_round(photo, clip) for _ in range(args.repeats)]
     med = {k: statistics.median(r[k] for r in rounds) for k in rounds[0]}
     rows = [
         ["start to first page", f"{med['first_page_s']:.2f} s", f"target {TARGET_FIRST_PAGE_S:g} s"],
@@ -122,6 +153,13 @@ def main() -> None:
         ["first photo decoded (loads the model)", f"{med['first_scan_s']:.2f} s", "ghost, 240 px close-up"],
         ["idle memory after a decode", f"{med['loaded_rss_mb']:.0f} MB", "torch, model, photo chain"],
     ]
+    if args.camera:
+        fps_target, shown_target = f"target {TARGET_CAMERA_FPS:g}", f"target {TARGET_PAYLOAD_SHOWN_S:g} s"
+        rows += [
+            ["scan tab, fake camera", f"{med['camera_fps']:.1f} frames/s", fps_target],
+            ["... over frames showing the print", f"{med['camera_print_fps']:.1f} frames/s", fps_target],
+            ["print in view to payload shown (longest)", f"{med['payload_shown_s']:.2f} s", shown_target],
+        ]
     print(table(["what", f"median of {args.repeats}", "note"], rows))
     path = write_json(args.out, {"environment": environment(), "median": med, "rounds": rounds})
     print(f"wrote {path}")

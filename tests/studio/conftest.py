@@ -16,28 +16,16 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Where the tabs' screenshots go: docs/studio/ only when asked (``DEEPMORPH_SCREENSHOTS=docs/studio``,
 #: docs/studio.md), so that running the tests leaves the repository as it was.
 SHOTS = Path(os.environ.get("DEEPMORPH_SCREENSHOTS") or Path(tempfile.gettempdir()) / "deepmorph-studio-shots")
-CHROMIUM = os.environ.get("DEEPMORPH_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-CAMERA_PAYLOAD = "0x5A3C96"  # what the fake camera's print carries
-CLIP_FPS = 15
-CLIP_EMPTY = 8  # frames of the bare desk, then the print comes into view ...
-CLIP_PRINT = 16  # ... for this many frames; the clip loops
+sys.path.insert(0, str(ROOT / "bench"))
+from _camera import CAMERA_PAYLOAD, CHROMIUM, camera_args, scan_live, write_camera_clip  # noqa: E402
+
+__all__ = ["CAMERA_PAYLOAD", "Server", "open_studio", "scan_live", "screenshot"]
 
 
 @dataclass
@@ -98,41 +86,10 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         process.kill()
 
 
-def _write_y4m(frames: list[np.ndarray], path: Path, fps: int = 15) -> None:
-    """BGR frames as a YUV4MPEG2 clip (4:2:0), what Chromium's fake camera plays."""
-    import cv2
-
-    h, w = frames[0].shape[:2]
-    with path.open("wb") as f:
-        f.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 C420jpeg\n".encode())
-        for frame in frames:
-            f.write(b"FRAME\n")
-            f.write(cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420).tobytes())
-
-
 @pytest.fixture(scope="session")
 def camera_clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 640x480 clip at :data:`CLIP_FPS`: :data:`CLIP_EMPTY` frames of a bare desk, then
-    :data:`CLIP_PRINT` simulated close-up photos (easy) of a print of the bundled ghost carrying
-    :data:`CAMERA_PAYLOAD`, each a fresh photo placed on the same desk. Chromium loops it, so the
-    print comes into view every ``(CLIP_EMPTY + CLIP_PRINT) / CLIP_FPS`` seconds."""
-    from deepmorph_core.bundled import BUNDLED_MODEL
-    from deepmorph_core.model import DeepMorphModel
-    from deepmorph_detect.scenes import close_up_photo
-
-    code = DeepMorphModel.load(BUNDLED_MODEL).code(CAMERA_PAYLOAD)
-    art = code.render(360)
-    rng = np.random.default_rng(5)
-    desk = np.full((480, 640, 3), 153, np.uint8)  # 0.6 grey, as close_up_photo's desk below
-    frames = [desk] * CLIP_EMPTY
-    for _ in range(CLIP_PRINT):
-        photo = close_up_photo(art, "easy", rng, size=440, desk=0.6)
-        frame = desk.copy()
-        frame[20:460, 100:540] = photo
-        frames.append(frame)
-    path = tmp_path_factory.mktemp("camera") / "ghost.y4m"
-    _write_y4m(frames, path, CLIP_FPS)
-    return path
+    """The fake camera's clip of a ghost print coming into view (``bench/_camera.py``)."""
+    return write_camera_clip(tmp_path_factory.mktemp("camera") / "ghost.y4m")
 
 
 @pytest.fixture(scope="session")
@@ -141,15 +98,7 @@ def browser(camera_clip: Path) -> Iterator[object]:
     if not Path(CHROMIUM).is_file():
         pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium)")
     with playwright_api.sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=CHROMIUM,
-            args=[
-                *CHROMIUM_ARGS,
-                "--use-fake-ui-for-media-stream",
-                "--use-fake-device-for-media-stream",
-                f"--use-file-for-fake-video-capture={camera_clip}",
-            ],
-        )
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=camera_args(camera_clip))
         yield browser
         browser.close()
 
