@@ -5,7 +5,7 @@ primitive kind reads each element, and holds every element to the allow-list of
 :mod:`deepmorph_core.svg.policy`: what DeepMorph cannot model is an ``unsupported:`` error with
 its line (or, with ``drop_unsupported``, left out and listed in :attr:`Drawing.dropped`), and
 scripts and event handlers are errors always. The lxml tree is kept so that a morph can be
-written back (:meth:`Drawing.write`), as a fresh document of the modelled parts only.
+written back into a fresh copy of the modelled parts only (:meth:`Drawing.sanitized`).
 """
 
 from __future__ import annotations
