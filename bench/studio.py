@@ -80,7 +80,8 @@ def _camera_round(url: str, clip: Path) -> dict[str, float]:
             scan = scan_live(page, url)
         finally:
             browser.close()
-    return {"camera_fps": scan.fps, "camera_print_fps": scan.print_fps, "payload_shown_s": max(scan.delays_s)}
+    shown_s = max(scan.delays_s, default=float("nan"))  # nan: the print never left the view and came back
+    return {"camera_fps": scan.fps, "camera_print_fps": scan.print_fps, "payload_shown_s": shown_s}
 
 
 def one_round(photo: bytes, clip: Path | None = None) -> dict[str, float]:
