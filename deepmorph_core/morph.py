@@ -294,7 +294,7 @@ class MorphSpace:
         v = values.detach().to(torch.float64).cpu()
         if v.ndim != 2 or v.shape[1] != self.n_variables:
             raise ValueError(f"expected (B, {self.n_variables}) values, got {tuple(v.shape)}")
-        copies: dict = {}
+        copies: dict[etree._Element, etree._Element] = {}
         tree = self.drawing.sanitized(copies)
         elements = [group.element for group in self.drawing.groups] + [p.element for p in self.drawing.primitives]
         nodes = [copies[element] for element in elements if element in copies]
@@ -309,7 +309,7 @@ class MorphSpace:
             texts.append(etree.tostring(tree, encoding="unicode"))
         return texts
 
-    def _write_morph(self, ext: np.ndarray, copies: dict) -> None:
+    def _write_morph(self, ext: np.ndarray, copies: dict[etree._Element, etree._Element]) -> None:
         """Write the morph ``ext`` (values and a trailing 0 for "no variable") into the
         sanitized copies (``copies``: the drawing's elements to theirs) of its groups and
         primitives; one the sanitized tree left out (inside an element it drops) is not written."""
