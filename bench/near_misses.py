@@ -13,8 +13,10 @@ One or more bundles; ``--samples`` close-ups of fresh payloads each
 wide), 1 thread. At each close-up the photo chain reads as it does (the bundle's detector, else
 the universal one); at the first drawing it aligned, the two first looks (the view as it is, and
 framed by the template's ink) are decoded CRC-blind, and each word they give is checked there.
-The table: close-ups, read by the chain; right words checked and withdrawn; near misses, per
-close-up, and passed by the check; right words and near misses passed on a few of their bits
+The table: close-ups, read by the chain; right words (the printed code word reached) checked and
+withdrawn; near misses (a wrong payload), per close-up, and passed by the check; words that reached
+the printed payload with other CRC bits (the real CRC refuses them; checked as collisions, they are
+near misses whose payload is right), and passed; right words and near misses passed on a few of their bits
 (``PayloadChecker.screens``); the wrong payloads per 10,000 close-ups that rate gives from
 these looks (passed near misses x ``2**-crc_bits``); and, with the three bit bars loosened one
 notch (``synthesis.MAX_CONTRADICTED`` + 1, ``MIN_WEAKEST_SUM`` down to 0, ``MAX_DEVIATION`` x 1.5,
@@ -92,12 +94,17 @@ def word_record(locator: Any, aligned: Any, reading: Any, blind: Any, truth: Any
     word = blind.decode(reading.probabilities, soft=True)
     if word.corrected_bits < 0:
         return None
+    printed = locator.model.codec.encode(truth)  # outside the collision: the true CRC's code word
     with colliding(locator.model.codec, blind.reached):
-        return _checked(locator, aligned, reading, word, truth)
+        return _checked(locator, aligned, reading, word, truth, printed)
 
 
-def _checked(locator: Any, aligned: Any, reading: Any, word: Any, truth: Any) -> dict[str, Any]:
-    """:func:`word_record` of the decoded ``word``, its CRC passing."""
+def _checked(locator: Any, aligned: Any, reading: Any, word: Any, truth: Any, printed: Any) -> dict[str, Any]:
+    """:func:`word_record` of the decoded ``word``, its CRC passing; ``truth`` is the printed
+    payload and ``printed`` its code word. A word is right where the correction reached the
+    printed code word; one that reached the printed payload with other CRC bits is a near miss
+    whose payload is right (the real CRC refuses it, and were it to collide, the payload told
+    would still be right)."""
     import numpy as np
 
     from deepmorph_core.codec import DecodeResult
@@ -115,8 +122,9 @@ def _checked(locator: Any, aligned: Any, reading: Any, word: Any, truth: Any) ->
     verdict = checker.check(pyramid, alignment.homography, asked, alignment, None, aligned.candidate.blind,
                             probabilities=reading.probabilities)  # fmt: skip
     record: dict[str, Any] = {
-        "right": bool(np.array_equal(word.payload, truth)),
+        **labels(code, word.payload, printed, truth),
         "payload": word.payload.tobytes().hex(),
+        "code": code.tobytes().hex(),
         "corrected_bits": int(word.corrected_bits),
         "confidence": round(float(word.confidence), 5),
         "status": verdict.status,
@@ -139,6 +147,14 @@ def _checked(locator: Any, aligned: Any, reading: Any, word: Any, truth: Any) ->
     )
     record["looser"] = looser_passes(record)
     return record
+
+
+def labels(code: Any, payload: Any, printed: Any, truth: Any) -> dict[str, bool]:
+    """Whether a word (its ``code`` word and ``payload``) is ``right``, the printed code word
+    ``printed``, and whether its payload is ``truth``, the printed payload (``right_payload``)."""
+    import numpy as np
+
+    return {"right": bool(np.array_equal(code, printed)), "right_payload": bool(np.array_equal(payload, truth))}
 
 
 def looser_passes(record: dict[str, Any]) -> bool:
@@ -180,12 +196,13 @@ def measure(bundle: Path, args: argparse.Namespace) -> tuple[dict[str, Any], lis
         looks = (locator.reader.read(view, True), locator.reader.read_framed_by_template(view, True))
         for look, reading in zip(LOOKS, looks):
             record = None if reading is None else word_record(locator, first, reading, blind, shot.payload)
-            if record is None or record["payload"] in seen:
+            if record is None or record["code"] in seen:
                 continue
-            seen.add(record["payload"])
+            seen.add(record["code"])
             words.append({"close_up": index, "look": look, **record})
     right = [w for w in words if w["right"]]
-    near = [w for w in words if not w["right"]]
+    near = [w for w in words if not w["right_payload"]]
+    other_crc = [w for w in words if w["right_payload"] and not w["right"]]
     passed_near = sum(w["status"] == "passed" for w in near)
     row = {
         "bundle": bundle.stem,
@@ -196,6 +213,8 @@ def measure(bundle: Path, args: argparse.Namespace) -> tuple[dict[str, Any], lis
         "near_misses": len(near),
         "near_per_close_up": round(len(near) / args.samples, 3),
         "near_passed": passed_near,
+        "other_crc": len(other_crc),
+        "other_crc_passed": sum(w["status"] == "passed" for w in other_crc),
         "right_screened": sum(w["screened"] for w in right),
         "near_screened": sum(w["screened"] for w in near),
         "wrong_per_10k": round(1e4 * passed_near / args.samples * 2.0**-model.codec.spec.crc_bits, 3),
@@ -221,6 +240,7 @@ def main() -> None:
     columns = {"bundle": "bundle", "close_ups": "close-ups", "read": "read by the chain",
                "right_words": "right words", "right_withdrawn": "withdrawn", "near_misses": "near misses",
                "near_per_close_up": "per close-up", "near_passed": "passed",
+               "other_crc": "right payload, other CRC bits", "other_crc_passed": "of them passed",
                "right_screened": "right passed on a few bits", "near_screened": "near passed on a few bits",
                "wrong_per_10k": "wrong per 10k close-ups", "looser_right_gained": "looser: right gained",
                "looser_near_passed": "near misses passed"}  # fmt: skip

@@ -13,7 +13,7 @@ import numpy as np
 from deepmorph_core.codec import PayloadCodec, choose_codec
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
-from near_misses import colliding, crc_blind  # noqa: E402
+from near_misses import colliding, crc_blind, labels  # noqa: E402
 
 
 def _a_word_with_a_foreign_crc(codec: PayloadCodec, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -47,3 +47,20 @@ def test_a_near_miss_is_checked_as_the_code_word_the_correction_reached() -> Non
         np.testing.assert_array_equal(codec.encode(other), PayloadCodec(codec.spec).encode(other))
     np.testing.assert_array_equal(codec.encode(payload), own)  # the codec's own CRC again
     assert not codec.decode(probs).ok
+
+
+def test_a_word_with_the_printed_payload_and_other_crc_bits_is_not_the_right_word() -> None:
+    """The printed word carries its payload's own CRC: a correction that reaches the same
+    payload with other CRC bits is a near miss (checked as that code word, the photo shows it
+    differs), whose payload is nonetheless right."""
+    codec = PayloadCodec(choose_codec(20, 8, 2))
+    sent, payload = _a_word_with_a_foreign_crc(codec, np.random.default_rng(5))
+    printed = codec.encode(payload)
+    blind = crc_blind(codec)
+    word = blind.decode(np.where(sent == 1, 0.9, 0.1))
+    with colliding(codec, blind.reached):
+        code = codec.encode(word.payload)
+    assert labels(code, word.payload, printed, payload) == {"right": False, "right_payload": True}
+    assert labels(printed, payload, printed, payload) == {"right": True, "right_payload": True}
+    other = payload ^ 1
+    assert labels(codec.encode(other), other, printed, payload) == {"right": False, "right_payload": False}
