@@ -6,12 +6,21 @@ import argparse
 import json
 import os
 import platform
+import socket
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 free at the time of asking (the system's pick), for a server
+    started by a benchmark or a test (the studio, ``torch.distributed``'s rendezvous)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def set_threads(n: int) -> int:

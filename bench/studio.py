@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import socket
 import statistics
 import subprocess
 import sys
@@ -33,18 +32,12 @@ import urllib.request
 from pathlib import Path
 
 from _camera import CHROMIUM, camera_args, scan_live, write_camera_clip
-from _common import RESULTS, environment, table, write_json
+from _common import RESULTS, environment, free_port, table, write_json
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_FIRST_PAGE_S = 2.0
 TARGET_CAMERA_FPS = 10.0
 TARGET_PAYLOAD_SHOWN_S = 1.0
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _rss_mb(pid: int) -> float:
@@ -85,7 +78,7 @@ def _camera_round(url: str, clip: Path) -> dict[str, float]:
 
 
 def one_round(photo: bytes, clip: Path | None = None) -> dict[str, float]:
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     with tempfile.TemporaryDirectory() as data:
         started = time.perf_counter()

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
 import sys
 import tempfile
 import time
@@ -30,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, environment, free_port, set_threads, table, write_json  # noqa: E402
 from train_profile import FEATHER, pick_drawing  # noqa: E402
 
 
@@ -72,12 +71,6 @@ def worker(rank: int, world_size: int, port: int, args: dict[str, Any], results:
             )
         if joined:
             leave()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def measure(processes: int, threads: int, args: dict[str, Any]) -> dict[str, Any]:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -24,8 +23,9 @@ ROOT = Path(__file__).resolve().parents[2]
 SHOTS = Path(os.environ.get("DEEPMORPH_SCREENSHOTS") or Path(tempfile.gettempdir()) / "deepmorph-studio-shots")
 sys.path.insert(0, str(ROOT / "bench"))
 from _camera import CAMERA_PAYLOAD, CHROMIUM, camera_args, scan_live, write_camera_clip  # noqa: E402
+from _common import free_port  # noqa: E402
 
-__all__ = ["CAMERA_PAYLOAD", "Server", "open_studio", "scan_live", "screenshot"]
+__all__ = ["CAMERA_PAYLOAD", "Server", "free_port", "open_studio", "scan_live", "screenshot"]
 
 
 @dataclass
@@ -42,12 +42,6 @@ class Server:
     @property
     def url(self) -> str:
         return f"{self.base}/?token={self.token}"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="session")
