@@ -20,11 +20,7 @@ time from the print coming into view to its payload on the page. Targets: 10 fra
 from __future__ import annotations
 
 import argparse
-import os
-import re
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 import urllib.error
@@ -32,9 +28,9 @@ import urllib.request
 from pathlib import Path
 
 from _camera import CHROMIUM, camera_args, scan_live, write_camera_clip
-from _common import RESULTS, environment, free_port, table, write_json
+from _common import RESULTS, environment, table, write_json
+from _studio import studio_process
 
-ROOT = Path(__file__).resolve().parent.parent
 TARGET_FIRST_PAGE_S = 2.0
 TARGET_CAMERA_FPS = 10.0
 TARGET_PAYLOAD_SHOWN_S = 1.0
@@ -78,52 +74,34 @@ def _camera_round(url: str, clip: Path) -> dict[str, float]:
 
 
 def one_round(photo: bytes, clip: Path | None = None) -> dict[str, float]:
-    port = free_port()
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
-    with tempfile.TemporaryDirectory() as data:
-        started = time.perf_counter()
-        process = subprocess.Popen(
-            [sys.executable, "-m", "deepmorph", "studio", "--no-browser", "--port", str(port), "--data", data],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            env=env,
+    with tempfile.TemporaryDirectory() as data, studio_process(Path(data)) as studio:
+        browser = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())  # keeps the token's cookie
+        while True:
+            try:
+                with browser.open(studio.url, timeout=5) as response:
+                    assert b"DeepMorph studio" in response.read()
+                break
+            except urllib.error.HTTPError:
+                raise
+            except OSError:
+                if studio.process.poll() is not None:
+                    raise RuntimeError("the studio stopped") from None
+                time.sleep(0.02)
+        first_page = time.perf_counter() - studio.started
+        time.sleep(1.0)
+        idle = _rss_mb(studio.process.pid)
+        scan = urllib.request.Request(
+            f"{studio.base}/api/models/ghost/scan", data=photo, headers={"X-DeepMorph-Token": studio.token}
         )
-        try:
-            assert process.stdout is not None
-            token = re.search(r"token=(\S+)", process.stdout.readline()).group(1)
-            url = f"http://127.0.0.1:{port}/?token={token}"
-            browser = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())  # keeps the token's cookie
-            while True:
-                try:
-                    with browser.open(url, timeout=5) as response:
-                        assert b"DeepMorph studio" in response.read()
-                    break
-                except urllib.error.HTTPError:
-                    raise
-                except OSError:
-                    if process.poll() is not None:
-                        raise RuntimeError("the studio stopped") from None
-                    time.sleep(0.02)
-            first_page = time.perf_counter() - started
-            time.sleep(1.0)
-            idle = _rss_mb(process.pid)
-            scan = urllib.request.Request(
-                f"http://127.0.0.1:{port}/api/models/ghost/scan", data=photo, headers={"X-DeepMorph-Token": token}
-            )
-            t0 = time.perf_counter()
-            with urllib.request.urlopen(scan, timeout=120) as response:
-                assert b'"ok":true' in response.read()
-            first_scan = time.perf_counter() - t0
-            with urllib.request.urlopen(scan, timeout=120) as response:
-                response.read()
-            time.sleep(1.0)
-            loaded = _rss_mb(process.pid)
-            camera = _camera_round(url, clip) if clip is not None else {}
-        finally:
-            process.terminate()
-            process.wait(timeout=30)
+        t0 = time.perf_counter()
+        with urllib.request.urlopen(scan, timeout=120) as response:
+            assert b'"ok":true' in response.read()
+        first_scan = time.perf_counter() - t0
+        with urllib.request.urlopen(scan, timeout=120) as response:
+            response.read()
+        time.sleep(1.0)
+        loaded = _rss_mb(studio.process.pid)
+        camera = _camera_round(studio.url, clip) if clip is not None else {}
     started_up = {"first_page_s": first_page, "idle_rss_mb": idle, "first_scan_s": first_scan, "loaded_rss_mb": loaded}
     return {**started_up, **camera}
 

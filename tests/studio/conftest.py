@@ -5,8 +5,6 @@ fake camera playing a clip of simulated close-up photos of a ghost print."""
 from __future__ import annotations
 
 import os
-import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -24,60 +22,35 @@ SHOTS = Path(os.environ.get("DEEPMORPH_SCREENSHOTS") or Path(tempfile.gettempdir
 sys.path.insert(0, str(ROOT / "bench"))
 from _camera import CAMERA_PAYLOAD, CHROMIUM, camera_args, scan_live, write_camera_clip  # noqa: E402
 from _common import free_port  # noqa: E402
+from _studio import StudioProcess, studio_process  # noqa: E402
 
 __all__ = ["CAMERA_PAYLOAD", "Server", "free_port", "open_studio", "scan_live", "screenshot"]
 
 
 @dataclass
-class Server:
-    """A running studio: its address, token and data folder, and how long it took from the
-    command's start to answer."""
+class Server(StudioProcess):
+    """The studio the tests share: its data folder, and how long it took from the command's
+    start to answer."""
 
-    base: str
-    token: str
     data: Path
-    process: subprocess.Popen[str]
     ready_s: float
-
-    @property
-    def url(self) -> str:
-        return f"{self.base}/?token={self.token}"
 
 
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data = tmp_path_factory.mktemp("studio-data")
-    port = free_port()
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
-    started = time.monotonic()
-    process = subprocess.Popen(
-        [sys.executable, "-m", "deepmorph", "studio", "--no-browser", "--port", str(port), "--data", str(data)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-    )
-    assert process.stdout is not None
-    line = process.stdout.readline()
-    match = re.search(r"(http://127\.0\.0\.1:\d+)/\?token=(\S+)", line)
-    assert match, f"the studio printed {line!r}"
-    base, token = match.group(1), match.group(2)
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            urllib.request.urlopen(f"{base}/api/check?token={token}", timeout=2)
-            break
-        except OSError:
-            if time.monotonic() > deadline or process.poll() is not None:
-                raise
-            time.sleep(0.1)
-    server = Server(base, token, data, process, time.monotonic() - started)
-    yield server
-    process.terminate()
-    try:
-        process.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        process.kill()
+    with studio_process(data) as studio:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                urllib.request.urlopen(f"{studio.base}/api/check?token={studio.token}", timeout=2)
+                break
+            except OSError:
+                if time.monotonic() > deadline or studio.process.poll() is not None:
+                    raise
+                time.sleep(0.1)
+        ready_s = time.perf_counter() - studio.started
+        yield Server(studio.base, studio.token, studio.process, studio.started, data, ready_s)
 
 
 @pytest.fixture(scope="session")
