@@ -794,7 +794,7 @@ def validate(
         print_json({"model": str(model), "validation": dumped, "saved": save})
     else:
         _print_validation(dumped)
-    warning = validation_warning(records, str(model))
+    warning = validation_warning(records, str(model), own_detector=m.meta.detector is not None)
     if warning:
         err.print(f"warning: {safe(warning)}")
 

@@ -845,7 +845,7 @@ def _validate_and_store(
     records = validate(model, default_registry(), renders, photos, seed=seed, device=device)
     model.meta.validation = records
     model.save(out)
-    warning = validation_warning(records, label)
+    warning = validation_warning(records, label, own_detector=model.meta.detector is not None)
     if warning:
         warn(warning)
     return records

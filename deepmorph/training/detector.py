@@ -381,7 +381,7 @@ def _validate_close_ups_again(out: Path, seed: int) -> None:
     record = validate_close_ups(model, photos, seed)
     model.meta.validation = [r for r in model.meta.validation if r.name != record.name] + [record]
     model.save(out)
-    warning = validation.validation_warning(model.meta.validation, str(out))
+    warning = validation.validation_warning(model.meta.validation, str(out), own_detector=True)
     if warning:
         warnings.warn(DeepMorphWarning(warning), stacklevel=3)
 

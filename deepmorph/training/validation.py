@@ -141,9 +141,11 @@ def validate(
     return records
 
 
-def validation_warning(records: list[ValidationRecord], label: str) -> str | None:
+def validation_warning(records: list[ValidationRecord], label: str, own_detector: bool = False) -> str | None:
     """Why the model should not be trusted yet, when a validation read fewer than
-    :data:`TARGET_RATE` of its payloads (or any wrong one); ``None`` when all is well."""
+    :data:`TARGET_RATE` of its payloads (or any wrong one); ``None`` when all is well.
+    ``own_detector``: the model holds a detector of its drawing's own (``train-detector``), so
+    prints not found are not met by advice to train one."""
     weak = [r for r in records if r.rate < TARGET_RATE or r.wrong]
     if not weak:
         return None
@@ -161,7 +163,12 @@ def validation_warning(records: list[ValidationRecord], label: str) -> str | Non
             "its renders read, so the photos' misses are their capture's (shadows, blur, the narrowest prints), "
             "not the code's: a smaller code reads about as many"
         )
-    if missed and missed >= misread:
+    if missed and missed >= misread and own_detector:
+        advice.append(
+            "most captures not read were not found by the drawing's own detector: the bundle it was tuned"
+            " from uses the universal detector, which may find more (compare both with `deepmorph validate`)"
+        )
+    elif missed and missed >= misread:
         advice.append(
             "most captures not read were not found: a detector of the drawing's own"
             " (`deepmorph train-detector`, about 2 minutes) may find them"

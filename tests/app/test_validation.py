@@ -106,6 +106,9 @@ def test_prints_the_chain_did_not_find_call_for_a_detector_not_fewer_bits() -> N
     unfound = ValidationRecord(**base, read=90, wrong=0, missed=8, bit_accuracy=0.999)
     text = validation_warning([unfound], "m.dmm")
     assert text is not None and "8 not found" in text and "train-detector" in text and "capacity" not in text
+    tuned = validation_warning([unfound], "m.dmm", own_detector=True)  # one was trained: not advised again
+    assert tuned is not None and "8 not found" in tuned and "train-detector" not in tuned
+    assert "universal detector" in tuned and "deepmorph validate" in tuned
     misread = ValidationRecord(**base, read=90, wrong=0, missed=2, bit_accuracy=0.97)
     text = validation_warning([misread], "m.dmm")
     assert text is not None and "deepmorph capacity" in text and "train-detector" not in text
