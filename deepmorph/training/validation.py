@@ -163,14 +163,12 @@ def validation_warning(records: list[ValidationRecord], label: str, own_detector
             "its renders read, so the photos' misses are their capture's (shadows, blur, the narrowest prints), "
             "not the code's: a smaller code reads about as many"
         )
-    if missed and missed >= misread and own_detector:
+    if missed and missed >= misread:
         advice.append(
             "most captures not read were not found by the drawing's own detector: the bundle it was tuned"
             " from uses the universal detector, which may find more (compare both with `deepmorph validate`)"
-        )
-    elif missed and missed >= misread:
-        advice.append(
-            "most captures not read were not found: a detector of the drawing's own"
+            if own_detector
+            else "most captures not read were not found: a detector of the drawing's own"
             " (`deepmorph train-detector`, about 2 minutes) may find them"
         )
     return (
