@@ -117,6 +117,8 @@ class Aligner:
             and each other drawing paid for both.
         verifier: the model's proposal verifier (:mod:`~deepmorph_detect.verifier`), where it
             stores one: a blind outline it turns away skips the wider searches.
+        shifted_sweep: an ink square's sweep also moves its centre (:func:`~deepmorph_detect.refine.refine`'s
+            ``shifted``): a colour drawing's, whose ink square can frame its darkest part alone.
     """
 
     def __init__(
@@ -128,8 +130,10 @@ class Aligner:
         flat_sheet: bool = True,
         blind_fallback: bool = True,
         verifier: ProposalVerifier | None = None,
+        shifted_sweep: bool = False,
     ) -> None:
         self.template = template
+        self.shifted_sweep = shifted_sweep
         self.verifier = verifier
         self.flat_sheet = flat_sheet
         self.blind_fallback = blind_fallback
@@ -264,6 +268,7 @@ class Aligner:
             aim=BLIND_SEARCH_BELOW if cand.blind else None,
             fallback=fallback,
             sweep_fallback=self._falls_back(cand),
+            shifted=self.shifted_sweep,
         )
 
     def _falls_back(self, cand: Candidate) -> bool:

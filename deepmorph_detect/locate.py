@@ -204,10 +204,11 @@ class Locator:
         thickness = ink_thickness(self.template, view_width)
         self.ink_share = thickness / view_width
         # the flat sheet read more close-ups of colour drawings, none of black-and-white ones, and
-        # OpenCV's fallback in flat light's quick path one more colour print, no black-and-white one
+        # OpenCV's fallback in flat light's quick path one more colour print, no black-and-white
+        # one; a colour print's ink square can frame its darkest part alone (a shifted sweep)
         self.aligner = Aligner(
             self.template, min_correlation, thickness, view_width, flat_sheet=md.colour, blind_fallback=md.colour,
-            verifier=verifier_for(model, self.device) if use_verifier else None,
+            verifier=verifier_for(model, self.device) if use_verifier else None, shifted_sweep=md.colour,
         )  # fmt: skip
         # a light that hides a faint colour fill does not hide black ink (decode_on_edges)
         self.realigns_on_edges = md.colour
@@ -326,17 +327,10 @@ class Locator:
         # whose every point may move, the alignment from that outline can absorb part of the
         # morph into the homography, and the morph check then cannot confirm a right payload.
         photo = gray
-        whole = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
-        if not whole:  # a sharp shadow across a print that fills the frame: in flat light
-            flat, framed = whole_frame_in_flat_light(gray, self.ink, self.template, self.frame_corners, self.ink_share)
-            if framed:
-                whole = self.aligner.verify(ImagePyramid(flat), framed)
-                gray = flat
+        gray, whole = self.whole_image(gray, pyramid)
         whole_results = self.decode_each(gray, whole, cam, soft)
         if not any(located.result.ok for located in whole_results):
-            # a print in light colours on a desk about as dark as its ink: on the sheet alone
-            sheet = whole_frame_on_paper(photo, self.ink, self.template, self.frame_corners)
-            on_sheet = self.decode_each(photo, self.aligner.verify(pyramid, sheet), cam, soft)
+            on_sheet = self.decode_each(photo, self.on_sheet(photo, pyramid), cam, soft)
             if any(located.result.ok for located in on_sheet) or not whole_results:
                 whole_results = on_sheet
         if not found:
@@ -345,6 +339,29 @@ class Locator:
         # a drawing the whole image read replaces the detector's unread reading of it
         every = read + [r for r in results if not self.aligner.seen(r.homography, [o.homography for o in read])]
         return _first_read(every) if first else every
+
+    def whole_image(self, gray: np.ndarray, pyramid: ImagePyramid) -> tuple[np.ndarray, list[Aligned]]:
+        """The whole image framed by its ink and aligned (a scan, a print filling the frame), or,
+        where that does not align, framed in flat light (a sharp shadow across such a print); and
+        the photo it was aligned in (``gray`` or it in flat light)."""
+        whole = self.aligner.verify(pyramid, whole_frame(gray, self.ink, self.template, self.frame_corners))
+        if not whole:
+            flat, framed = whole_frame_in_flat_light(gray, self.ink, self.template, self.frame_corners, self.ink_share)
+            if framed:
+                return flat, self.aligner.verify(ImagePyramid(flat), framed)
+        return gray, whole
+
+    def on_sheet(self, gray: np.ndarray, pyramid: ImagePyramid) -> list[Aligned]:
+        """The ink on the photo's paper sheet alone, framed and aligned: a print in light colours
+        on a desk about as dark as its ink."""
+        return self.aligner.verify(pyramid, whole_frame_on_paper(gray, self.ink, self.template, self.frame_corners))
+
+    def every_alignment(self, image: np.ndarray) -> list[Aligned]:
+        """Every alignment :meth:`locate` reads from where nothing reads: the detector's
+        proposals aligned (:meth:`alignments`), the whole image framed by its ink
+        (:meth:`whole_image`) and the ink on the sheet alone (:meth:`on_sheet`)."""
+        gray, _, pyramid, found = self._proposed(image, None)
+        return [*found, *self.whole_image(gray, pyramid)[1], *self.on_sheet(gray, pyramid)]
 
     def _quick_looks(
         self,

@@ -46,6 +46,12 @@ SWEEP_TRIES = 3  # starts of the sweep carried through ECC (the best by plain co
 #: tilted 45-60 degrees, 200-300 px wide in 1280x720 scenes, were outlined at 0.75-0.9 of their
 #: size, where ECC diverged from every corner order; enlarged, 4 of 6 aligned
 SIZED_SWEEP_SCALES = (1.15, 1.3)
+#: a colour drawing's ink square (``refine(sized=True, shifted=True)``), where nothing else aligned,
+#: is swept at these scales with its centre moved by each pair of these shares of its size: the
+#: universal detector squares a colour print's darkest part (a dark badge beside a pale outline),
+#: a quarter of its size off its centre (``bench/README.md``, *Finding colour prints*)
+SHIFTED_SWEEP_SCALES = (1.15, 1.3, 1.6)
+SHIFTED_SWEEP_SHIFTS = (-0.25, 0.0, 0.25)
 WIDE_SEARCH_MARGIN = 0.05  # what the wider searches find must beat ``accept`` by this much
 #: a wider search's coarse solve below this is not carried through the finer levels, where it
 #: cannot reach what a wider search must (``accept`` plus the margin, 0.6 for a detector's
@@ -432,21 +438,33 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def outline_sweep(
-    homography: np.ndarray, template: Template, turns: int = SWEEP_TURNS, scales: tuple[float, ...] = SWEEP_SCALES
+    homography: np.ndarray,
+    template: Template,
+    turns: int = SWEEP_TURNS,
+    scales: tuple[float, ...] = SWEEP_SCALES,
+    shifts: tuple[float, ...] = (0.0,),
+    centred: bool = True,
 ) -> list[np.ndarray]:
     """The homography with its outline in the photo turned about its centre in ``turns`` equal
-    steps and scaled by each of ``scales``: starts for a drawing the detector outlined
-    loosely (turned by a fraction of a quarter, or too large or too small)."""
+    steps, scaled by each of ``scales`` and its centre moved across and down by each pair of
+    ``shifts`` (shares of the outline's mean side; ``centred`` false: the pair that leaves it in
+    place left out): starts for a drawing the detector outlined loosely (turned by a fraction of
+    a quarter, too large or too small, or off its centre)."""
     frame = viewbox_corners(template.viewbox).astype(np.float32)
     quad = project(homography, frame)
     centre = quad.mean(0)
+    side = float(np.linalg.norm(quad - np.roll(quad, 1, axis=0), axis=1).mean())
     out = []
     for scale in scales:
-        for k in range(turns):
-            a = 2 * np.pi * k / turns
-            rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * scale
-            moved = ((quad - centre) @ rot.T + centre).astype(np.float32)
-            out.append(cv2.getPerspectiveTransform(frame, moved).astype(np.float64))
+        for dx in shifts:
+            for dy in shifts:
+                if not centred and dx == dy == 0:
+                    continue
+                for k in range(turns):
+                    a = 2 * np.pi * k / turns
+                    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * scale
+                    moved = ((quad - centre) @ rot.T + centre + side * np.array([dx, dy])).astype(np.float32)
+                    out.append(cv2.getPerspectiveTransform(frame, moved).astype(np.float64))
     return out
 
 
@@ -463,6 +481,7 @@ def refine(
     ink: bool = True,
     fallback: bool = True,
     sweep_fallback: bool = True,
+    shifted: bool = False,
 ) -> Alignment | None:
     """Refine ``homography`` (SVG units -> image pixels) by ECC, coarse to fine over the
     template's levels.
@@ -505,6 +524,9 @@ def refine(
             ``False``: the sweep goes without it, as the ink's starts do (a blind proposal of a
             black-and-white drawing's: over 2,000 scenes of four such drawings it aligned no
             print, while each other drawing paid for it).
+        shifted: where all else fell short, a ``sized`` outline is swept once more with its
+            centre moved (:data:`SHIFTED_SWEEP_SHIFTS`, at :data:`SHIFTED_SWEEP_SCALES`): a
+            colour drawing's, whose ink square can frame its darkest part alone.
 
     Returns:
         The best alignment reached, or ``None`` when the candidate is rejected or ECC diverges
@@ -590,6 +612,14 @@ def refine(
         # without OpenCV's fallback: these starts fit the print's shear already, and over 800
         # scenes of four drawings it reached 0.7 from 5 of 700 starts on other drawings, on no print
         best = best_few(ink_starts(pyramid.levels[0], quad, template.ink_moments, SWEEP_TURNS), best, 0)
+        if good(best):
+            return searched(best)
+    if sized and shifted:
+        # a colour print's ink square can frame its darkest part alone: the square moved off its
+        # centre, last (among the centred starts, the best few by plain correlation were these
+        # often enough to crowd out the right one)
+        moved = outline_sweep(homography, template, 4, SHIFTED_SWEEP_SCALES, SHIFTED_SWEEP_SHIFTS, centred=False)
+        best = best_few(moved, best, 1 if sweep_fallback else 0)
         if good(best):
             return searched(best)
     # short of the aim, a wider search still beats a quick path that was not accepted at all

@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from deepmorph.training.many import DrawingResult
+    from deepmorph_core.capacity import CapacityReport
     from deepmorph_core.morphable import MorphableDrawing
 
 
@@ -228,6 +229,8 @@ def capacity(
     sizes = plan(drawing, report.visible_mask, plan_sizes(pixels), report, DEFAULTS.width, crc)
     train_px = int(pixels) if pixels is not None and at_pixels(int(pixels)) else None
     report = for_print(report, train_px, crc)  # the model to train for a print that wide
+    if drawing.colour and report.readable_groups:  # some colour drawings are hard to find in photos
+        report = _found(report, drawing, (move, shift, scale, rotate), train_px, not as_json)
     camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
     # a model reads prints at least as wide as its decoder's frame (the default one before training)
     legible = None if pixels is None else legibility(pixels, DEFAULTS.width, print_mm, frame_px, fov_deg)
@@ -271,6 +274,31 @@ def capacity(
     _print_sizes(sizes, pixels, print_mm, distance_cm, frame_px, fov_deg)
     if legible is not None:
         out.print(safe(legible.sentence()))
+
+
+def _found(
+    report: CapacityReport, drawing: MorphableDrawing, bounds: tuple[Any, ...], print_px: int | None, say: bool
+) -> CapacityReport:
+    """``report`` with how often the photo chain finds ``drawing``'s prints in simulated hard
+    photos (:func:`~deepmorph_detect.findable.findability`), for a model trained with ``bounds``
+    (``--move``, ``--shift``, ``--scale``, ``--rotate``) for prints ``print_px`` wide."""
+    from dataclasses import replace
+
+    from deepmorph_core.morphable import bound_defaults
+    from deepmorph_detect.findable import SHOTS, findability
+
+    move, shift, scale, rotate = bounds
+    defaults = bound_defaults(
+        move=move,
+        shift=parse_pair(shift, "shift", single_ok=True),
+        scale=parse_pair(scale, "scale"),
+        rotate=parse_pair(rotate, "rotate"),
+    ).model_dump(exclude_none=True)
+    if say:
+        err.print(f"simulating {SHOTS} hard photos to see how often its prints are found (a few seconds) ...")
+    svg_text = drawing.to_svg(drawing.neutral_values()[0])
+    found = findability(svg_text, "drawing", defaults, drawing.channel, print_px, shots=SHOTS)
+    return replace(report, found=(found.found, found.shots))
 
 
 def _print_sizes(

@@ -18,8 +18,10 @@ from deepmorph_core.capacity import (
     CODE_BITS_PER_GROUP,
     COLOUR_KEPT,
     ECC_CHOICES,
+    FOUND_ENOUGH,
     LARGEST_CODE_MEASURED,
     PIXELS_MEASURED,
+    CapacityReport,
     code_bits_for,
     for_print,
     largest_payload,
@@ -220,3 +222,15 @@ def test_a_colour_drawings_plan_says_how_much_training_kept_of_such_plans() -> N
     assert report.to_json()["colour"] is True
     plain = predict(MorphableDrawing.load(DRAWING))
     assert not plain.colour and not any("colour drawing's plan" in line for line in plain.limits())
+
+
+def test_a_drawing_the_chain_found_too_seldom_is_called_out() -> None:
+    """`limits` names a drawing found in fewer than FOUND_ENOUGH of its simulated hard photos,
+    and says nothing where it was found often enough or not simulated."""
+    just_enough = math.ceil(FOUND_ENOUGH * 40)
+
+    def said(found: tuple[int, int] | None) -> bool:
+        report = CapacityReport(10, 10, 10, 7, 4, None, colour=True, found=found)
+        return any("simulated hard photos" in line for line in report.limits())
+
+    assert said((just_enough - 1, 40)) and not said((just_enough, 40)) and not said(None)

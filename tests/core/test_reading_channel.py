@@ -131,9 +131,12 @@ def test_a_bundle_with_impossible_channel_weights_is_one_clear_error(tmp_path: P
         DeepMorphModel.load(tmp_path / "bad.dmm")
 
 
-def test_read_in_luminance_keeps_a_colour_drawing_for_gray_prints(tmp_path: Path) -> None:
+def test_read_in_luminance_keeps_a_colour_drawing_for_gray_prints(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """`--read-in luminance` (for prints made in gray) overrides the choice, in training and in
     `capacity`."""
+    monkeypatch.setattr("deepmorph_detect.findable.SHOTS", 2)  # how often it is found is not asked here
     svg = tmp_path / "yellow.svg"
     svg.write_bytes(YELLOW)
     out = tmp_path / "gray.dmm"

@@ -30,7 +30,8 @@ def colour_aligner(svg: Path) -> tuple[Template, Aligner]:
     _, renderer = template_renderer(unmorphed, md.drawing.viewbox, LEVELS, md.channel)
     template = Template.from_svg(unmorphed, md.drawing.viewbox, LEVELS, stretched_renderer(renderer, md.ink_level))
     thickness = ink_thickness(template, VIEW_WIDTH)
-    return template, Aligner(template, MIN_CORRELATION, thickness, VIEW_WIDTH, flat_sheet=md.colour)
+    aligner = Aligner(template, MIN_CORRELATION, thickness, VIEW_WIDTH, flat_sheet=md.colour, shifted_sweep=md.colour)
+    return template, aligner
 
 
 def _candidate(proposal: dict) -> Candidate:

@@ -32,3 +32,9 @@ def crystal() -> tuple[Template, Aligner]:
 def reading() -> tuple[Template, Aligner]:
     """The Icons8 reading figure."""
     return colour_aligner(DATA / "flat-color-icons" / "reading.svg")
+
+
+@pytest.fixture(scope="module")
+def add_row() -> tuple[Template, Aligner]:
+    """The Icons8 add-row: a pale blue row and a dark green badge at its corner."""
+    return colour_aligner(DATA / "flat-color-icons" / "add-row.svg")

@@ -21,6 +21,7 @@ from deepmorph_detect.camera import Camera, homography_from_pose, project, viewb
 from deepmorph_detect.locate import Locator
 from deepmorph_detect.propose import quad_bbox
 from deepmorph_detect.refine import SIZED_SWEEP_SCALES, SWEEP_TURNS, ImagePyramid, Template, refine
+from tests.detect.colour_close_ups import close_up_proposals, corner_error
 
 FEATHER = Path(__file__).parents[1] / "data" / "feather"
 
@@ -139,3 +140,57 @@ def test_a_black_and_white_drawing_s_blind_outline_mostly_goes_without_opencvs_f
     colour = Aligner(locator.aligner.template, locator.aligner.min_correlation, 4.0, 256, blind_fallback=True)
     colour.align_outline(ImagePyramid(photo), cand, photo)
     assert asked == [(False, True), (True, True)]
+
+
+@pytest.mark.parametrize(
+    "photo", ["ink_square_on_badge_colour_close_up", "ink_square_on_badge_misaligned_colour_close_up"]
+)
+def test_a_colour_print_squared_by_its_dark_badge_aligns_from_a_shifted_sweep(
+    add_row: tuple[Template, Aligner], photo: str
+) -> None:
+    """Hard close-ups of the Icons8 add-row, whose dark badge the universal detector squares
+    instead of the whole print: with its square's centre swept too (a colour drawing's aligner)
+    the print aligns within 3 % of its width; from turns and scales alone it aligns nowhere, or at
+    a wrong pose."""
+    template, aligner = add_row
+    gray, truth, candidates = close_up_proposals(Path(__file__).parents[1] / "data" / "photos" / f"{photo}.png")
+
+    def errors(shifted: bool) -> list[float]:
+        aligner.shifted_sweep = shifted
+        kept = aligner.verify(ImagePyramid(gray), candidates, gray)
+        # add-row looks nothing like itself turned: the corners in their own order
+        return [corner_error(a.alignment.homography, template, truth) for a in kept]
+
+    try:
+        unshifted, shifted = errors(False), errors(True)
+    finally:
+        aligner.shifted_sweep = True  # as the fixture made it
+    assert all(error > 0.15 for error in unshifted)
+    assert min(shifted) < 0.03
+
+
+def test_a_colour_drawing_s_ink_square_is_moved_off_its_centre_last(
+    add_row: tuple[Template, Aligner], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a photo of noise (nothing aligns, so every wider search runs), a colour drawing's ink
+    square is swept as any ink square is (its corner orders enlarged, the ink starts), and only
+    then moved off its centre, the place it started from left out; without ``shifted`` it is not."""
+    template, _ = add_row
+    photo = np.random.default_rng(2).uniform(0.2, 1.0, (480, 640)).astype(np.float32)
+    start = Aligner(template, 0.55, 4.0, 256).homography(np.array([[200.0, 120], [440, 120], [440, 360], [200, 360]]))
+    steps: list[str] = []
+    sweep, ink = refine_module.outline_sweep, refine_module.ink_starts
+
+    def recorded_sweep(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        starts = sweep(*args, **kwargs)
+        steps.append(f"sweep of {len(starts)}")
+        return starts
+
+    monkeypatch.setattr(refine_module, "outline_sweep", recorded_sweep)
+    monkeypatch.setattr(refine_module, "ink_starts", lambda *a, **k: steps.append("ink") or ink(*a, **k))
+    for shifted in (True, False):
+        steps.clear()
+        refine(ImagePyramid(photo), start, template, orders=4, accept=0.55, sized=True, shifted=shifted)
+        moved = len(refine_module.SHIFTED_SWEEP_SCALES) * (len(refine_module.SHIFTED_SWEEP_SHIFTS) ** 2 - 1) * 4
+        centred = [f"sweep of {4 * len(SIZED_SWEEP_SCALES)}", "ink"]
+        assert steps == ([*centred, f"sweep of {moved}"] if shifted else centred)
