@@ -314,12 +314,14 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
             await run_in_threadpool(lambda: drawings.random_morph(drawings.load(svg.encode(), name), seed, extreme))
         )
 
-    # the drawings' channels (about half a minute each), measured one at a time beside the requests,
-    # on daemon threads: quitting the studio does not wait for a measurement
+    # the drawings' channels (about half a minute each), and for a colour drawing how often its
+    # prints are found (a few seconds), measured one at a time beside the requests, on daemon
+    # threads: quitting the studio does not wait for a measurement
     channels_measuring: dict[str, Future[Any]] = {}
     one_measurement = threading.Lock()
+    found_in_photos: dict[str, tuple[int, int]] = {}  # by channel_key
 
-    def measure_later(report: CapacityReport, md: MorphableDrawing) -> Future[Any]:
+    def measure_later(report: CapacityReport, md: MorphableDrawing, key: str) -> Future[Any]:
         from deepmorph_core.capacity import with_channel
 
         future: Future[Any] = Future()
@@ -327,7 +329,13 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         def run() -> None:
             with one_measurement:
                 try:
-                    future.set_result(with_channel(report, md))
+                    measured = with_channel(report, md)
+                    if md.colour and measured.readable_groups and key not in found_in_photos:
+                        from deepmorph_detect.findable import findability
+
+                        found = findability(md.to_svg(md.neutral_values()[0]), "drawing", {}, md.channel)
+                        found_in_photos[key] = (found.found, found.shots)
+                    future.set_result(measured)
                 except BaseException as exc:  # noqa: BLE001 - handed to the request that asks next
                     future.set_exception(exc)
 
@@ -335,6 +343,8 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
         return future
 
     async def capacity(request: Request) -> Response:
+        from dataclasses import replace
+
         from deepmorph_core.capacity import channel_key, predict, with_channel
         from deepmorph_core.reading_channel import channel_name
 
@@ -345,24 +355,30 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
 
         def work() -> dict[str, Any]:
             md = drawings.load(svg.encode(), name).read_in()  # what training will read
-            # the plan from 200 px up starts from the drawing's channel: measured once, in the background
+            # the plan from 200 px up starts from the drawing's channel, and a colour drawing's
+            # prints may be hard to find: each measured once, in the background
             report = with_channel(predict(md), md, measure=False)
-            if report.channel_payload is None:
-                key = channel_key(md)
+            key = channel_key(md)
+            if key in found_in_photos:
+                report = replace(report, found=found_in_photos[key])
+            unmeasured = report.channel_payload is None or (
+                md.colour and report.readable_groups > 0 and report.found is None
+            )
+            if unmeasured:
                 measuring = channels_measuring.get(key)
                 if measuring is not None and measuring.done():
                     del channels_measuring[key]
                     measuring.result()  # its error, if it failed; a later request measures again
                     measuring = None  # measured, and since forgotten: measure again
                 if measuring is None:
-                    channels_measuring[key] = measure_later(report, md)
+                    channels_measuring[key] = measure_later(report, md, key)
             return {
                 "name": name,
                 "reading_channel": channel_name(md.channel),
                 **report.to_json(),
                 "limits": report.limits(),
                 "print_size": print_size(md, report, print_mm, distance_cm),
-                "channel_measured": report.channel_payload is not None,
+                "channel_measured": not unmeasured,
             }
 
         return JSONResponse(await run_in_threadpool(work))
