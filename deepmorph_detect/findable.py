@@ -26,6 +26,7 @@ from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphWarning
 from deepmorph_core.luminance import Channel
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.morphable import MorphableDrawing
 from deepmorph_detect.camera import project
 from deepmorph_detect.locate import Aligned, Locator
 from deepmorph_detect.metrics import corner_error
@@ -86,20 +87,20 @@ def untrained_model(
 
 
 def findability(
-    svg_text: str,
-    label: str,
-    bounds: dict[str, float],
-    channel: Channel | None,
+    drawing: MorphableDrawing,
+    bounds: dict[str, Any],
     print_px: int | None = None,
     shots: int = SHOTS,
     seed: int = SEED,
 ) -> Findability:
-    """How many of ``shots`` hard close-ups of the drawing (``svg_text`` with ``bounds``, read in
-    ``channel``) the universal detector and the alignment find, photographed as the validation of
-    a model trained for prints ``print_px`` wide photographs them (``None``: the default model's)."""
+    """How many of ``shots`` hard close-ups of ``drawing`` (loaded with the default ``bounds``,
+    read in its channel) the universal detector and the alignment find, photographed as the
+    validation of a model trained for prints ``print_px`` wide photographs them (``None``: the
+    default model's)."""
+    model = untrained_model(drawing.to_svg(drawing.neutral_values()[0]), "drawing", bounds, drawing.channel, print_px)
     with warnings.catch_warnings():  # no decoder reads here: its graph is not worth a warning
         warnings.simplefilter("ignore", DeepMorphWarning)
-        locator = Locator(untrained_model(svg_text, label, bounds, channel, print_px), "universal", use_verifier=False)
+        locator = Locator(model, "universal", use_verifier=False)
     found = 0
     for shot in close_ups(locator.model, shots, seed, "hard"):
         truth = project(shot.homography, locator.frame_corners)

@@ -71,19 +71,23 @@ TrainSeverityOpt = Annotated[SeverityName, setting_option("severity")]
 TABLE_ROWS = 60  # primitives shown in inspect's table (a rich table of thousands of rows takes seconds)
 
 
+def _bounds(move: float | None, shift: str | None, scale: str | None, rotate: str | None) -> dict[str, Any]:
+    """The default bounds ``--move``, ``--shift``, ``--scale`` and ``--rotate`` give, parsed
+    (``None`` where not given)."""
+    return {
+        "move": move,
+        "shift": parse_pair(shift, "shift", single_ok=True),
+        "scale": parse_pair(scale, "scale"),
+        "rotate": parse_pair(rotate, "rotate"),
+    }
+
+
 def _load(
     svg: Path, move: float | None, shift: str | None, scale: str | None, rotate: str | None, drop: bool = False
 ) -> MorphableDrawing:
     from deepmorph_core.morphable import MorphableDrawing
 
-    md = MorphableDrawing.load(
-        svg,
-        move=move,
-        shift=parse_pair(shift, "shift", single_ok=True),
-        scale=parse_pair(scale, "scale"),
-        rotate=parse_pair(rotate, "rotate"),
-        drop_unsupported=drop,
-    )
+    md = MorphableDrawing.load(svg, **_bounds(move, shift, scale, rotate), drop_unsupported=drop)
     warn_dropped(md.drawing)
     return md
 
@@ -230,7 +234,7 @@ def capacity(
     train_px = int(pixels) if pixels is not None and at_pixels(int(pixels)) else None
     report = for_print(report, train_px, crc)  # the model to train for a print that wide
     if drawing.colour and report.readable_groups:  # some colour drawings are hard to find in photos
-        report = _found(report, drawing, (move, shift, scale, rotate), train_px, not as_json)
+        report = _found(report, drawing, _bounds(move, shift, scale, rotate), train_px, not as_json)
     camera = {"print_mm": print_mm, "distance_cm": distance_cm, "frame_px": frame_px, "fov_deg": fov_deg}
     # a model reads prints at least as wide as its decoder's frame (the default one before training)
     legible = None if pixels is None else legibility(pixels, DEFAULTS.width, print_mm, frame_px, fov_deg)
@@ -277,27 +281,20 @@ def capacity(
 
 
 def _found(
-    report: CapacityReport, drawing: MorphableDrawing, bounds: tuple[Any, ...], print_px: int | None, say: bool
+    report: CapacityReport, drawing: MorphableDrawing, bounds: dict[str, Any], print_px: int | None, say: bool
 ) -> CapacityReport:
     """``report`` with how often the photo chain finds ``drawing``'s prints in simulated hard
-    photos (:func:`~deepmorph_detect.findable.findability`), for a model trained with ``bounds``
-    (``--move``, ``--shift``, ``--scale``, ``--rotate``) for prints ``print_px`` wide."""
+    photos (:func:`~deepmorph_detect.findable.findability`), for a model trained with the default
+    ``bounds`` (:func:`_bounds`) for prints ``print_px`` wide."""
     from dataclasses import replace
 
     from deepmorph_core.morphable import bound_defaults
     from deepmorph_detect.findable import SHOTS, findability
 
-    move, shift, scale, rotate = bounds
-    defaults = bound_defaults(
-        move=move,
-        shift=parse_pair(shift, "shift", single_ok=True),
-        scale=parse_pair(scale, "scale"),
-        rotate=parse_pair(rotate, "rotate"),
-    ).model_dump(exclude_none=True)
     if say:
         err.print(f"simulating {SHOTS} hard photos to see how often its prints are found (a few seconds) ...")
-    svg_text = drawing.to_svg(drawing.neutral_values()[0])
-    found = findability(svg_text, "drawing", defaults, drawing.channel, print_px, shots=SHOTS)
+    defaults = bound_defaults(**bounds).model_dump(exclude_none=True)
+    found = findability(drawing, defaults, print_px, shots=SHOTS)
     return replace(report, found=(found.found, found.shots))
 
 
@@ -463,12 +460,7 @@ def train(
             crc_bits=crc,
             ecc_t=ecc_t,
             resume=resume,
-            bounds={
-                "move": move,
-                "shift": parse_pair(shift, "shift", single_ok=True),
-                "scale": parse_pair(scale, "scale"),
-                "rotate": parse_pair(rotate, "rotate"),
-            },
+            bounds=_bounds(move, shift, scale, rotate),
             train=settings,
             on_start=on_start,
             on_warning=lambda text: err.print(f"warning: {text}"),

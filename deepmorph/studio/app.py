@@ -333,7 +333,7 @@ def handlers(studio: Studio) -> list[Route]:  # noqa: C901 - one closure per rou
                     if md.colour and measured.readable_groups and key not in found_in_photos:
                         from deepmorph_detect.findable import findability
 
-                        found = findability(md.to_svg(md.neutral_values()[0]), "drawing", {}, md.channel)
+                        found = findability(md, {})  # its bounds are in the SVG
                         found_in_photos[key] = (found.found, found.shots)
                     future.set_result(measured)
                 except BaseException as exc:  # noqa: BLE001 - handed to the request that asks next

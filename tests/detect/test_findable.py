@@ -33,8 +33,7 @@ NEAR_WHITE = (
 def _found(svg: bytes, shots: int) -> int:
     drawing = MorphableDrawing.load(svg, move=0.5)
     drawing.read_in(None)
-    return findability(drawing.to_svg(drawing.neutral_values()[0]), "test", {"move": 0.5}, drawing.channel,
-                       shots=shots).found  # fmt: skip
+    return findability(drawing, {"move": 0.5}, shots=shots).found
 
 
 def test_a_clear_colour_drawing_is_found_and_one_as_white_as_its_paper_is_not() -> None:
