@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from deepmorph_core.capacity import FOUND_ENOUGH
 from deepmorph_core.codec import CodecSpec
 from deepmorph_core.errors import DeepMorphWarning
 from deepmorph_core.luminance import Channel
@@ -47,20 +46,12 @@ WIDTH = 96
 
 @dataclass(frozen=True)
 class Findability:
-    """How many of ``shots`` hard close-ups of a drawing the photo chain found it in."""
+    """How many of ``shots`` hard close-ups of a drawing the photo chain found it in
+    (:meth:`CapacityReport.limits <deepmorph_core.capacity.CapacityReport.limits>` calls out a
+    drawing found in fewer than :data:`~deepmorph_core.capacity.FOUND_ENOUGH` of them)."""
 
     found: int
     shots: int
-
-    @property
-    def share(self) -> float:
-        return self.found / self.shots if self.shots else 0.0
-
-    @property
-    def enough(self) -> bool:
-        """Whether the drawing is found often enough to call nothing out
-        (:data:`~deepmorph_core.capacity.FOUND_ENOUGH`)."""
-        return self.share >= FOUND_ENOUGH
 
 
 def frame_error(frame_corners: np.ndarray, aligned: list[Aligned], truth: np.ndarray) -> float | None:
