@@ -60,7 +60,7 @@ def crc_blind(codec: Any) -> Any:
         blind.reached = None
         return type(codec).decode(blind, probs, soft)
 
-    blind._crc_ok = passes  # noqa: SLF001 - the one check this copy sets aside
+    blind._accepts = passes  # noqa: SLF001 - the one check this copy sets aside
     blind.decode = decode
     return blind
 

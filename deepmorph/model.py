@@ -209,6 +209,7 @@ def train(
     early_stop: bool = DEFAULTS.early_stop,
     renders_tune: int = DEFAULTS.renders_tune,
     verifier: bool | None = DEFAULTS.verifier,
+    trust_samples: int | None = DEFAULTS.trust_samples,
     read_in: ReadIn = DEFAULTS.read_in,
     device: Literal["auto", "cpu", "cuda"] = DEFAULTS.device,
     shards: int | None = DEFAULTS.shards,
@@ -251,6 +252,9 @@ def train(
         verifier: then train the model's proposal verifier and store it (``deepmorph
             train-verifier``): photos holding other drawings' prints read faster. ``None``: with
             ``pixels``.
+        trust_samples: hard close-ups that count the wrong payloads when training ends; a
+            ``payload_bits="auto"`` payload gives bits to a longer CRC where they call for it
+            (``None``: 600 for a colour drawing, 0 for black ink).
         read_in: the gray a colour drawing's prints are read in (``auto``: red, green or blue
             where its colours differ at least twice as much there, else luminance); a model not
             read in luminance needs its prints in colour.

@@ -12,6 +12,7 @@ truncated or foreign file) is one :class:`~deepmorph_core.errors.DeepMorphError`
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,6 +142,73 @@ class ValidationRecord(BaseModel):
     def rate(self) -> float:
         """Share of payloads read whole."""
         return self.read / self.samples
+
+
+class TrustRecord(BaseModel):
+    """How often the photo chain could give a wrong payload, measured when training ended
+    (``deepmorph.training.trust``): hard close-ups of fresh payloads read with the CRC checked on
+    only ``crc_checked`` of its bits, so that each wrong payload they gave stands for
+    ``2**(crc_bits - crc_checked)`` fewer with the whole CRC.
+
+    Attributes:
+        severity: the close-ups' capture.
+        print_px: about how wide the prints were in the close-ups, in camera pixels.
+        samples: close-ups read.
+        crc_checked: the CRC bits checked while they were read.
+        wrong: close-ups that gave a payload other than the one printed.
+        crc_bits, payload_bits: ``(when measured, now)``: training gives payload bits over to a
+            longer CRC where the measured rate calls for it, and the code stays as large.
+        seconds: how long it took.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    severity: str = Field(max_length=16)
+    print_px: int = Field(ge=1)
+    samples: int = Field(ge=1)
+    crc_checked: int = Field(ge=0)
+    wrong: int = Field(ge=0)
+    crc_bits: tuple[int, int]
+    payload_bits: tuple[int, int]
+    seconds: float = Field(ge=0.0)
+
+    def wrong_per_read(self, crc_bits: int | None = None) -> float:
+        """The wrong payloads per read the count implies with a CRC of ``crc_bits`` (default: the
+        model's now); 0 where none was seen (:meth:`at_most_per_read` bounds it)."""
+        bits = self.crc_bits[1] if crc_bits is None else crc_bits
+        return self.wrong / self.samples * 2.0 ** (self.crc_checked - bits)
+
+    def at_most_per_read(self, crc_bits: int | None = None) -> float:
+        """The rate's upper 95 % bound where no wrong payload was seen (three in ``samples``,
+        the rule of three); otherwise :meth:`wrong_per_read`."""
+        bits = self.crc_bits[1] if crc_bits is None else crc_bits
+        return self.wrong_per_read(bits) if self.wrong else 3.0 / self.samples * 2.0 ** (self.crc_checked - bits)
+
+    def describe(self) -> str:
+        """One line: what was read, the wrong payloads seen, and the rate they imply now."""
+        crc_now = self.crc_bits[1]
+        rate = per_10k(self.at_most_per_read())
+        estimate = f"an estimated {rate} per 10,000" if self.wrong else f"fewer than {rate} per 10,000 (95 %)"
+        line = (
+            f"{self.samples} {self.severity} close-ups of prints about {self.print_px} px wide, the CRC checked on "
+            f"{self.crc_checked} of its {self.crc_bits[0]} bits: {self.wrong} wrong payloads, so {estimate} with "
+            f"CRC-{crc_now}"
+        )
+        if self.crc_bits[0] != crc_now:
+            line += (
+                f" (lengthened from CRC-{self.crc_bits[0]}: payload {self.payload_bits[0]} -> "
+                f"{self.payload_bits[1]} bits)"
+            )
+        return f"{line}; {self.seconds:.0f} s"
+
+
+def per_10k(rate: float) -> str:
+    """A rate per read written per 10,000 reads, to two significant figures."""
+    value = rate * 1e4
+    if value <= 0:
+        return "0"
+    digits = max(0, 1 - math.floor(math.log10(value)))
+    return f"{value:.{digits}f}"
 
 
 @dataclass
@@ -298,6 +366,9 @@ class BundleMeta(BaseModel):
     tuning: list[dict[str, Any]] = Field(default_factory=list)  # decoder tunings after training, oldest first
     # the last validation of the codec as it now is (after training, tuning or `deepmorph validate`)
     validation: list[ValidationRecord] = Field(default_factory=list, max_length=16)
+    # the wrong payloads measured when training ended; bundles written before it, or trained
+    # without it, have none
+    trust: TrustRecord | None = None
     graphs: dict[_NAME, GraphMeta] = Field(default_factory=dict, max_length=MAX_GRAPHS)
 
 

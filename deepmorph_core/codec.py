@@ -23,6 +23,7 @@ was checked and matches, so with ``crc_bits=0`` it is always False.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import itertools
 import math
@@ -40,7 +41,16 @@ from deepmorph_core.payload import MAX_PAYLOAD_BITS, as_bits, format_payload, in
 
 MAX_BCH_T = 16
 BCH_M_RANGE = (5, 15)
-_CRC_CONFIGS = {8: crc.Crc8.CCITT, 16: crc.Crc16.XMODEM}
+#: The CRC of each width a code may have (normal form, the top bit implied): CRC-8/CCITT and
+#: CRC-16/XMODEM, and between them the RevEng catalogue's CRC-10/ATM, -11/FLEXRAY, -12/DECT,
+#: -13/BBC, -14/DARC and -15/CAN polynomials. All start at zero with no final XOR and no
+#: reflection, so the differences between code words stay one linear code
+#: (:meth:`PayloadCodec.rival_margin`). The widths between 8 and 16 let the trust check
+#: (``deepmorph.training.trust``) lengthen a drawing's CRC by what its photos need, bit by bit.
+CRC_POLYNOMIALS = {8: 0x07, 10: 0x233, 11: 0x385, 12: 0x80F, 13: 0x1CF5, 14: 0x805, 15: 0x4599, 16: 0x1021}
+#: Every CRC width a :class:`CodecSpec` may have (0: none).
+CRC_WIDTHS: tuple[int, ...] = (0, *CRC_POLYNOMIALS)
+CrcWidth = Literal[0, 8, 10, 11, 12, 13, 14, 15, 16]
 _WHITENING_SEED = b"deepmorph payload codec whitening/1"
 _PROB_EPS = 1e-9
 #: a payload of at most this many bits has every difference between two of its code words listed
@@ -80,8 +90,8 @@ class CodecSpec(BaseModel):
 
     Attributes:
         payload_bits: bits the user hides, 1..256.
-        crc_bits: CRC width (0, 8 or 16). Without a CRC nothing can vouch for a decoded payload,
-            so :attr:`DecodeResult.ok` is always False.
+        crc_bits: CRC width (0, 8, 10-16: :data:`CRC_WIDTHS`). Without a CRC nothing can vouch for
+            a decoded payload, so :attr:`DecodeResult.ok` is always False.
         bch_t: bit errors the BCH code corrects (0 = no error correction), at most 16.
         bch_m: Galois field order 5..15 of the BCH code; None picks the smallest that fits.
     """
@@ -89,7 +99,7 @@ class CodecSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     payload_bits: int = Field(ge=1, le=MAX_PAYLOAD_BITS)
-    crc_bits: Literal[0, 8, 16] = 8
+    crc_bits: CrcWidth = 8
     bch_t: int = Field(default=2, ge=0, le=MAX_BCH_T)
     bch_m: int | None = Field(default=None, ge=BCH_M_RANGE[0], le=BCH_M_RANGE[1])
 
@@ -135,6 +145,19 @@ class CodecSpec(BaseModel):
     def code_bits(self) -> int:
         """``N_b``: the bits the network embeds, ``payload_bits + crc_bits + ecc_bits``."""
         return self.payload_bits + self.crc_bits + self.ecc_bits
+
+
+@cache
+def crc_configuration(width: int) -> crc.Configuration:
+    """The CRC of ``width`` bits (:data:`CRC_POLYNOMIALS`)."""
+    return crc.Configuration(
+        width=width,
+        polynomial=CRC_POLYNOMIALS[width],
+        init_value=0,
+        final_xor_value=0,
+        reverse_input=False,
+        reverse_output=False,
+    )
 
 
 @cache
@@ -281,7 +304,7 @@ class PayloadCodec:
         soft_candidates: most distinct code words the soft search may put to the CRC. Each one is
             a ``2**-crc_bits`` chance of accepting garbage, so the false-accept rate of a random
             input is at most ``(1 + soft_candidates) * 2**-crc_bits``. Default: 64 with a 16-bit
-            CRC (<= 0.1%), 2 with an 8-bit CRC (<= 1.2%).
+            CRC (<= 0.1%), 2 with a shorter one (<= 1.2% with 8 bits).
         reliable_above: bits whose ``max(p, 1 - p)`` reaches this are never flipped by the soft
             search (saturated outputs say nothing about which bits are wrong).
 
@@ -318,12 +341,14 @@ class PayloadCodec:
         self.spec = spec
         self.soft_bits = soft_bits
         if soft_candidates is None:
-            soft_candidates = {0: 2**soft_bits, 8: 2, 16: 64}[spec.crc_bits]
+            soft_candidates = {0: 2**soft_bits, 16: 64}.get(spec.crc_bits, 2)
         self.soft_candidates = soft_candidates
         self.reliable_above = reliable_above
         self._k = spec.payload_bits + spec.crc_bits
         self._bch = bchlib.BCH(spec.bch_t, m=spec.field_order) if spec.bch_t else None
-        self._crc = crc.Calculator(_CRC_CONFIGS[spec.crc_bits], optimized=True) if spec.crc_bits else None
+        self._crc = crc.Calculator(crc_configuration(spec.crc_bits), optimized=True) if spec.crc_bits else None
+        self._crc_checked = spec.crc_bits  # the CRC bits a word must match (:meth:`narrowed`)
+        self._collided: dict[bytes, np.ndarray] | None = None  # a narrowed copy's collisions
         self._differences: np.ndarray | None = None
         self._columns: np.ndarray | None = None
         self._zero_word: np.ndarray | None = None
@@ -335,7 +360,12 @@ class PayloadCodec:
     # -- pieces
 
     def _crc_bits_of(self, payload: np.ndarray) -> np.ndarray:
-        """CRC of the payload's value as big-endian bytes (left-padded with zeros)."""
+        """CRC of the payload's value as big-endian bytes (left-padded with zeros); in a
+        :meth:`narrowed` copy, the CRC bits a collision gave it, where one did."""
+        if self._collided:
+            collided = self._collided.get(np.asarray(payload, np.uint8).tobytes())
+            if collided is not None:
+                return collided.copy()
         pad = (-payload.shape[0]) % 8
         data = np.packbits(np.concatenate([np.zeros(pad, np.uint8), payload])).tobytes()
         return int_to_bits(self._crc.checksum(data), self.spec.crc_bits)
@@ -343,6 +373,47 @@ class PayloadCodec:
     def _crc_ok(self, word: np.ndarray) -> bool:
         p = self.spec.payload_bits
         return bool(np.array_equal(self._crc_bits_of(word[:p]), word[p : self._k]))
+
+    def _accepts(self, word: np.ndarray) -> bool:
+        """Whether decoding accepts ``word``: its CRC matches. A :meth:`narrowed` copy also accepts
+        a word whose CRC bits match on the bits it checks, and takes them as its payload's CRC."""
+        if self._crc_ok(word):
+            return True
+        if self._collided is None:
+            return False
+        p, checked = self.spec.payload_bits, self._crc_checked
+        key = np.asarray(word[:p], np.uint8).tobytes()
+        if key in self._collided or not np.array_equal(self._crc_bits_of(word[:p])[:checked], word[p : p + checked]):
+            return False
+        self._collided[key] = np.array(word[p : self._k], dtype=np.uint8)
+        return True
+
+    def narrowed(self, checked: int) -> PayloadCodec:
+        """A copy of this codec whose decoding checks only the first ``checked`` of the CRC's bits,
+        to measure how often wrong code words get through the rest of a reading
+        (``deepmorph.training.trust``), never to read. A wrong word, whose CRC bits are as good as
+        random, then passes ``2**(crc_bits - checked)`` times as often; a right one still passes.
+
+        A word accepted on fewer than all its CRC bits has *collided*: until :meth:`forget`, the
+        CRC bits it was read with are its payload's CRC, so the rest of the reading (the payload
+        check encodes the payload again) judges the very code word the correction reached, as
+        it would a real collision, not the payload's own code word, which differs from what was
+        read in about half its CRC and parity bits.
+
+        Raises:
+            DeepMorphError: ``checked`` outside ``0..crc_bits``.
+        """
+        if not 0 <= checked <= self.spec.crc_bits:
+            raise DeepMorphError(f"a CRC of {self.spec.crc_bits} bits cannot be checked on {checked} of them")
+        narrow = copy.copy(self)
+        narrow._crc_checked = checked
+        narrow._collided = {}
+        return narrow
+
+    def forget(self) -> None:
+        """Forget the collisions a :meth:`narrowed` copy took (before another photo)."""
+        if self._collided is not None:
+            self._collided.clear()
 
     def _ecc(self, info: np.ndarray) -> np.ndarray:
         ecc = self._bch.encode(np.packbits(info).tobytes())
@@ -428,7 +499,7 @@ class PayloadCodec:
         p, checked = self.spec.payload_bits, self._crc is not None
 
         word = self._bch_correct(hard[None])[0]
-        if word is None or (checked and not self._crc_ok(word)):
+        if word is None or (checked and not self._accepts(word)):
             word = self._chase(hard, cost, first=word) if soft else None
         if word is None:
             return self._result(hard[:p], ok=False, flips=-1, conf=conf)
@@ -621,7 +692,7 @@ class PayloadCodec:
         (this module's docstring), the CRC's and the BCH code's parameters, and the whitening
         mask as a string of ``0`` and ``1``, most significant bit first (``docs/export.md``)."""
         spec = self.spec
-        crc_config = _CRC_CONFIGS[spec.crc_bits].value if spec.crc_bits else None
+        crc_config = crc_configuration(spec.crc_bits) if spec.crc_bits else None
         return {
             "payload_bits": spec.payload_bits,
             "crc_bits": spec.crc_bits,
@@ -682,7 +753,7 @@ class PayloadCodec:
         # -log-likelihood relative to the hard decision: the sum of |LLR| over the changed bits
         ranked = np.argsort((words != hard) @ cost, kind="stable")[: self.soft_candidates]
         for i in ranked:
-            if self._crc is None or self._crc_ok(words[i]):
+            if self._crc is None or self._accepts(words[i]):
                 return words[i]
         return None
 

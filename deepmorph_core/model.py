@@ -412,6 +412,7 @@ class DeepMorphModel:
             "verifier": None if m.verifier is None else m.verifier.model_dump(),
             "tuning": m.tuning,
             "validation": [r.model_dump() for r in m.validation],
+            "trust": None if m.trust is None else {**m.trust.model_dump(), "text": m.trust.describe()},
             "graphs": {name: graph.meta.model_dump() for name, graph in self.graphs.items()},
         }
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -168,12 +168,54 @@ def validate_close_ups(  # noqa: PLR0913
     )
 
 
+@dataclass(frozen=True)
+class WrongPayloadCount:
+    """What :func:`count_wrong_payloads` read: close-ups that gave the payload printed, and those
+    that gave another one (any other payload reported counts, beside the right one or not)."""
+
+    samples: int
+    read: int
+    wrong: int
+    seconds: float
+
+
+def count_wrong_payloads(  # noqa: PLR0913
+    model: DeepMorphModel,
+    samples: int,
+    seed: int,
+    crc_checked: int,
+    severity: str = "hard",
+    print_px: float | None = None,
+) -> WrongPayloadCount:
+    """Read ``samples`` fresh payloads' close-ups (:func:`close_ups`) through the photo chain,
+    the model's CRC checked on only its first ``crc_checked`` bits
+    (:meth:`PayloadCodec.narrowed <deepmorph_core.codec.PayloadCodec.narrowed>`), and count the
+    wrong payloads. A wrong code word passes such a CRC ``2**(crc_bits - crc_checked)`` times as
+    often as the whole one, at every look the chain takes, and the rest of the chain (the morph's
+    fit, the bits' evidence, the print's size) judges it as it would a real collision, the code
+    word reached: each wrong payload counted stands for that many fewer with the whole CRC. A little fewer are
+    counted than that, as a wrong word passed early can end a search that would have passed
+    another later. The model is not changed."""
+    start = time.perf_counter()
+    narrow = replace(model, codec=model.codec.narrowed(crc_checked))
+    locator = Locator(narrow)
+    read = wrong = 0
+    for shot in close_ups(model, samples, seed, severity, print_px):
+        narrow.codec.forget()
+        vouched = [f.result.payload for f in locator.locate(shot.photo) if f.result.ok]
+        read += any(np.array_equal(payload, shot.payload) for payload in vouched)
+        wrong += any(not np.array_equal(payload, shot.payload) for payload in vouched)
+    return WrongPayloadCount(samples, read, wrong, round(time.perf_counter() - start, 2))
+
+
 __all__ = [
     "PHOTO_PX",
     "PRINT_PX",
     "CloseUp",
     "close_up_width",
+    "WrongPayloadCount",
     "close_ups",
+    "count_wrong_payloads",
     "photo_for_print",
     "printed",
     "validate_close_ups",

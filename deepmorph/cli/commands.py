@@ -51,6 +51,7 @@ from deepmorph.training.settings import (
     TuneSettings,
     chosen,
 )
+from deepmorph_core.codec import CRC_WIDTHS
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.fileio import refuse_to_overwrite
 from deepmorph_core.threads import use_threads
@@ -185,7 +186,7 @@ def capacity(
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
     crc: Annotated[
-        Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: the codec's choice).")
+        Optional[int], typer.Option("--crc", help="CRC bits: 8, 10-16 (default: the codec's choice).")
     ] = None,
     drop: DropOpt = False,
     pixels: Annotated[
@@ -216,8 +217,8 @@ def capacity(
     from deepmorph_core.print_size import legibility, pixels_across, plan, plan_sizes, rows_to_json
     from deepmorph_core.reading_channel import channel_for, channel_name
 
-    if crc not in (None, 8, 16):
-        raise typer.BadParameter(f"expected 8 or 16, got {crc}", param_hint="--crc")
+    if crc is not None and crc not in CRC_WIDTHS[1:]:
+        raise typer.BadParameter(f"expected 8 or 10 to 16, got {crc}", param_hint="--crc")
     if (print_mm is None) != (distance_cm is None):
         raise typer.BadParameter("give both --print-mm and --distance-cm, or neither", param_hint="--print-mm")
     if print_mm is not None and pixels is not None:
@@ -402,7 +403,8 @@ def train(
         ),
     ] = str(PAYLOAD_BITS),
     crc: Annotated[
-        Optional[int], typer.Option("--crc", help="CRC bits: 8 or 16 (default: 8 up to 32 payload bits).")
+        Optional[int],
+        typer.Option("--crc", help="CRC bits: 8, 10-16 (default: 8 up to 32 payload bits, longer where auto needs)."),
     ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
     steps: Annotated[int, setting_option("steps")] = DEFAULTS.steps,
@@ -419,6 +421,7 @@ def train(
     early_stop: Annotated[bool, setting_option("early_stop")] = DEFAULTS.early_stop,
     renders_tune: Annotated[int, setting_option("renders_tune")] = DEFAULTS.renders_tune,
     verifier: Annotated[Optional[bool], setting_option("verifier")] = DEFAULTS.verifier,
+    trust_samples: Annotated[Optional[int], setting_option("trust_samples")] = DEFAULTS.trust_samples,
     read_in: Annotated[ReadIn, setting_option("read_in")] = DEFAULTS.read_in,
     device: DeviceOpt = DEFAULTS.device,
     shards: Annotated[Optional[int], setting_option("shards")] = DEFAULTS.shards,
@@ -482,7 +485,10 @@ def train(
             shrunk=[s.model_dump() for s in summary.shrunk],
         )
         verified = summary.verifier.as_json() if summary.verifier else None
-        print_json({**result, "validation": [r.model_dump() for r in summary.validation], "verifier": verified})
+        trust = summary.trust.model_dump() if summary.trust else None
+        print_json(
+            {**result, "validation": [r.model_dump() for r in summary.validation], "trust": trust, "verifier": verified}
+        )
         return
     out.print(
         f"wrote {summary.bundle} ({summary.steps} steps in {summary.elapsed_s:.0f} s, stage 2 from step "
@@ -490,6 +496,8 @@ def train(
         f"); log {summary.log}" + (f", plot {summary.plot}" if summary.plot else "")
     )
     _print_validation([r.model_dump() for r in summary.validation])
+    if summary.trust is not None:
+        out.print(f"wrong payloads: {safe(summary.trust.describe())}")
     if summary.verifier is not None:
         out.print(f"verifier: {summary.verifier.text()}")
 
@@ -720,6 +728,8 @@ def info(model: ModelArg, as_json: JsonOpt = False) -> None:
         )
     for line in _validation_lines(data["validation"]) or ["none (run `deepmorph validate MODEL --save`)"]:
         rows.append(("validated", line))
+    if data.get("trust"):
+        rows.append(("wrong payloads", data["trust"]["text"]))
     graphs = data["graphs"]
     rows.append(
         (
@@ -789,6 +799,16 @@ def validate(
     photos: Annotated[
         int, typer.Option("--photos", min=0, max=100_000, help="Payloads read from close-up photos.")
     ] = PHOTO_SAMPLES,
+    trust: Annotated[
+        int,
+        typer.Option(
+            "--trust",
+            min=0,
+            max=100_000,
+            help="Also count wrong payloads in this many hard close-ups, the CRC checked on two bits (training's "
+            "count; the code is never changed here).",
+        ),
+    ] = 0,
     seed: SeedOpt = 0,
     save: Annotated[bool, typer.Option("--save", help="Store the result in the bundle (shown by info).")] = False,
     threads: ThreadsOpt = None,
@@ -796,6 +816,7 @@ def validate(
     as_json: JsonOpt = False,
 ) -> None:
     """Read fresh random payloads back from renders and photos: what the model really reads."""
+    from deepmorph.training.trust import measure_trust, trust_warning
     from deepmorph.training.validation import validate as run_validation
     from deepmorph.training.validation import validation_warning
     from deepmorph_core.device import resolve_device
@@ -806,16 +827,22 @@ def validate(
     where = resolve_device(device)
     m = DeepMorphModel.load(model)
     records = run_validation(m, default_registry(), samples, photos, seed=seed, device=where)
+    counted = measure_trust(m, trust, seed) if trust and m.codec.spec.crc_bits else None
     if save:
         m.meta.validation = records
+        m.meta.trust = counted or m.meta.trust
         m.save(model)
     dumped = [r.model_dump() for r in records]
     if as_json:
-        print_json({"model": str(model), "validation": dumped, "saved": save})
+        trusted = None if counted is None else counted.model_dump()
+        print_json({"model": str(model), "validation": dumped, "trust": trusted, "saved": save})
     else:
         _print_validation(dumped)
-    warning = validation_warning(records, str(model), own_detector=m.meta.detector is not None)
-    if warning:
+        if counted is not None:
+            out.print(f"wrong payloads: {safe(counted.describe())}")
+    warnings = [validation_warning(records, str(model), own_detector=m.meta.detector is not None)]
+    warnings.append(trust_warning(counted, str(model)) if counted is not None else None)
+    for warning in filter(None, warnings):
         err.print(f"warning: {safe(warning)}")
 
 

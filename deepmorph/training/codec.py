@@ -63,7 +63,7 @@ from deepmorph.training.loop import LoopSummary, Panel, TrainingLoop
 from deepmorph.training.settings import PAYLOAD_BITS, SMALL_PRINT_SCALE, TUNE_DEFAULTS, TrainSettings
 from deepmorph.training.validation import default_samples, validate, validation_warning
 from deepmorph_core.bounds import format_validation_error
-from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, ValidationRecord
+from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, TrustRecord, ValidationRecord
 from deepmorph_core.capacity import predict, size_warning
 from deepmorph_core.codec import CodecSpec, choose_codec
 from deepmorph_core.corruption import build_pipeline
@@ -577,6 +577,7 @@ class TrainingSummary:
     payload_bits: int = 0
     shrunk: list[CodeShrink] = field(default_factory=list)
     verifier: VerifierSummary | None = None
+    trust: TrustRecord | None = None
 
 
 def _settings_error(what: str, exc: ValidationError) -> DeepMorphError:
@@ -657,8 +658,17 @@ def train_model(
     model.encoder.cpu()  # validated (and used after training) on the CPU, as the photo chain runs
     model.decoder.cpu()
     records: list[ValidationRecord] = []
-    verifier = None
+    verifier = trust = None
     if world.main:  # rank 0 alone validates (the others have no plot either)
+        renders, photos = validation_samples if validation_samples is not None else default_samples()
+        if renders > 0 and photos > 0:  # the wrong payloads first: they may lengthen the CRC validated next
+            from deepmorph.training.trust import check_trust, trust_samples  # the photo chain, loaded only here
+
+            if on_validation:
+                on_validation()
+                on_validation = None
+            samples = trust_samples(config.trust_samples, model.drawing.colour)
+            trust = check_trust(model, samples, config.seed, label, warn)
         records = _validate_and_store(
             model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
         )
@@ -666,7 +676,7 @@ def train_model(
             verifier = _add_verifier(out, config, warn, on_verifier)
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
-        run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk), verifier,
+        run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk), verifier, trust,
     )  # fmt: skip
 
 

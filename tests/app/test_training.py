@@ -662,9 +662,10 @@ def test_train_and_tune_print_one_json_object(tiny_svg: Path, trained: Path, tmp
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     keys = {"written", "bundle", "log", "plot", "steps", "stage2_start", "stopped_early", "payload_bits", "shrunk",
-            "elapsed_s", "metrics", "validation", "verifier"}  # fmt: skip
+            "elapsed_s", "metrics", "validation", "trust", "verifier"}  # fmt: skip
     assert set(data) == keys and [r["name"] for r in data["validation"]] == ["renders", "close-ups"]
     assert data["payload_bits"] == 4 and data["shrunk"] == [] and data["verifier"] is None  # none without --pixels
+    assert data["trust"] is None  # black ink: not measured by default
     assert data["bundle"] == str(out) and data["steps"] == 2 and str(out) in data["written"]
     assert {"step", "loss", "bit_acc"} <= set(data["metrics"]) and data["metrics"]["step"] == 2
     tuned = tmp_path / "t.dmm"

@@ -77,10 +77,15 @@ def test_validate_command_prints_and_saves_on_request(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert [r["name"] for r in data["validation"]] == ["renders", "close-ups"] and data["saved"] is False
-    assert DeepMorphModel.load(bundle).meta.validation == []
-    saved = CliRunner().invoke(app, ["validate", str(bundle), "--samples", "30", "--photos", "0", "--save"])
+    assert DeepMorphModel.load(bundle).meta.validation == [] and data["trust"] is None
+    args = ["validate", str(bundle), "--samples", "30", "--photos", "0", "--trust", "2", "--save"]
+    saved = CliRunner().invoke(app, args)
     assert saved.exit_code == 0, saved.output
-    assert [r.name for r in DeepMorphModel.load(bundle).meta.validation] == ["renders"]
+    assert "wrong payloads: 2 hard close-ups" in saved.output
+    kept = DeepMorphModel.load(bundle)
+    assert [r.name for r in kept.meta.validation] == ["renders"]
+    assert kept.meta.trust is not None and kept.meta.trust.samples == 2 and kept.meta.trust.crc_bits == (8, 8)
+    assert kept.codec.spec == DeepMorphModel.load(BUNDLED_MODEL).codec.spec  # the code is never changed here
 
 
 def test_bad_validation_counts_are_a_usage_error(tmp_path: Path) -> None:

@@ -17,7 +17,16 @@ from hypothesis import given
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from deepmorph_core.codec import CodecSpec, DecodeResult, PayloadCodec, choose_codec, format_codec_error
+from deepmorph_core.codec import (
+    CRC_POLYNOMIALS,
+    CRC_WIDTHS,
+    CodecSpec,
+    DecodeResult,
+    PayloadCodec,
+    choose_codec,
+    crc_configuration,
+    format_codec_error,
+)
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.payload import Payload, TextForm, format_payload, parse_payload_text, random_payloads
 
@@ -497,7 +506,7 @@ def test_spec_is_frozen_and_round_trips_through_json() -> None:
     [
         ({"payload_bits": 0}, "payload_bits: Input should be greater than or equal to 1"),
         ({"payload_bits": 257}, "payload_bits: Input should be less than or equal to 256"),
-        ({"payload_bits": 24, "crc_bits": 12}, "crc_bits: Input should be 0, 8 or 16"),
+        ({"payload_bits": 24, "crc_bits": 9}, "crc_bits: Input should be 0, 8, 10, 11, 12, 13, 14, 15 or 16"),
         ({"payload_bits": 24, "bch_t": -1}, "bch_t: Input should be greater than or equal to 0"),
         ({"payload_bits": 24, "bch_m": 4}, "bch_m: Input should be greater than or equal to 5"),
         (
@@ -520,7 +529,9 @@ def test_choose_codec_errors_are_one_line() -> None:
     with pytest.raises(DeepMorphError) as info:
         choose_codec(0)
     assert str(info.value) == "invalid codec: payload_bits: Input should be greater than or equal to 1"
-    with pytest.raises(DeepMorphError, match="^invalid codec: crc_bits: Input should be 0, 8 or 16$"):
+    with pytest.raises(
+        DeepMorphError, match="^invalid codec: crc_bits: Input should be 0, 8, 10, 11, 12, 13, 14, 15 or 16$"
+    ):
         choose_codec(24, crc_bits=32)
 
 
@@ -689,3 +700,73 @@ def test_a_corrected_reading_reports_how_much_its_probabilities_prefer_it_to_any
     doubtful[4] = misread[4]
     assert 0 < codec.decode(doubtful).rival_log_odds < repaired.rival_log_odds
     assert codec.decode(np.full(codec.spec.code_bits, 0.5)).rival_log_odds == 0.0
+
+
+def _crc_by_division(data: bytes, width: int, polynomial: int) -> int:
+    """The CRC of ``data`` by long division, bit by bit (zero init, no reflection, no final XOR)."""
+    register, top = 0, 1 << width
+    for bit in np.unpackbits(np.frombuffer(data, dtype=np.uint8)).tolist() + [0] * width:
+        register = (register << 1) | bit
+        if register & top:
+            register ^= top | polynomial
+    return register
+
+
+@pytest.mark.parametrize("width", [w for w in CRC_WIDTHS if w])
+def test_every_crc_width_is_its_polynomial_and_the_catalogue_check_value(width: int) -> None:
+    """Each width's CRC is long division by its polynomial; where the RevEng catalogue lists the
+    same CRC with zero init, its check value over b"123456789" matches."""
+    catalogue = {8: 0xF4, 10: 0x199, 12: 0xF5B, 13: 0x04FA, 15: 0x059E, 16: 0x31C3}
+    calculator = crc.Calculator(crc_configuration(width))
+    for data in (b"123456789", b"\x00\x01", b"\xff" * 5, bytes(range(7))):
+        assert calculator.checksum(data) == _crc_by_division(data, width, CRC_POLYNOMIALS[width])
+    if width in catalogue:
+        assert calculator.checksum(b"123456789") == catalogue[width]
+
+
+@pytest.mark.parametrize("width", [w for w in CRC_WIDTHS if w])
+def test_every_crc_width_round_trips_and_corrects_t_flips(width: int) -> None:
+    codec = PayloadCodec(CodecSpec(payload_bits=12, crc_bits=width, bch_t=2))
+    rng = np.random.default_rng(width)
+    payloads = random_payloads(20, 12, rng)
+    for payload, word in zip(payloads, codec.encode(payloads)):
+        probs = np.where(word == 1, 0.9, 0.1)
+        flips = rng.choice(codec.spec.code_bits, 2, replace=False)
+        probs[flips] = 1.0 - probs[flips]
+        result = codec.decode(probs, soft=False)
+        assert result.ok and np.array_equal(result.payload, payload) and result.corrected_bits == 2
+
+
+def test_a_longer_crc_in_place_of_payload_bits_keeps_the_code_bits() -> None:
+    """Payload bits given over to the CRC leave the BCH data, its parity and the code's size as
+    they were: what lets a trained model's code carry a longer CRC."""
+    for payload_bits, t in ((10, 1), (6, 2), (20, 2), (3, 1)):
+        base = CodecSpec(payload_bits=payload_bits, crc_bits=8, bch_t=t)
+        for width in CRC_WIDTHS:
+            if 8 < width < 8 + payload_bits:
+                longer = CodecSpec(payload_bits=payload_bits - (width - 8), crc_bits=width, bch_t=t)
+                assert (longer.code_bits, longer.ecc_bits) == (base.code_bits, base.ecc_bits)
+
+
+def test_a_narrowed_codec_checks_only_the_first_crc_bits() -> None:
+    codec = PayloadCodec(CodecSpec(payload_bits=16, crc_bits=8, bch_t=1))
+    narrow = codec.narrowed(3)
+    payload = random_payloads(1, 16, np.random.default_rng(0))[0]
+    right = codec.encode(payload)
+    passes = {True: 0, False: 0}
+    for flip in range(1, 256):  # every wrong CRC for the same payload, BCH parity made to match
+        crc_bits = codec._crc_bits_of(payload) ^ np.array([(flip >> (7 - i)) & 1 for i in range(8)], np.uint8)  # noqa: SLF001
+        info = np.concatenate([payload, crc_bits])
+        word = (np.concatenate([info, codec._ecc(info)]) ^ codec._mask).astype(np.uint8)  # noqa: SLF001
+        assert not codec.decode(np.where(word == 1, 0.9, 0.1), soft=False).ok
+        narrow.forget()
+        read = narrow.decode(np.where(word == 1, 0.9, 0.1), soft=False)
+        passes[flip >> 5 == 0] += read.ok and read.corrected_bits == 0
+        if read.ok:  # collided: the payload's code word is now the word read, as in a real collision
+            assert np.array_equal(narrow.encode(payload), word) and not np.array_equal(codec.encode(payload), word)
+    assert passes == {True: 31, False: 0}  # the flips within the last 5 bits, and only they
+    narrow.forget()
+    assert np.array_equal(narrow.encode(payload), right)
+    assert narrow.decode(np.where(right == 1, 0.9, 0.1)).ok and codec._crc_checked == 8  # noqa: SLF001
+    with pytest.raises(DeepMorphError, match="cannot be checked on 9"):
+        codec.narrowed(9)

@@ -1,0 +1,74 @@
+"""The wrong payloads a model's photos could give, as training measures them, and the CRC its rule picks.
+
+For each bundle, ``--samples`` hard close-ups of fresh payloads at the model's trained print width
+are read by the photo chain with the CRC checked on two of its bits
+(:func:`deepmorph.training.trust.measure_trust`, as training runs it, 1 thread). Each wrong
+payload seen stands for 64 fewer with CRC-8. The table: the model's payload and CRC, close-ups,
+the prints' width, wrong payloads, the rate they imply with the model's CRC (per 10,000 reads; an
+upper 95 % bound where none was seen), and the CRC the rule would give a ``--payload-bits auto``
+model (:func:`deepmorph.training.trust.crc_for`) with the payload that leaves. The JSON keeps each
+record.
+
+    .venv/bin/python bench/trust.py model.dmm other.dmm --samples 1000 --seed 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+
+
+def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
+    """One bundle's row: its code, the record :func:`measure_trust` gives and what the rule picks."""
+    from deepmorph.training.trust import TRUST_TARGET, crc_for, measure_trust
+    from deepmorph_core.bundle import per_10k
+    from deepmorph_core.model import DeepMorphModel
+
+    model = DeepMorphModel.load(bundle)
+    spec = model.codec.spec
+    record = measure_trust(model, samples, seed)
+    width = crc_for(record, spec)
+    return {
+        "bundle": bundle.stem,
+        "colour": model.drawing.colour,
+        "code": f"{spec.payload_bits} + CRC-{spec.crc_bits}",
+        "samples": record.samples,
+        "print_px": record.print_px,
+        "wrong": record.wrong,
+        "per_10k": ("" if record.wrong else "< ") + per_10k(record.at_most_per_read()),
+        "meets": record.wrong_per_read() <= TRUST_TARGET,
+        "rule_crc": width,
+        "rule_payload": None if width is None else spec.payload_bits - (width - spec.crc_bits),
+        "seconds": record.seconds,
+        "record": record.model_dump(),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("bundles", type=Path, nargs="+")
+    ap.add_argument("--samples", type=int, default=600)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / "trust.json")
+    args = ap.parse_args()
+    threads = set_threads(1)
+    import cv2
+
+    cv2.setNumThreads(1)
+    rows = [measure(bundle, args.samples, args.seed) for bundle in args.bundles]
+    columns = {"bundle": "bundle", "colour": "colour", "code": "payload + CRC", "samples": "hard close-ups",
+               "print_px": "print px", "wrong": "wrong (2 CRC bits)", "per_10k": "per 10k, its CRC",
+               "meets": "at most 0.1", "rule_crc": "CRC the rule picks", "rule_payload": "payload then",
+               "seconds": "s"}  # fmt: skip
+    print(f"hard close-ups at each model's trained width, seed {args.seed}, {threads} thread")
+    print(table(list(columns.values()), [[row[k] for k in columns] for row in rows]))
+    print(f"wrote {write_json(args.out, {'environment': environment(), 'seed': args.seed, 'rows': rows})}")
+
+
+if __name__ == "__main__":
+    main()

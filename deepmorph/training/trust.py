@@ -1,0 +1,160 @@
+"""How often a trained model's photos could give a wrong payload, and a CRC long enough to keep it rare.
+
+A wrong payload takes three things: a misread that the error correction carries to another code
+word, that word's CRC passing by chance (one in ``2**crc_bits``), and the payload check (the
+morph's fit, the bits' evidence) failing to refuse it. The last is the drawing's own: a thin
+stroke read in hard light fits a wrong word's morph nearly as well as the right one's, a bold
+black outline does not. So the rate is measured for each model when training ends, where the
+photo chain reads hard close-ups of fresh payloads at the trained print width with the CRC checked
+on only :data:`TRUST_CRC_CHECKED` of its bits
+(:func:`~deepmorph_detect.photo_validation.count_wrong_payloads`): each wrong payload seen there
+stands for ``2**(crc_bits - TRUST_CRC_CHECKED)`` fewer with the whole CRC.
+
+Where that estimate is above :data:`TRUST_TARGET`, a payload sized by training (``--payload-bits
+auto``, the CRC left to DeepMorph) gives bits over to a longer CRC (:data:`~deepmorph_core.codec.
+CRC_WIDTHS`): the payload and its CRC fill the same code bits, so the networks, and all they
+read, stay as they are, and each bit given halves the rate. Where the payload cannot give enough,
+or its size or CRC is the user's, training warns with the estimate instead.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from deepmorph_core.bundle import TrustRecord, per_10k
+from deepmorph_core.codec import CRC_WIDTHS, CodecSpec, PayloadCodec
+from deepmorph_core.model import DeepMorphModel
+from deepmorph_detect.photo_validation import close_up_width, count_wrong_payloads
+from deepmorph_detect.scenes import CLOSE_UP_SIZE
+
+#: Wrong payloads per read a model may give in hard close-ups at its trained width: 0.1 in
+#: 10,000, so that 10,000 reads give none nine times in ten.
+TRUST_TARGET = 1e-5
+#: The CRC bits checked while the rate is measured: a wrong word passes 64 times as often as
+#: with CRC-8, so one wrong payload in 600 close-ups is 0.26 in 10,000 with CRC-8, and a wrong
+#: word passed seldom ends a search early (held-out colour drawings at ``--pixels 200``: 1-66 in
+#: 1000, ``bench/trust.py``).
+TRUST_CRC_CHECKED = 2
+#: Hard close-ups read by the measurement (0.2-0.9 s each for a colour drawing on one core).
+TRUST_SAMPLES = 600
+TRUST_SEVERITY = "hard"
+#: The measurement's payloads and photos draw from the training's seed plus this.
+TRUST_SEED_OFFSET = 4217
+
+
+def trust_samples(setting: int | None, colour: bool) -> int:
+    """The close-ups a training measures its wrong payloads on: ``setting`` where the user set
+    it; else :data:`TRUST_SAMPLES` for a colour drawing and none for black ink. Every colour
+    drawing measured so was above :data:`TRUST_TARGET` with CRC-8 (0.16-10 in 10,000); black ink
+    read 10,000 medium and hard close-ups at each size without a wrong payload, and its counts
+    here were 0 and 1 in 1000 (``bench/README.md``), where one count would cost two payload bits."""
+    if setting is not None:
+        return setting
+    return TRUST_SAMPLES if colour else 0
+
+
+def measure_trust(model: DeepMorphModel, samples: int, seed: int) -> TrustRecord:
+    """Count the wrong payloads of ``samples`` hard close-ups of ``model`` at its trained width,
+    the CRC checked on :data:`TRUST_CRC_CHECKED` bits."""
+    spec = model.codec.spec
+    checked = min(TRUST_CRC_CHECKED, spec.crc_bits)
+    count = count_wrong_payloads(model, samples, seed + TRUST_SEED_OFFSET, checked, TRUST_SEVERITY)
+    return TrustRecord(
+        severity=TRUST_SEVERITY,
+        print_px=round(close_up_width(model) * sum(CLOSE_UP_SIZE) / 2),
+        samples=samples,
+        crc_checked=checked,
+        wrong=count.wrong,
+        crc_bits=(spec.crc_bits, spec.crc_bits),
+        payload_bits=(spec.payload_bits, spec.payload_bits),
+        seconds=count.seconds,
+    )
+
+
+def crc_for(record: TrustRecord, spec: CodecSpec) -> int | None:
+    """The shortest CRC, no shorter than ``spec``'s, whose estimated rate meets
+    :data:`TRUST_TARGET` and that leaves at least one payload bit; ``None`` where none does."""
+    for width in CRC_WIDTHS:
+        if width >= spec.crc_bits and width - spec.crc_bits < spec.payload_bits:
+            if record.wrong_per_read(width) <= TRUST_TARGET:
+                return width
+    return None
+
+
+def with_crc(spec: CodecSpec, width: int) -> CodecSpec:
+    """``spec`` with payload bits given over to a CRC of ``width`` bits: the same code bits, BCH
+    data and parity (payload and CRC fill the same bytes)."""
+    longer = CodecSpec(
+        payload_bits=spec.payload_bits - (width - spec.crc_bits),
+        crc_bits=width,
+        bch_t=spec.bch_t,
+        bch_m=spec.bch_m,
+    )
+    if longer.code_bits != spec.code_bits:  # pragma: no cover - the layout's invariant
+        raise AssertionError(f"a CRC of {width} bits changed the code's size: {spec} -> {longer}")
+    return longer
+
+
+def lengthen_crc(model: DeepMorphModel, record: TrustRecord) -> TrustRecord:
+    """Give ``model``'s payload bits over to the CRC its measured rate needs, where training
+    sized the payload and the user left the CRC to it; the record, with the code now."""
+    auto = model.meta.record.payload_auto
+    spec = model.codec.spec
+    if auto is None or auto.crc_bits is not None or record.wrong_per_read() <= TRUST_TARGET:
+        return record
+    width = crc_for(record, spec)
+    if width is None:  # the most the payload can give: all but one bit, within the widths there are
+        width = max(w for w in CRC_WIDTHS if w - spec.crc_bits < spec.payload_bits)
+    if width <= spec.crc_bits:
+        return record
+    longer = with_crc(spec, width)
+    model.codec = PayloadCodec(longer)
+    model.meta.codec = longer
+    return record.model_copy(
+        update={"crc_bits": (spec.crc_bits, width), "payload_bits": (spec.payload_bits, longer.payload_bits)}
+    )
+
+
+def trust_warning(record: TrustRecord, label: str) -> str | None:
+    """A warning where the estimated rate is still above :data:`TRUST_TARGET`; else ``None``."""
+    if record.wrong_per_read() <= TRUST_TARGET:
+        return None
+    return (
+        f"{label}: an estimated {per_10k(record.wrong_per_read())} wrong payloads per 10,000 hard photos "
+        f"({record.wrong} in {record.samples} close-ups read with {record.crc_checked} CRC bits checked); "
+        f"{TRUST_TARGET * 1e4:g} is the aim. A longer CRC (--crc 16) or a smaller payload makes them rarer"
+    )
+
+
+def check_trust(
+    model: DeepMorphModel,
+    samples: int,
+    seed: int,
+    label: str,
+    warn: Callable[[str], None],
+) -> TrustRecord | None:
+    """Measure ``model``'s wrong payloads on ``samples`` hard close-ups (none: nothing), lengthen
+    its CRC where that is the model's to choose (:func:`lengthen_crc`), store the record in its
+    metadata and warn where the rate is still above :data:`TRUST_TARGET`."""
+    if samples <= 0 or not model.codec.spec.crc_bits:
+        return None
+    record = lengthen_crc(model, measure_trust(model, samples, seed))
+    model.meta.trust = record
+    warning = trust_warning(record, label)
+    if warning:
+        warn(warning)
+    return record
+
+
+__all__ = [
+    "TRUST_CRC_CHECKED",
+    "TRUST_SAMPLES",
+    "TRUST_TARGET",
+    "check_trust",
+    "crc_for",
+    "lengthen_crc",
+    "measure_trust",
+    "trust_samples",
+    "trust_warning",
+    "with_crc",
+]
