@@ -1,9 +1,9 @@
 """The wrong payloads a model's photos could give, as training measures them, and the CRC its rule picks.
 
 For each bundle, ``--samples`` hard close-ups of fresh payloads at the model's trained print width
-are read by the photo chain with the CRC checked on two of its bits
+are read by the photo chain with six of the CRC's bits unchecked (two of CRC-8's checked)
 (:func:`deepmorph.training.trust.measure_trust`, as training runs it, 1 thread). Each wrong
-payload seen stands for 64 fewer with CRC-8. The table: the model's payload and CRC, close-ups,
+payload seen stands for 64 fewer with the whole CRC. The table: the model's payload and CRC, close-ups,
 the prints' width, wrong payloads, the rate they imply with the model's CRC (per 10,000 reads; an
 upper 95 % bound where none was seen), and the CRC the rule would give a ``--payload-bits auto``
 model (:func:`deepmorph.training.trust.crc_for`) with the payload that leaves. The JSON keeps each
@@ -62,7 +62,7 @@ def main() -> None:
     cv2.setNumThreads(1)
     rows = [measure(bundle, args.samples, args.seed) for bundle in args.bundles]
     columns = {"bundle": "bundle", "colour": "colour", "code": "payload + CRC", "samples": "hard close-ups",
-               "print_px": "print px", "wrong": "wrong (2 CRC bits)", "per_10k": "per 10k, its CRC",
+               "print_px": "print px", "wrong": "wrong (6 CRC bits unchecked)", "per_10k": "per 10k, its CRC",
                "meets": "at most 0.1", "rule_crc": "CRC the rule picks", "rule_payload": "payload then",
                "seconds": "s"}  # fmt: skip
     print(f"hard close-ups at each model's trained width, seed {args.seed}, {threads} thread")

@@ -252,9 +252,9 @@ def train(
         verifier: then train the model's proposal verifier and store it (``deepmorph
             train-verifier``): photos holding other drawings' prints read faster. ``None``: with
             ``pixels``.
-        trust_samples: hard close-ups that count the wrong payloads when training ends; a
+        trust_samples: hard close-ups that count the wrong payloads after validation; a
             ``payload_bits="auto"`` payload gives bits to a longer CRC where they call for it
-            (``None``: 600 for a colour drawing, 0 for black ink).
+            (``None``: 600 for a colour drawing that reads 90 % of its close-ups, else 0).
         read_in: the gray a colour drawing's prints are read in (``auto``: red, green or blue
             where its colours differ at least twice as much there, else luminance); a model not
             read in luminance needs its prints in colour.

@@ -195,9 +195,10 @@ class TrustRecord(BaseModel):
             f"CRC-{crc_now}"
         )
         if self.crc_bits[0] != crc_now:
+            after = self.payload_bits[1]
             line += (
                 f" (lengthened from CRC-{self.crc_bits[0]}: payload {self.payload_bits[0]} -> "
-                f"{self.payload_bits[1]} bits)"
+                f"{after} bit{'' if after == 1 else 's'})"
             )
         return f"{line}; {self.seconds:.0f} s"
 

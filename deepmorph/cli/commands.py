@@ -805,7 +805,7 @@ def validate(
             "--trust",
             min=0,
             max=100_000,
-            help="Also count wrong payloads in this many hard close-ups, the CRC checked on two bits (training's "
+            help="Also count wrong payloads in this many hard close-ups, six CRC bits unchecked (training's "
             "count; the code is never changed here).",
         ),
     ] = 0,

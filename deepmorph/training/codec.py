@@ -660,24 +660,44 @@ def train_model(
     records: list[ValidationRecord] = []
     verifier = trust = None
     if world.main:  # rank 0 alone validates (the others have no plot either)
-        renders, photos = validation_samples if validation_samples is not None else default_samples()
-        if renders > 0 and photos > 0:  # the wrong payloads first: they may lengthen the CRC validated next
-            from deepmorph.training.trust import check_trust, trust_samples  # the photo chain, loaded only here
-
-            if on_validation:
-                on_validation()
-                on_validation = None
-            samples = trust_samples(config.trust_samples, model.drawing.colour)
-            trust = check_trust(model, samples, config.seed, label, warn)
-        records = _validate_and_store(
-            model, out, label, validation_samples, config.seed, warn, on_validation, resolve_device(config.device)
-        )
+        device = resolve_device(config.device)
+        records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, on_validation, device)
+        trust = _count_wrong_payloads(model, out, config, records, label, warn)
+        if trust is not None and trust.crc_bits[0] != trust.crc_bits[1]:  # a new code: validated again
+            records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, None, device)
         if wants_verifier(config):
             verifier = _add_verifier(out, config, warn, on_verifier)
     return TrainingSummary(
         out, summary.log, summary.plot, summary.steps, run.record.stage2_start, summary.elapsed_s, records,
         run.record.stopped_early, model.codec.spec.payload_bits, list(run.record.shrunk), verifier, trust,
     )  # fmt: skip
+
+
+def _count_wrong_payloads(
+    model: DeepMorphModel,
+    out: Path,
+    config: TrainSettings,
+    records: list[ValidationRecord],
+    label: str,
+    warn: Callable[[str], None],
+) -> TrustRecord | None:
+    """Count the validated model's wrong payloads (:mod:`deepmorph.training.trust`), lengthen an
+    ``auto`` payload's CRC where they call for it, and store the count in the bundle at ``out``:
+    where ``trust_samples`` asks, else (a colour drawing) where its close-ups read at least
+    :data:`~deepmorph.training.trust.COUNTED_FROM` (a model that reads fewer has its warning,
+    and the close-ups of one that misreads take long to count)."""
+    close_ups = [r for r in records if r.name == "close-ups"]
+    if not close_ups:
+        return None
+    from deepmorph.training.trust import COUNTED_FROM, check_trust, trust_samples  # the photo chain, here only
+
+    samples = trust_samples(config.trust_samples, model.drawing.colour)
+    if config.trust_samples is None and close_ups[0].rate < COUNTED_FROM:
+        return None
+    trust = check_trust(model, samples, config.seed, label, warn)
+    if trust is not None:
+        model.save(out)
+    return trust
 
 
 def wants_verifier(config: TrainSettings) -> bool:

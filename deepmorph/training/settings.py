@@ -113,11 +113,12 @@ class TrainSettings:
             store it in the bundle: photos holding other drawings' prints read faster.
             ``None`` (the default): with ``print_px``, where wide frames hold other prints
             (``--pixels 200`` models: 0.83-1.64x QR's frame time without it, 0.57-0.90x with it).
-        trust_samples: when the codec is trained, hard close-ups of fresh payloads read with the
-            CRC checked on two of its bits, to estimate the wrong payloads the photo chain gives
+        trust_samples: when the codec is validated, hard close-ups of fresh payloads read with the
+            CRC checked on all but six of its bits, to estimate the wrong payloads the photo chain gives
             (:mod:`deepmorph.training.trust`); a ``--payload-bits auto`` payload whose estimate
-            is above 0.1 in 10,000 gives bits over to a longer CRC. ``None``: 600 for a colour
-            drawing, 0 for black ink (which read 10,000 close-ups at each size without a wrong one).
+            is above 0.1 in 10,000 gives bits over to a longer CRC, validated again. ``None``: 600
+            for a colour drawing whose validation read 90 % of its close-ups, else 0 (black ink
+            read 10,000 close-ups at each size without a wrong one).
         freeze_encoder: train the decoder alone, the encoder as it is (no spread start, no
             stage 2), learning rate decaying by a cosine to 10 % over all steps: what
             :func:`~deepmorph.training.codec.tune_decoder` runs on a trained bundle.
@@ -193,8 +194,8 @@ class TrainSettings:
     trust_samples: Annotated[int | None, Ge(0), Le(100_000)] = setting(
         None,
         "trust-samples",
-        "Hard close-ups that count wrong payloads when training ends; with --payload-bits auto, payload bits go to a "
-        "longer CRC where they call for it. Default: 600 for a colour drawing, 0 for black ink.",
+        "Hard close-ups that count wrong payloads after validation; with --payload-bits auto, payload bits go to a "
+        "longer CRC where they call for it. Default: 600 for a colour drawing that reads 90 % of its close-ups.",
     )
     freeze_encoder: bool = False
     seed: int = setting(0, "seed")

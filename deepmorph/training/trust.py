@@ -4,11 +4,11 @@ A wrong payload takes three things: a misread that the error correction carries 
 word, that word's CRC passing by chance (one in ``2**crc_bits``), and the payload check (the
 morph's fit, the bits' evidence) failing to refuse it. The last is the drawing's own: a thin
 stroke read in hard light fits a wrong word's morph nearly as well as the right one's, a bold
-black outline does not. So the rate is measured for each model when training ends, where the
-photo chain reads hard close-ups of fresh payloads at the trained print width with the CRC checked
-on only :data:`TRUST_CRC_CHECKED` of its bits
+black outline does not. So the rate is measured for each model after its validation, where the
+photo chain reads hard close-ups of fresh payloads at the trained print width with
+:data:`TRUST_UNCHECKED_BITS` of the CRC's bits left unchecked
 (:func:`~deepmorph_detect.photo_validation.count_wrong_payloads`): each wrong payload seen there
-stands for ``2**(crc_bits - TRUST_CRC_CHECKED)`` fewer with the whole CRC.
+stands for ``2**TRUST_UNCHECKED_BITS`` (64) fewer with the whole CRC.
 
 Where that estimate is above :data:`TRUST_TARGET`, a payload sized by training (``--payload-bits
 auto``, the CRC left to DeepMorph) gives bits over to a longer CRC (:data:`~deepmorph_core.codec.
@@ -30,14 +30,18 @@ from deepmorph_detect.scenes import CLOSE_UP_SIZE
 #: Wrong payloads per read a model may give in hard close-ups at its trained width: 0.1 in
 #: 10,000, so that 10,000 reads give none nine times in ten.
 TRUST_TARGET = 1e-5
-#: The CRC bits checked while the rate is measured: a wrong word passes 64 times as often as
-#: with CRC-8, so one wrong payload in 600 close-ups is 0.26 in 10,000 with CRC-8, and a wrong
-#: word passed seldom ends a search early (held-out colour drawings at ``--pixels 200``: 1-66 in
-#: 1000, ``bench/trust.py``).
-TRUST_CRC_CHECKED = 2
+#: The CRC bits left unchecked while the rate is measured (all but these are checked: two of
+#: CRC-8's): a wrong word passes 64 times as often as with the whole CRC, whatever its width, so
+#: one wrong payload in 600 close-ups is 0.26 in 10,000, a wrong word passed seldom ends a search
+#: early (held-out colour drawings at ``--pixels 200``: 1-66 in 1000, ``bench/trust.py``), and
+#: the close-ups take as long to count with CRC-16 as with CRC-8.
+TRUST_UNCHECKED_BITS = 6
 #: Hard close-ups read by the measurement (0.2-0.9 s each for a colour drawing on one core).
 TRUST_SAMPLES = 600
 TRUST_SEVERITY = "hard"
+#: A model is counted by default only where its validation read at least this share of its
+#: close-ups: one that reads fewer has its warning, and a misreading model's close-ups take long.
+COUNTED_FROM = 0.9
 #: The measurement's payloads and photos draw from the training's seed plus this.
 TRUST_SEED_OFFSET = 4217
 
@@ -55,9 +59,9 @@ def trust_samples(setting: int | None, colour: bool) -> int:
 
 def measure_trust(model: DeepMorphModel, samples: int, seed: int) -> TrustRecord:
     """Count the wrong payloads of ``samples`` hard close-ups of ``model`` at its trained width,
-    the CRC checked on :data:`TRUST_CRC_CHECKED` bits."""
+    :data:`TRUST_UNCHECKED_BITS` of the CRC's bits left unchecked."""
     spec = model.codec.spec
-    checked = min(TRUST_CRC_CHECKED, spec.crc_bits)
+    checked = max(0, spec.crc_bits - TRUST_UNCHECKED_BITS)
     count = count_wrong_payloads(model, samples, seed + TRUST_SEED_OFFSET, checked, TRUST_SEVERITY)
     return TrustRecord(
         severity=TRUST_SEVERITY,
@@ -147,9 +151,10 @@ def check_trust(
 
 
 __all__ = [
-    "TRUST_CRC_CHECKED",
+    "COUNTED_FROM",
     "TRUST_SAMPLES",
     "TRUST_TARGET",
+    "TRUST_UNCHECKED_BITS",
     "check_trust",
     "crc_for",
     "lengthen_crc",

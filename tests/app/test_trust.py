@@ -115,8 +115,9 @@ ORANGE = make_svg(
 
 
 def test_training_stores_and_shows_the_measurement(tmp_path: Path) -> None:
-    """``train`` on a colour drawing measures its wrong payloads before its validation
-    (``--trust-samples``), stores the record, prints it, and ``info`` shows it."""
+    """``train`` on a colour drawing counts its wrong payloads after its validation where asked
+    (``--trust-samples``, whatever the model reads), stores the record, prints it, and ``info``
+    shows it."""
     svg = tmp_path / "orange.svg"
     svg.write_bytes(ORANGE)
     out = tmp_path / "orange.dmm"

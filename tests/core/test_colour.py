@@ -279,7 +279,16 @@ def test_a_short_training_run_on_a_two_colour_drawing_reads_its_bits_from_a_colo
     svg = tmp_path / "two.svg"
     svg.write_bytes(TWO_COLOURS)
     out = tmp_path / "two.dmm"
-    train = {"width": 48, "batch": 16, "severity": "none", "hard_fraction": 0.25, "steps": 500, "seed": 1, "threads": 1}
+    train = {
+        "width": 48,
+        "batch": 16,
+        "severity": "none",
+        "hard_fraction": 0.25,
+        "steps": 500,
+        "seed": 1,
+        "threads": 1,
+        "trust_samples": 0,
+    }  # validated, not counted (minutes: tests/app/test_trust.py counts)
     train_model(svg, out, payload_bits=4, crc_bits=16, ecc_t=0, train=train)
     model = DeepMorphModel.load(out)
     assert model.drawing.colour
