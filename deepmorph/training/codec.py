@@ -661,10 +661,15 @@ def train_model(
     verifier = trust = None
     if world.main:  # rank 0 alone validates (the others have no plot either)
         device = resolve_device(config.device)
-        records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, on_validation, device)
+        weak: list[str] = []  # the validation's warning, said once it is known to be about the final code
+        seed = config.seed
+        records = _validate_and_store(model, out, label, validation_samples, seed, weak.append, on_validation, device)
         trust = _count_wrong_payloads(model, out, config, records, label, warn)
         if trust is not None and trust.crc_bits[0] != trust.crc_bits[1]:  # a new code: validated again
-            records = _validate_and_store(model, out, label, validation_samples, config.seed, warn, None, device)
+            records = _validate_and_store(model, out, label, validation_samples, seed, warn, None, device)
+        else:
+            for text in weak:
+                warn(text)
         if wants_verifier(config):
             verifier = _add_verifier(out, config, warn, on_verifier)
     return TrainingSummary(
