@@ -25,7 +25,7 @@ from _common import RESULTS, environment, set_threads, table, write_json  # noqa
 
 def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
     """One bundle's row: its code, the record :func:`measure_trust` gives and what the rule picks."""
-    from deepmorph.training.trust import TRUST_TARGET, crc_for, measure_trust
+    from deepmorph.training.trust import TRUST_TARGET, crc_for, measure_trust, with_crc
     from deepmorph_core.bundle import per_10k
     from deepmorph_core.model import DeepMorphModel
 
@@ -43,7 +43,7 @@ def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
         "per_10k": ("" if record.wrong else "< ") + per_10k(record.at_most_per_read()),
         "meets": record.wrong_per_read() <= TRUST_TARGET,
         "rule_crc": width,
-        "rule_payload": None if width is None else spec.payload_bits - (width - spec.crc_bits),
+        "rule_payload": None if width is None else with_crc(spec, width).payload_bits,
         "seconds": record.seconds,
         "record": record.model_dump(),
     }

@@ -175,14 +175,17 @@ class TrustRecord(BaseModel):
     def wrong_per_read(self, crc_bits: int | None = None) -> float:
         """The wrong payloads per read the count implies with a CRC of ``crc_bits`` (default: the
         model's now); 0 where none was seen (:meth:`at_most_per_read` bounds it)."""
-        bits = self.crc_bits[1] if crc_bits is None else crc_bits
-        return self.wrong / self.samples * 2.0 ** (self.crc_checked - bits)
+        return self._per_read(self.wrong, crc_bits)
 
     def at_most_per_read(self, crc_bits: int | None = None) -> float:
         """The rate's upper 95 % bound where no wrong payload was seen (three in ``samples``,
         the rule of three); otherwise :meth:`wrong_per_read`."""
+        return self._per_read(self.wrong or 3, crc_bits)
+
+    def _per_read(self, count: float, crc_bits: int | None) -> float:
+        """``count`` wrong payloads in the close-ups, per read with a CRC of ``crc_bits`` (default: now)."""
         bits = self.crc_bits[1] if crc_bits is None else crc_bits
-        return self.wrong_per_read(bits) if self.wrong else 3.0 / self.samples * 2.0 ** (self.crc_checked - bits)
+        return count / self.samples * 2.0 ** (self.crc_checked - bits)
 
     def describe(self) -> str:
         """One line: what was read, the wrong payloads seen, and the rate they imply now."""

@@ -377,15 +377,16 @@ class PayloadCodec:
     def _accepts(self, word: np.ndarray) -> bool:
         """Whether decoding accepts ``word``: its CRC matches. A :meth:`narrowed` copy also accepts
         a word whose CRC bits match on the bits it checks, and takes them as its payload's CRC."""
-        if self._crc_ok(word):
+        p, checked = self.spec.payload_bits, self._crc_checked
+        own, read = self._crc_bits_of(word[:p]), word[p : self._k]
+        if np.array_equal(own, read):
             return True
         if self._collided is None:
             return False
-        p, checked = self.spec.payload_bits, self._crc_checked
         key = np.asarray(word[:p], np.uint8).tobytes()
-        if key in self._collided or not np.array_equal(self._crc_bits_of(word[:p])[:checked], word[p : p + checked]):
+        if key in self._collided or not np.array_equal(own[:checked], read[:checked]):
             return False
-        self._collided[key] = np.array(word[p : self._k], dtype=np.uint8)
+        self._collided[key] = np.array(read, dtype=np.uint8)
         return True
 
     def narrowed(self, checked: int) -> PayloadCodec:

@@ -75,14 +75,16 @@ def measure_trust(model: DeepMorphModel, samples: int, seed: int) -> TrustRecord
     )
 
 
+def widths_within(spec: CodecSpec) -> list[int]:
+    """The CRC widths ``spec``'s code can have, shortest first: its own and the longer ones that
+    leave at least one payload bit."""
+    return [w for w in CRC_WIDTHS if spec.crc_bits <= w < spec.crc_bits + spec.payload_bits]
+
+
 def crc_for(record: TrustRecord, spec: CodecSpec) -> int | None:
-    """The shortest CRC, no shorter than ``spec``'s, whose estimated rate meets
-    :data:`TRUST_TARGET` and that leaves at least one payload bit; ``None`` where none does."""
-    for width in CRC_WIDTHS:
-        if width >= spec.crc_bits and width - spec.crc_bits < spec.payload_bits:
-            if record.wrong_per_read(width) <= TRUST_TARGET:
-                return width
-    return None
+    """The shortest CRC within ``spec``'s code (:func:`widths_within`) whose estimated rate meets
+    :data:`TRUST_TARGET`; ``None`` where none does."""
+    return next((w for w in widths_within(spec) if record.wrong_per_read(w) <= TRUST_TARGET), None)
 
 
 def with_crc(spec: CodecSpec, width: int) -> CodecSpec:
@@ -108,7 +110,7 @@ def lengthen_crc(model: DeepMorphModel, record: TrustRecord) -> TrustRecord:
         return record
     width = crc_for(record, spec)
     if width is None:  # the most the payload can give: all but one bit, within the widths there are
-        width = max(w for w in CRC_WIDTHS if w - spec.crc_bits < spec.payload_bits)
+        width = widths_within(spec)[-1]
     if width <= spec.crc_bits:
         return record
     longer = with_crc(spec, width)
@@ -161,5 +163,6 @@ __all__ = [
     "measure_trust",
     "trust_samples",
     "trust_warning",
+    "widths_within",
     "with_crc",
 ]
