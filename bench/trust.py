@@ -5,9 +5,11 @@ are read by the photo chain with six of the CRC's bits unchecked (two of CRC-8's
 (:func:`deepmorph.training.trust.measure_trust`, as training runs it, 1 thread). Each wrong
 payload seen stands for 64 fewer with the whole CRC. The table: the model's payload and CRC, close-ups,
 the prints' width, wrong payloads, the rate they imply with the model's CRC (per 10,000 reads; an
-upper 95 % bound where none was seen), and the CRC the rule would give a ``--payload-bits auto``
-model (:func:`deepmorph.training.trust.crc_for`) with the payload that leaves. The JSON keeps each
-record.
+upper 95 % bound where none was seen), the CRC the rule would give a ``--payload-bits auto``
+model (:func:`deepmorph.training.trust.crc_for`) with the payload that leaves, and what an ``auto``
+training gives the same code now: a colour drawing's plan first gives its payload bits to a CRC of
+up to 12 (:func:`deepmorph_core.capacity.plan_code`), then the rule lengthens it where the count
+needs (:func:`deepmorph.training.trust.crc_needed`). The JSON keeps each record.
 
     .venv/bin/python bench/trust.py model.dmm other.dmm --samples 1000 --seed 0
 """
@@ -25,14 +27,18 @@ from _common import RESULTS, environment, set_threads, table, write_json  # noqa
 
 def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
     """One bundle's row: its code, the record :func:`measure_trust` gives and what the rule picks."""
-    from deepmorph.training.trust import TRUST_TARGET, crc_for, measure_trust, with_crc
+    from deepmorph.training.trust import TRUST_TARGET, crc_for, crc_needed, measure_trust
     from deepmorph_core.bundle import per_10k
+    from deepmorph_core.capacity import default_crc_code, plan_code
+    from deepmorph_core.codec import with_crc
     from deepmorph_core.model import DeepMorphModel
 
     model = DeepMorphModel.load(bundle)
     spec = model.codec.spec
     record = measure_trust(model, samples, seed)
     width = crc_for(record, spec)
+    planned = plan_code(default_crc_code(spec), bool(model.drawing.colour))
+    now = with_crc(planned, crc_needed(record, planned))
     return {
         "bundle": bundle.stem,
         "colour": model.drawing.colour,
@@ -44,6 +50,8 @@ def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
         "meets": record.wrong_per_read() <= TRUST_TARGET,
         "rule_crc": width,
         "rule_payload": None if width is None else with_crc(spec, width).payload_bits,
+        "planned": f"{planned.payload_bits} + CRC-{planned.crc_bits}",
+        "now": f"{now.payload_bits} + CRC-{now.crc_bits}",
         "seconds": record.seconds,
         "record": record.model_dump(),
     }
@@ -64,7 +72,7 @@ def main() -> None:
     columns = {"bundle": "bundle", "colour": "colour", "code": "payload + CRC", "samples": "hard close-ups",
                "print_px": "print px", "wrong": "wrong (6 CRC bits unchecked)", "per_10k": "per 10k, its CRC",
                "meets": "at most 0.1", "rule_crc": "CRC the rule picks", "rule_payload": "payload then",
-               "seconds": "s"}  # fmt: skip
+               "planned": "its code, colour CRC", "now": "after the count", "seconds": "s"}  # fmt: skip
     print(f"hard close-ups at each model's trained width, seed {args.seed}, {threads} thread")
     print(table(list(columns.values()), [[row[k] for k in columns] for row in rows]))
     print(f"wrote {write_json(args.out, {'environment': environment(), 'seed': args.seed, 'rows': rows})}")

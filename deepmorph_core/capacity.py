@@ -31,6 +31,10 @@ in codes correcting two bit errors (:data:`ECC_AT_PIXELS`, the codes it was meas
 most :data:`LARGEST_CODE_MEASURED` code bits, as at 96 px:
 fitted on two drawings of ``bench/pixels_panel.py``'s rule and checked on seven more
 (``bench/README.md``). Below that width nothing larger was measured, and the 96-px figure stands.
+
+A colour drawing's planned code gives payload bits to a CRC of :data:`COLOUR_CRC` bits where the
+CRC is DeepMorph's to choose (:func:`plan_code`): the same code bits, so the same networks, but a
+colour print's wrong words pass the photo chain's checks far more often than black ink's.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from deepmorph_core.codec import CodecSpec, choose_codec
+from deepmorph_core.codec import CodecSpec, choose_codec, widths_within, with_crc
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import INVISIBLE, MorphableDrawing
 from deepmorph_core.networks import twin_groups
@@ -75,6 +79,13 @@ FAINT = 0.2
 #: drawings nobody chose*): least, median and most. The plan counts shapes that show, not how
 #: faint their edges are in a photo, so it overshoots colour drawings by up to three times.
 COLOUR_KEPT = (0.31, 0.64, 1.0)
+#: The CRC a colour drawing's planned payload has where the CRC is DeepMorph's to choose
+#: (:func:`plan_code`). Counted over the whole photo chain (``bench/trust.py``), six colour
+#: drawings trained for prints 200 px wide gave 0.16-10 wrong payloads per 10,000 hard close-ups
+#: with CRC-8, all above the aim of 0.1 (:data:`deepmorph.training.trust.TRUST_TARGET`); the
+#: CRCs that meet it were 10-15 bits on the five whose payload had the bits to give (median 12).
+#: Training counts each colour model's own and lengthens its CRC further where that needs it.
+COLOUR_CRC = 12
 #: A colour drawing found in less than this share of simulated hard photos
 #: (:mod:`deepmorph_detect.findable`) is called out: 3 of 20 colour drawings nobody chose fell
 #: below it (``bench/README.md``, *Finding colour prints*; median 93.8 %).
@@ -163,8 +174,8 @@ class CapacityReport:
                 f"carry {self.channel_payload} payload bits at 99 %; a trained model reads about "
                 f"{CHANNEL_SHARE:.2f} of that"
             )
-            share = channel_share(self.channel_payload)
-            if share > self.payload_bits:
+            share = channel_share(self.channel_payload)  # payload bits with CRC-8, as the plan's before its CRC
+            if share > (0 if self.codec is None else default_crc_code(self.codec).payload_bits):
                 lines.append(
                     f"the prediction stops at {LARGEST_CODE_MEASURED} code bits, the largest code measured to read "
                     f"({share} payload bits would need more); above it only a training's validation says what reads"
@@ -181,6 +192,12 @@ class CapacityReport:
                 f"a colour drawing's plan counts the shapes that show, not how faint their edges are in a photo: "
                 f"on eleven colour drawings training kept {least:.2f}-{most:.2f} of it (median {median:.2f}); "
                 "`train --payload-bits auto` cuts a code its renders do not read"
+            )
+        if self.colour and self.codec is not None and self.codec.crc_bits > 8:
+            lines.append(
+                f"a colour drawing's payload gives bits to a CRC of {self.codec.crc_bits} (black ink: 8): wrong words "
+                "from photos of colour prints pass the photo chain's checks far more often; training counts this "
+                "model's wrong payloads and may give the CRC more (six colour drawings measured needed 10-15 bits)"
             )
         if self.found is not None and self.found[0] < FOUND_ENOUGH * self.found[1]:
             lines.append(
@@ -325,7 +342,7 @@ def predict(
                 round(float(contrast[prim.index]), 3),
             )
         )
-    code_bits, spec = _planned_code(readable, None, crc_bits, ecc)
+    code_bits, spec = _planned_code(readable, None, crc_bits, ecc, colour=bool(drawing.colour))
     report = CapacityReport(
         n,
         int(shown.sum()),
@@ -388,7 +405,9 @@ def for_print(
     """``report``'s prediction for a model trained for prints ``print_px`` wide instead (the
     same readable groups and channel; no new renders), with codes of ``crc_bits`` and ``ecc``.
     From :data:`PIXELS_MEASURED` px up the report must hold the channel (:func:`with_channel`)."""
-    code_bits, spec = _planned_code(report.readable_groups, print_px, crc_bits, ecc, report.channel_payload)
+    code_bits, spec = _planned_code(
+        report.readable_groups, print_px, crc_bits, ecc, report.channel_payload, colour=report.colour
+    )
     payload = 0 if spec is None else spec.payload_bits
     return replace(report, code_bits=code_bits, payload_bits=payload, codec=spec, print_px=print_px)
 
@@ -417,6 +436,7 @@ def _planned_code(
     crc_bits: int | None,
     ecc: tuple[int, ...] | None,
     channel_payload: int | None = None,
+    colour: bool = False,
 ) -> tuple[int, CodecSpec | None]:
     """The code bits a model trained for prints ``print_px`` wide reads reliably, and the largest
     payload's code in them (BCH strengths ``ecc``, default :func:`plan_ecc`'s): for the default
@@ -424,17 +444,20 @@ def _planned_code(
     :data:`CHANNEL_SHARE` of ``channel_payload``, the payload of the drawing's channel, in at most
     :data:`LARGEST_CODE_MEASURED` code bits (no larger code was measured to read at any width: a
     colour emoji's channel of 213 bits would otherwise plan 102). Never less than the default
-    training's plan: a ``--pixels`` model reads prints at least as well."""
+    training's plan: a ``--pixels`` model reads prints at least as well. A ``colour`` drawing's
+    code then gets its longer CRC (:func:`plan_code`)."""
     default_bits = code_bits_for(readable_groups)
     default = largest_payload(default_bits, crc_bits, ECC_CHOICES if ecc is None else ecc)
     if not at_pixels(print_px):
-        return default_bits, default
+        return default_bits, None if default is None else plan_code(default, colour, crc_bits)
     if channel_payload is None:
         raise ValueError(f"a plan for prints {print_px} px wide needs the drawing's channel (capacity.with_channel)")
     spec = _largest_code_within(channel_share(channel_payload), crc_bits, ecc or ECC_AT_PIXELS, LARGEST_CODE_MEASURED)
     if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
-        return default_bits, default
-    return (0 if spec is None else spec.code_bits), spec
+        return default_bits, plan_code(default, colour, crc_bits)
+    if spec is None:
+        return 0, None
+    return spec.code_bits, plan_code(spec, colour, crc_bits)
 
 
 def channel_share(channel_payload: int) -> int:
@@ -453,6 +476,27 @@ def _largest_code_within(
         if codes:
             return codes[0]
     return None
+
+
+def plan_code(spec: CodecSpec, colour: bool, crc_bits: int | None = None) -> CodecSpec:
+    """The code a plan gives: ``spec`` (a code with the codec's default CRC), or for a ``colour``
+    drawing whose CRC is DeepMorph's (``crc_bits`` ``None``) the same code with payload bits given
+    to the longest CRC of at most :data:`COLOUR_CRC` bits that leaves one
+    (:func:`~deepmorph_core.codec.with_crc`): 16 payload bits and CRC-8 become 12 and CRC-12, 3
+    and CRC-8 become 1 and CRC-10, a payload above 32 bits keeps its CRC-16."""
+    if not colour or crc_bits is not None:
+        return spec
+    width = max((w for w in widths_within(spec) if w <= COLOUR_CRC), default=spec.crc_bits)
+    return spec if width == spec.crc_bits else with_crc(spec, width)
+
+
+def default_crc_code(spec: CodecSpec) -> CodecSpec:
+    """The code :func:`plan_code` made ``spec`` from (a CRC of 10-:data:`COLOUR_CRC` bits back to
+    CRC-8, its bits back to the payload); any other code as it is. Cuts of a planned code start
+    from it (:mod:`deepmorph.training.code_shrink`)."""
+    if 8 < spec.crc_bits <= COLOUR_CRC:
+        return with_crc(spec, 8)
+    return spec
 
 
 def size_warning(spec: CodecSpec, report: CapacityReport, label: str) -> str | None:
@@ -476,6 +520,7 @@ __all__ = [
     "CODE_BITS_PER_GROUP",
     "CHANNEL_SHARE",
     "ECC_AT_PIXELS",
+    "COLOUR_CRC",
     "COLOUR_KEPT",
     "LARGEST_CODE_MEASURED",
     "PIXELS_MEASURED",
@@ -490,6 +535,8 @@ __all__ = [
     "payload_for_width",
     "largest_payload",
     "payload_codes",
+    "plan_code",
+    "default_crc_code",
     "predict",
     "size_warning",
 ]

@@ -201,6 +201,26 @@ def choose_codec(payload_bits: int, crc_bits: int | None = None, bch_t: int | No
         raise DeepMorphError(f"invalid codec: {format_codec_error(exc)}") from None
 
 
+def widths_within(spec: CodecSpec) -> list[int]:
+    """The CRC widths ``spec``'s code can have, shortest first: its own and the longer ones that
+    leave at least one payload bit."""
+    return [w for w in CRC_WIDTHS if spec.crc_bits <= w < spec.crc_bits + spec.payload_bits]
+
+
+def with_crc(spec: CodecSpec, width: int) -> CodecSpec:
+    """``spec`` with payload bits given over to a CRC of ``width`` bits: the same code bits, BCH
+    data and parity (payload and CRC fill the same bytes)."""
+    longer = CodecSpec(
+        payload_bits=spec.payload_bits - (width - spec.crc_bits),
+        crc_bits=width,
+        bch_t=spec.bch_t,
+        bch_m=spec.bch_m,
+    )
+    if longer.code_bits != spec.code_bits:  # pragma: no cover - the layout's invariant
+        raise AssertionError(f"a CRC of {width} bits changed the code's size: {spec} -> {longer}")
+    return longer
+
+
 def _mask_bits(n: int, variant: int) -> np.ndarray:
     """``n`` pseudo-random bits: SHA-256(seed || variant || counter) blocks, fixed forever."""
     blocks = math.ceil(n / 256)

@@ -45,7 +45,7 @@ from torch import Tensor, nn
 
 from deepmorph.training.validation import RENDER_SAMPLES, TARGET_RATE, read_renders, tally_decoded
 from deepmorph_core.bundle import AutoPayload, CodeShrink
-from deepmorph_core.capacity import payload_codes, plan_ecc
+from deepmorph_core.capacity import default_crc_code, payload_codes, plan_code, plan_ecc
 from deepmorph_core.codec import CodecSpec, PayloadCodec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -109,13 +109,19 @@ def shrink_ecc(auto: AutoPayload, print_px: int | None) -> tuple[int, ...]:
 
 
 def largest_smaller(
-    spec: CodecSpec, auto: AutoPayload, print_px: int | None, fits: Callable[[CodecSpec], bool]
+    spec: CodecSpec, auto: AutoPayload, print_px: int | None, fits: Callable[[CodecSpec], bool], colour: bool = False
 ) -> CodecSpec | None:
     """The code a cut goes on with: the largest payload below ``spec``'s with a code that ``fits``
     (the user's CRC, :func:`shrink_ecc`'s strengths, the first in their order); where none does,
-    the smallest payload's smallest code. ``None`` where that code is not smaller than ``spec``'s."""
-    for payload in range(spec.payload_bits - 1, 0, -1):
-        codes = payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
+    the smallest payload's smallest code. ``None`` where that code is not smaller than ``spec``'s.
+    A ``colour`` drawing's codes are planned as :func:`~deepmorph_core.capacity.plan_code` plans
+    them (payload bits given to a longer CRC), counted from the code ``spec`` was planned from."""
+    base = default_crc_code(spec) if colour and auto.crc_bits is None else spec
+    for payload in range(base.payload_bits - 1, 0, -1):
+        codes = [
+            plan_code(c, colour, auto.crc_bits)
+            for c in payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
+        ]
         fitting = [c for c in codes if fits(c)]
         if fitting or payload == 1:
             new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
@@ -123,16 +129,18 @@ def largest_smaller(
     return None
 
 
-def code_halfway(spec: CodecSpec, toward_bits: float, auto: AutoPayload, print_px: int | None) -> CodecSpec | None:
+def code_halfway(
+    spec: CodecSpec, toward_bits: float, auto: AutoPayload, print_px: int | None, colour: bool = False
+) -> CodecSpec | None:
     """The largest payload below ``spec``'s (:func:`largest_smaller`) whose code fits halfway, in
     code bits, between ``spec``'s (less one) and ``toward_bits``: how far both cuts go when they
     go halfway (:func:`smaller_code`, and :func:`code_fitting`'s first)."""
     size = math.ceil((toward_bits + spec.code_bits - 1) / 2)
-    return largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size)
+    return largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size, colour)
 
 
 def smaller_code(
-    errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None
+    errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None, colour: bool = False
 ) -> tuple[CodecSpec, list[int], float] | None:
     """The code to go on with, the current code bits it keeps (the best read, ascending) and
     the information the window's bits carried: the largest payload below ``spec``'s whose
@@ -143,9 +151,10 @@ def smaller_code(
         errors: ``(R, N_b)`` bool, the code bits each capture of the window read wrong.
         spec: the code now.
         auto: the CRC and BCH the user fixed.
+        colour: the drawing is in colour (its codes planned with a longer CRC).
     """
     carried = information(errors)
-    new = code_halfway(spec, carried, auto, print_px)
+    new = code_halfway(spec, carried, auto, print_px, colour)
     if new is None:
         return None
     order = torch.argsort(errors.sum(0), stable=True)  # best read first
@@ -183,6 +192,7 @@ def code_fitting(
     rng: np.random.Generator,
     print_px: int | None = None,
     halfway: bool = False,
+    colour: bool = False,
 ) -> tuple[CodecSpec, list[int]] | None:
     """The code to go on with and the current code bits it keeps (ascending, the most reliable),
     for a code whose bits were read with the reliabilities ``right`` (``(R, spec.code_bits)``,
@@ -199,11 +209,11 @@ def code_fitting(
         best = right[:, order[: code.code_bits]]
         return code.code_bits < spec.code_bits and simulated_read(best, code, rng) >= RENDER_FIT
 
-    new = largest_smaller(spec, auto, print_px, fits)
+    new = largest_smaller(spec, auto, print_px, fits, colour)
     if new is None:
         return None
     if halfway:
-        new = code_halfway(spec, new.code_bits, auto, print_px) or new
+        new = code_halfway(spec, new.code_bits, auto, print_px, colour) or new
     return new, sorted(int(k) for k in order[: new.code_bits])
 
 
@@ -229,7 +239,7 @@ def code_for_renders(
     if read >= RENDER_SHRINK_BELOW:
         return None
     right = np.where(words == 1, probs, 1.0 - probs)
-    found = code_fitting(right, spec, auto, rng, model.print_px, halfway)
+    found = code_fitting(right, spec, auto, rng, model.print_px, halfway, bool(model.drawing.colour))
     if found is None:
         return None
     return RenderShrink(found[0], found[1], read, information(torch.from_numpy(right < 0.5)))

@@ -491,7 +491,7 @@ class CodecRun:
         read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
         if read >= shrink_below(cfg.print_px):
             return
-        smaller = smaller_code(errors, spec, rec.payload_auto, cfg.print_px)
+        smaller = smaller_code(errors, spec, rec.payload_auto, cfg.print_px, bool(self.model.drawing.colour))
         if smaller is None:
             return
         new, keep, carried = smaller

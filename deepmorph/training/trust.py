@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from deepmorph_core.bundle import TrustRecord, per_10k
-from deepmorph_core.codec import CRC_WIDTHS, CodecSpec, PayloadCodec
+from deepmorph_core.codec import CodecSpec, PayloadCodec, widths_within, with_crc
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.photo_validation import close_up_width, count_wrong_payloads
 from deepmorph_detect.scenes import CLOSE_UP_SIZE
@@ -75,30 +75,18 @@ def measure_trust(model: DeepMorphModel, samples: int, seed: int) -> TrustRecord
     )
 
 
-def widths_within(spec: CodecSpec) -> list[int]:
-    """The CRC widths ``spec``'s code can have, shortest first: its own and the longer ones that
-    leave at least one payload bit."""
-    return [w for w in CRC_WIDTHS if spec.crc_bits <= w < spec.crc_bits + spec.payload_bits]
-
-
 def crc_for(record: TrustRecord, spec: CodecSpec) -> int | None:
     """The shortest CRC within ``spec``'s code (:func:`widths_within`) whose estimated rate meets
     :data:`TRUST_TARGET`; ``None`` where none does."""
     return next((w for w in widths_within(spec) if record.wrong_per_read(w) <= TRUST_TARGET), None)
 
 
-def with_crc(spec: CodecSpec, width: int) -> CodecSpec:
-    """``spec`` with payload bits given over to a CRC of ``width`` bits: the same code bits, BCH
-    data and parity (payload and CRC fill the same bytes)."""
-    longer = CodecSpec(
-        payload_bits=spec.payload_bits - (width - spec.crc_bits),
-        crc_bits=width,
-        bch_t=spec.bch_t,
-        bch_m=spec.bch_m,
-    )
-    if longer.code_bits != spec.code_bits:  # pragma: no cover - the layout's invariant
-        raise AssertionError(f"a CRC of {width} bits changed the code's size: {spec} -> {longer}")
-    return longer
+def crc_needed(record: TrustRecord, spec: CodecSpec) -> int:
+    """The CRC :func:`lengthen_crc` gives ``spec``'s code: :func:`crc_for`'s, or where none meets
+    :data:`TRUST_TARGET` the most the payload can give (all but one bit, within the widths there
+    are)."""
+    width = crc_for(record, spec)
+    return widths_within(spec)[-1] if width is None else width
 
 
 def lengthen_crc(model: DeepMorphModel, record: TrustRecord) -> TrustRecord:
@@ -108,9 +96,7 @@ def lengthen_crc(model: DeepMorphModel, record: TrustRecord) -> TrustRecord:
     spec = model.codec.spec
     if auto is None or auto.crc_bits is not None or record.wrong_per_read() <= TRUST_TARGET:
         return record
-    width = crc_for(record, spec)
-    if width is None:  # the most the payload can give: all but one bit, within the widths there are
-        width = widths_within(spec)[-1]
+    width = crc_needed(record, spec)
     if width <= spec.crc_bits:
         return record
     longer = with_crc(spec, width)
@@ -159,10 +145,9 @@ __all__ = [
     "TRUST_UNCHECKED_BITS",
     "check_trust",
     "crc_for",
+    "crc_needed",
     "lengthen_crc",
     "measure_trust",
     "trust_samples",
     "trust_warning",
-    "widths_within",
-    "with_crc",
 ]

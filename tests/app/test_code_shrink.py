@@ -25,6 +25,7 @@ from deepmorph.training.code_shrink import (
 from deepmorph.training.codec import train_model
 from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundle import AutoPayload
+from deepmorph_core.capacity import plan_code
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -197,6 +198,24 @@ def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
 
 
 #: A few steps with no corruption: the batches read, and the renders, read at ``medium``, do not.
+def test_a_colour_codes_cut_keeps_the_colour_crc_and_loses_what_the_black_codes_cut_loses() -> None:
+    """A colour drawing's planned code (CRC-12) is cut as the code it was planned from (CRC-8)
+    and planned again: the same code bits kept, the same information bits, CRC-12 while the
+    payload has the bits; a CRC the user fixed is left as it is."""
+    black = choose_codec(20, 8, 2)
+    colour = plan_code(black, colour=True)
+    gen = torch.Generator().manual_seed(0)
+    errors = torch.rand(4000, black.code_bits, generator=gen) < 0.5
+    errors[:, torch.randperm(black.code_bits, generator=gen)[:14]] = False
+    cut_black, keep_black, _ = smaller_code(errors, black, AutoPayload())
+    cut_colour, keep_colour, _ = smaller_code(errors, colour, AutoPayload(), colour=True)
+    assert keep_colour == keep_black and cut_colour.code_bits == cut_black.code_bits
+    assert cut_colour == plan_code(cut_black, colour=True) and cut_colour.crc_bits > 8
+    assert cut_colour.payload_bits + cut_colour.crc_bits == cut_black.payload_bits + cut_black.crc_bits
+    fixed, _, _ = smaller_code(errors, choose_codec(20, 12, 2), AutoPayload(crc_bits=12), colour=True)
+    assert fixed.crc_bits == 12
+
+
 EASY_THEN_RENDERS = {**FAST, "steps": 30, "renders_tune": 20, "checkpoint_every": 10, "seed": 2}
 
 

@@ -18,12 +18,11 @@ from deepmorph.training.trust import (
     lengthen_crc,
     trust_samples,
     trust_warning,
-    with_crc,
 )
 from deepmorph.training.validation import validate_renders
 from deepmorph_core.bundle import AutoPayload, TrustRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.codec import CodecSpec
+from deepmorph_core.codec import CodecSpec, with_crc
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.photo_validation import count_wrong_payloads
 from tests.conftest import make_svg

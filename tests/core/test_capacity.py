@@ -16,6 +16,7 @@ from deepmorph.training.codec import train_model
 from deepmorph_core.capacity import (
     CHANNEL_SHARE,
     CODE_BITS_PER_GROUP,
+    COLOUR_CRC,
     COLOUR_KEPT,
     ECC_CHOICES,
     FOUND_ENOUGH,
@@ -23,9 +24,11 @@ from deepmorph_core.capacity import (
     PIXELS_MEASURED,
     CapacityReport,
     code_bits_for,
+    default_crc_code,
     for_print,
     largest_payload,
     payload_for_width,
+    plan_code,
     predict,
     size_warning,
     with_channel,
@@ -222,6 +225,46 @@ def test_a_colour_drawings_plan_says_how_much_training_kept_of_such_plans() -> N
     assert report.to_json()["colour"] is True
     plain = predict(MorphableDrawing.load(DRAWING))
     assert not plain.colour and not any("colour drawing's plan" in line for line in plain.limits())
+
+
+def test_a_colour_plan_gives_payload_bits_to_a_longer_crc_in_the_same_code() -> None:
+    """A colour drawing's plan has the black drawing's code bits and BCH, with payload bits given
+    to CRC-12 (where the CRC is DeepMorph's): at 96 px, for wide prints and in the width table;
+    its limits say why. A CRC the user chose, and black ink, keep the codec's."""
+    coloured = MorphableDrawing.load(DRAWING.replace(b'stroke="black"', b'stroke="#1f4e9c"'))
+    black = MorphableDrawing.load(DRAWING)
+    for_colour, for_black = predict(coloured), predict(black)
+    assert for_colour.codec is not None and for_black.codec is not None
+    assert for_black.codec.crc_bits == 8 and for_colour.codec.crc_bits == COLOUR_CRC
+    assert for_colour.code_bits == for_black.code_bits and for_colour.codec.code_bits == for_black.codec.code_bits
+    assert for_colour.payload_bits == for_black.payload_bits - (COLOUR_CRC - 8)
+    assert for_colour.codec.bch_t == for_black.codec.bch_t
+    assert any(f"CRC of {COLOUR_CRC} (black ink: 8)" in line for line in for_colour.limits())
+    assert not any("black ink: 8" in line for line in for_black.limits())
+    wide = for_print(replace(for_colour, channel_payload=40), 250)
+    assert wide.codec is not None and wide.codec.crc_bits == COLOUR_CRC
+    assert wide.payload_bits == math.floor(CHANNEL_SHARE * 40) - (COLOUR_CRC - 8)  # the same information
+    assert not any("stops at" in line for line in wide.limits())
+    assert payload_for_width(replace(for_colour, channel_payload=40), 250, 96)[0] == wide.payload_bits
+    chosen = predict(coloured, crc_bits=8)  # the user's CRC stands
+    assert chosen.codec is not None and chosen.codec.crc_bits == 8
+
+
+@pytest.mark.parametrize(
+    ("payload", "crc", "planned"),
+    [(16, 8, (12, 12)), (3, 8, (1, 10)), (4, 8, (1, 11)), (1, 8, (1, 8)), (40, 16, (40, 16))],
+)
+def test_a_colour_code_takes_the_longest_crc_up_to_colour_crc_that_leaves_a_payload_bit(
+    payload: int, crc: int, planned: tuple[int, int]
+) -> None:
+    """The plan's CRC for colour: up to COLOUR_CRC bits, never the last payload bit, never
+    shorter than the codec's; the code's size stays and the code it came from is recovered."""
+    spec = choose_codec(payload, crc, 2)
+    colour = plan_code(spec, colour=True)
+    assert (colour.payload_bits, colour.crc_bits) == planned
+    assert colour.code_bits == spec.code_bits and colour.bch_t == spec.bch_t
+    assert default_crc_code(colour) == spec
+    assert plan_code(spec, colour=False) == spec and plan_code(spec, colour=True, crc_bits=crc) == spec
 
 
 def test_a_drawing_the_chain_found_too_seldom_is_called_out() -> None:
