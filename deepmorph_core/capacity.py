@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from deepmorph_core.codec import CodecSpec, choose_codec, widths_within, with_crc
+from deepmorph_core.codec import COLOUR_CRC, CodecSpec, choose_codec, widths_within, with_crc
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.morphable import INVISIBLE, MorphableDrawing
 from deepmorph_core.networks import twin_groups
@@ -79,13 +79,6 @@ FAINT = 0.2
 #: drawings nobody chose*): least, median and most. The plan counts shapes that show, not how
 #: faint their edges are in a photo, so it overshoots colour drawings by up to three times.
 COLOUR_KEPT = (0.31, 0.64, 1.0)
-#: The CRC a colour drawing's planned payload has where the CRC is DeepMorph's to choose
-#: (:func:`plan_code`). Counted over the whole photo chain (``bench/trust.py``), six colour
-#: drawings trained for prints 200 px wide gave 0.16-10 wrong payloads per 10,000 hard close-ups
-#: with CRC-8, all above the aim of 0.1 (:data:`deepmorph.training.trust.TRUST_TARGET`); the
-#: CRCs that meet it were 10-15 bits on the five whose payload had the bits to give (median 12).
-#: Training counts each colour model's own and lengthens its CRC further where that needs it.
-COLOUR_CRC = 12
 #: A colour drawing found in less than this share of simulated hard photos
 #: (:mod:`deepmorph_detect.findable`) is called out: 3 of 20 colour drawings nobody chose fell
 #: below it (``bench/README.md``, *Finding colour prints*; median 93.8 %).

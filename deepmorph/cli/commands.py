@@ -186,7 +186,8 @@ def capacity(
     scale: ScaleOpt = None,
     rotate: RotateOpt = None,
     crc: Annotated[
-        Optional[int], typer.Option("--crc", help="CRC bits: 8, 10-16 (default: the codec's choice).")
+        Optional[int],
+        typer.Option("--crc", help="CRC bits: 8, 10-16 (default: the codec's choice; colour at least 12)."),
     ] = None,
     drop: DropOpt = False,
     pixels: Annotated[
@@ -404,7 +405,10 @@ def train(
     ] = str(PAYLOAD_BITS),
     crc: Annotated[
         Optional[int],
-        typer.Option("--crc", help="CRC bits: 8, 10-16 (default: 8 up to 32 payload bits, longer where auto needs)."),
+        typer.Option(
+            "--crc",
+            help="CRC bits: 8, 10-16 (default: 8, 16 above 32 payload bits; colour 12 or more; auto as counted).",
+        ),
     ] = None,
     ecc_t: Annotated[Optional[int], typer.Option("--ecc-t", min=0, max=16, help="BCH correctable bit errors.")] = None,
     steps: Annotated[int, setting_option("steps")] = DEFAULTS.steps,

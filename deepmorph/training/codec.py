@@ -65,7 +65,7 @@ from deepmorph.training.validation import default_samples, validate, validation_
 from deepmorph_core.bounds import format_validation_error
 from deepmorph_core.bundle import AutoPayload, CodeShrink, TrainingRecord, TrustRecord, ValidationRecord
 from deepmorph_core.capacity import predict, size_warning
-from deepmorph_core.codec import CodecSpec, choose_codec
+from deepmorph_core.codec import CodecSpec, choose_codec, default_crc_bits
 from deepmorph_core.corruption import build_pipeline
 from deepmorph_core.device import resolve_device, torch_device
 from deepmorph_core.errors import DeepMorphError
@@ -841,7 +841,8 @@ def _payload_code(
     """The code of a new model: the requested payload's (with a warning when the drawing is
     predicted to carry less), or for ``"auto"`` the largest the drawing is predicted to carry,
     read in ``channel``, by a model of ``config`` (its frame width, and the print width it is
-    trained for)."""
+    trained for). Where ``crc_bits`` is ``None`` a colour drawing's CRC is at least
+    :data:`~deepmorph_core.codec.COLOUR_CRC` bits, in the payload's bits for ``"auto"``."""
     drawing = MorphableDrawing.load(svg_text.encode(), label=label, **bounds).read_in(channel)
     check_trainable(drawing, Path(label).name)  # before the prediction, which renders every variable
     report = predict(drawing, config.width, crc_bits, (ecc_t,) if ecc_t is not None else None, config.print_px)
@@ -853,6 +854,8 @@ def _payload_code(
                 "--move); `deepmorph capacity` says what limits it"
             )
         return report.codec
+    if crc_bits is None:  # a colour drawing's photos need a longer CRC (docs/training.md)
+        crc_bits = default_crc_bits(payload_bits, bool(drawing.colour))
     spec = choose_codec(payload_bits, crc_bits, ecc_t)
     warning = size_warning(spec, report, label)
     if warning:

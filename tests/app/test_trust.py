@@ -22,7 +22,7 @@ from deepmorph.training.trust import (
 from deepmorph.training.validation import validate_renders
 from deepmorph_core.bundle import AutoPayload, TrustRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
-from deepmorph_core.codec import CodecSpec, with_crc
+from deepmorph_core.codec import COLOUR_CRC, CodecSpec, with_crc
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.photo_validation import count_wrong_payloads
 from tests.conftest import make_svg
@@ -116,7 +116,7 @@ ORANGE = make_svg(
 def test_training_stores_and_shows_the_measurement(tmp_path: Path) -> None:
     """``train`` on a colour drawing counts its wrong payloads after its validation where asked
     (``--trust-samples``, whatever the model reads), stores the record, prints it, and ``info``
-    shows it."""
+    shows it. The payload the user sized gets a colour drawing's CRC (12 bits: six checked)."""
     svg = tmp_path / "orange.svg"
     svg.write_bytes(ORANGE)
     out = tmp_path / "orange.dmm"
@@ -128,7 +128,8 @@ def test_training_stores_and_shows_the_measurement(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     trust = data["trust"]
-    assert trust["samples"] == 3 and trust["severity"] == "hard" and trust["crc_checked"] == 2
+    assert trust["samples"] == 3 and trust["severity"] == "hard" and trust["crc_checked"] == COLOUR_CRC - 6
+    assert DeepMorphModel.load(out).codec.spec.crc_bits == COLOUR_CRC and trust["crc_bits"] == [12, 12]
     assert trust["payload_bits"][1] == data["payload_bits"] == DeepMorphModel.load(out).codec.spec.payload_bits
     stored = DeepMorphModel.load(out).meta.trust
     assert stored is not None and stored.model_dump(mode="json") == trust

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from deepmorph_core.codec import (
+    COLOUR_CRC,
     CRC_POLYNOMIALS,
     CRC_WIDTHS,
     CodecSpec,
@@ -25,6 +26,7 @@ from deepmorph_core.codec import (
     PayloadCodec,
     choose_codec,
     crc_configuration,
+    default_crc_bits,
     format_codec_error,
 )
 from deepmorph_core.errors import DeepMorphError
@@ -770,3 +772,11 @@ def test_a_narrowed_codec_checks_only_the_first_crc_bits() -> None:
     assert narrow.decode(np.where(right == 1, 0.9, 0.1)).ok and codec._crc_checked == 8  # noqa: SLF001
     with pytest.raises(DeepMorphError, match="cannot be checked on 9"):
         codec.narrowed(9)
+
+
+def test_a_colour_payloads_default_crc_is_at_least_colour_crc() -> None:
+    """Where nobody chose a CRC: 8 bits up to 32 payload bits and 16 above; a colour drawing's at
+    least COLOUR_CRC; ``choose_codec`` takes the black-ink default."""
+    assert [default_crc_bits(p) for p in (1, 32, 33)] == [8, 8, 16]
+    assert [default_crc_bits(p, colour=True) for p in (1, 32, 33)] == [COLOUR_CRC, COLOUR_CRC, 16]
+    assert choose_codec(16).crc_bits == 8 and choose_codec(40).crc_bits == 16
