@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
 
 
-def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
+def measure(bundle: Path, samples: int, seed: int, workers: int) -> dict[str, Any]:
     """One bundle's row: its code, the record :func:`measure_trust` gives and what the rule picks."""
     from deepmorph.training.trust import TRUST_TARGET, crc_for, crc_needed, measure_trust
     from deepmorph_core.bundle import per_10k
@@ -35,7 +35,7 @@ def measure(bundle: Path, samples: int, seed: int) -> dict[str, Any]:
 
     model = DeepMorphModel.load(bundle)
     spec = model.codec.spec
-    record = measure_trust(model, samples, seed)
+    record = measure_trust(model, samples, seed, workers)
     width = crc_for(record, spec)
     planned = plan_code(default_crc_code(spec), bool(model.drawing.colour))
     now = with_crc(planned, crc_needed(record, planned))
@@ -62,20 +62,22 @@ def main() -> None:
     ap.add_argument("bundles", type=Path, nargs="+")
     ap.add_argument("--samples", type=int, default=600)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=1, help="processes reading the close-ups, one thread each")
     ap.add_argument("--out", type=Path, default=RESULTS / "trust.json")
     args = ap.parse_args()
     threads = set_threads(1)
     import cv2
 
     cv2.setNumThreads(1)
-    rows = [measure(bundle, args.samples, args.seed) for bundle in args.bundles]
+    rows = [measure(bundle, args.samples, args.seed, args.workers) for bundle in args.bundles]
     columns = {"bundle": "bundle", "colour": "colour", "code": "payload + CRC", "samples": "hard close-ups",
                "print_px": "print px", "wrong": "wrong (6 CRC bits unchecked)", "per_10k": "per 10k, its CRC",
                "meets": "at most 0.1", "rule_crc": "CRC the rule picks", "rule_payload": "payload then",
                "planned": "its code, colour CRC", "now": "after the count", "seconds": "s"}  # fmt: skip
-    print(f"hard close-ups at each model's trained width, seed {args.seed}, {threads} thread")
+    print(f"hard close-ups at each model's trained width, seed {args.seed}, {threads} thread, {args.workers} workers")
     print(table(list(columns.values()), [[row[k] for k in columns] for row in rows]))
-    print(f"wrote {write_json(args.out, {'environment': environment(), 'seed': args.seed, 'rows': rows})}")
+    report = {"environment": environment(), "seed": args.seed, "workers": args.workers, "rows": rows}
+    print(f"wrote {write_json(args.out, report)}")
 
 
 if __name__ == "__main__":

@@ -827,11 +827,12 @@ def validate(
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import default_registry
 
-    use_threads(threads)
+    n_threads = use_threads(threads)
     where = resolve_device(device)
     m = DeepMorphModel.load(model)
     records = run_validation(m, default_registry(), samples, photos, seed=seed, device=where)
-    counted = measure_trust(m, trust, seed) if trust and m.codec.spec.crc_bits else None
+    # the count's close-ups are read by one process per thread (single-threaded work each)
+    counted = measure_trust(m, trust, seed, workers=n_threads) if trust and m.codec.spec.crc_bits else None
     if save:
         m.meta.validation = records
         m.meta.trust = counted or m.meta.trust

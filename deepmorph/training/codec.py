@@ -699,7 +699,8 @@ def _count_wrong_payloads(
     samples = trust_samples(config.trust_samples, model.drawing.colour)
     if config.trust_samples is None and close_ups[0].rate < COUNTED_FROM:
         return None
-    trust = check_trust(model, samples, config.seed, label, warn)
+    # one process per thread the training ran on: a close-up's reading is single-threaded work
+    trust = check_trust(model, samples, config.seed, label, warn, workers=torch.get_num_threads())
     if trust is not None:
         model.save(out)
     return trust

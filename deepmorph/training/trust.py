@@ -57,12 +57,13 @@ def trust_samples(setting: int | None, colour: bool) -> int:
     return TRUST_SAMPLES if colour else 0
 
 
-def measure_trust(model: DeepMorphModel, samples: int, seed: int) -> TrustRecord:
+def measure_trust(model: DeepMorphModel, samples: int, seed: int, workers: int = 1) -> TrustRecord:
     """Count the wrong payloads of ``samples`` hard close-ups of ``model`` at its trained width,
-    :data:`TRUST_UNCHECKED_BITS` of the CRC's bits left unchecked."""
+    :data:`TRUST_UNCHECKED_BITS` of the CRC's bits left unchecked, read by ``workers`` processes."""
     spec = model.codec.spec
     checked = max(0, spec.crc_bits - TRUST_UNCHECKED_BITS)
-    count = count_wrong_payloads(model, samples, seed + TRUST_SEED_OFFSET, checked, TRUST_SEVERITY)
+    seed += TRUST_SEED_OFFSET
+    count = count_wrong_payloads(model, samples, seed, checked, TRUST_SEVERITY, workers=workers)
     return TrustRecord(
         severity=TRUST_SEVERITY,
         print_px=round(close_up_width(model) * sum(CLOSE_UP_SIZE) / 2),
@@ -124,13 +125,15 @@ def check_trust(
     seed: int,
     label: str,
     warn: Callable[[str], None],
+    workers: int = 1,
 ) -> TrustRecord | None:
-    """Measure ``model``'s wrong payloads on ``samples`` hard close-ups (none: nothing), lengthen
-    its CRC where that is the model's to choose (:func:`lengthen_crc`), store the record in its
-    metadata and warn where the rate is still above :data:`TRUST_TARGET`."""
+    """Measure ``model``'s wrong payloads on ``samples`` hard close-ups (none: nothing) read by
+    ``workers`` processes, lengthen its CRC where that is the model's to choose
+    (:func:`lengthen_crc`), store the record in its metadata and warn where the rate is still
+    above :data:`TRUST_TARGET`."""
     if samples <= 0 or not model.codec.spec.crc_bits:
         return None
-    record = lengthen_crc(model, measure_trust(model, samples, seed))
+    record = lengthen_crc(model, measure_trust(model, samples, seed, workers))
     model.meta.trust = record
     warning = trust_warning(record, label)
     if warning:

@@ -6,6 +6,7 @@ stores and shows the record."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from typer.testing import CliRunner
@@ -24,7 +25,8 @@ from deepmorph_core.bundle import AutoPayload, TrustRecord
 from deepmorph_core.bundled import BUNDLED_MODEL
 from deepmorph_core.codec import COLOUR_CRC, CodecSpec, with_crc
 from deepmorph_core.model import DeepMorphModel
-from deepmorph_detect.photo_validation import count_wrong_payloads
+from deepmorph_detect.close_up_pool import read_close_ups
+from deepmorph_detect.photo_validation import close_ups, count_wrong_payloads, payloads_reported
 from tests.conftest import make_svg
 
 
@@ -94,6 +96,19 @@ def test_the_chain_counts_wrong_payloads_with_the_crc_checked_on_fewer_bits() ->
     assert whole.samples == 6 and whole.wrong == 0 and whole.read >= 5, whole
     count_wrong_payloads(model, 2, seed=2, crc_checked=0, severity="medium")
     assert model.codec._crc_checked == 8 and model.codec._collided is None  # noqa: SLF001 - not changed
+
+
+def test_close_ups_counted_by_two_processes_count_as_by_one() -> None:
+    """The count's close-ups read by two worker processes give each close-up's verdict as one
+    process does, in order: the same close-ups read and the same wrong payloads."""
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    shots = list(close_ups(model, 8, seed=5, severity="hard"))
+    narrow = replace(model, codec=model.codec.narrowed(0))  # CRC-blind: wrong words pass too
+    one = list(read_close_ups(narrow, shots, payloads_reported, workers=1))
+    two = list(read_close_ups(narrow, shots, payloads_reported, workers=2))
+    assert one == two and len(one) == 8 and any(right for right, _ in one)
+    counted = [count_wrong_payloads(model, 8, seed=5, crc_checked=0, workers=w) for w in (1, 2)]
+    assert (counted[0].read, counted[0].wrong) == (counted[1].read, counted[1].wrong)
 
 
 def test_check_trust_measures_nothing_without_samples_or_crc() -> None:
