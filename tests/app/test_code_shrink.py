@@ -25,7 +25,7 @@ from deepmorph.training.code_shrink import (
 from deepmorph.training.codec import train_model
 from deepmorph.training.loop import Interrupted
 from deepmorph_core.bundle import AutoPayload
-from deepmorph_core.capacity import plan_code
+from deepmorph_core.capacity import default_crc_code, plan_code
 from deepmorph_core.codec import choose_codec
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_core.payload import random_payloads
@@ -238,9 +238,12 @@ def test_the_first_renders_cut_goes_halfway_in_black_and_white_and_in_colour(
     svg = tmp_path / "tiny.svg"
     svg.write_bytes(TINY.replace(b'stroke="black"', f'stroke="{stroke}"'.encode()))
     train_model(svg, tmp_path / "m.dmm", payload_bits="auto", train=EASY_THEN_RENDERS, validation_samples=(0, 0))
-    colour = DeepMorphModel.load(tmp_path / "m.dmm").drawing.colour
+    model = DeepMorphModel.load(tmp_path / "m.dmm")
+    colour = model.drawing.colour
     assert colour == (stroke != "black") and asked
     assert asked == [True] + [False] * (len(asked) - 1)
+    spec = model.codec.spec  # cut as planned: a colour code keeps the plan's longer CRC where it can
+    assert spec == plan_code(default_crc_code(spec), colour) and (colour or spec.crc_bits == 8)
 
 
 def test_an_auto_code_that_reads_too_few_renders_is_shrunk_when_training_ends(tiny_svg: Path, tmp_path: Path) -> None:
