@@ -1,21 +1,26 @@
 """Close-ups read by several processes at once, in the order they were made.
 
 Reading one close-up through the photo chain is many small NumPy, OpenCV and ONNX Runtime calls
-that one thread runs best, so a count over hundreds of close-ups (the wrong payloads training
-counts, :func:`~deepmorph_detect.photo_validation.count_wrong_payloads`) gains from processes,
-not threads. Each worker is forked from the caller with the model already in memory, builds its
-own :class:`~deepmorph_detect.locate.Locator` on one thread, and reads the close-ups handed to it;
-the caller makes the close-ups (their random draws stay one stream) and receives each result in
-the order the close-ups came, a few in flight per worker so that no more are held than that.
+that one thread runs best, so hundreds of close-ups (a model's validation, the wrong payloads
+training counts: :mod:`deepmorph_detect.photo_validation`) gain from processes, not threads.
+Each worker is forked from the caller with the model already in memory (it does not pickle: its
+SVG tree), builds its own :class:`~deepmorph_detect.locate.Locator`, runs torch on one thread,
+and reads the close-ups handed to it. The caller makes the close-ups (their random draws stay one
+stream) and receives each result in the order the close-ups came, a few in flight per worker so
+that no more are held than that.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import signal
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from multiprocessing.pool import AsyncResult
 from typing import Any, TypeVar
+
+import torch
+from threadpoolctl import threadpool_limits
 
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.locate import Locator
@@ -29,35 +34,44 @@ _WORKER: tuple[Locator, Callable[[Locator, Any], Any]] | None = None
 
 
 def read_close_ups(
-    model: DeepMorphModel, shots: Iterable[Any], read: Callable[[Locator, Any], T], workers: int = 1
+    model: DeepMorphModel,
+    shots: Iterable[Any],
+    read: Callable[[Locator, Any], T],
+    workers: int = 1,
+    detector: str | None = None,
 ) -> Iterator[T]:
     """``read(locator, shot)`` for each of ``shots``, in their order, by ``workers`` processes
-    (1: here, on one :class:`Locator` of ``model``). ``read`` runs in the workers, so it is a
-    module-level function, and what it returns comes back by pickling: a small result, not the
-    locator's detections with their images."""
+    (1: here), each on one :class:`Locator` of ``model`` with ``detector`` (``None``: the
+    model's). ``read`` runs in the workers, so it is a module-level function, and what it
+    returns comes back by pickling: a small result, not the locator's detections."""
     if workers <= 1:
-        locator = Locator(model)
+        locator = Locator(model, detector=detector)
         for shot in shots:
             yield read(locator, shot)
         return
+    # every worker is forked at once, before the pool starts its own threads (a fork beside a
+    # running thread can copy a lock that thread holds: the child would wait on it for ever)
     context = multiprocessing.get_context("fork")  # the model is inherited, not pickled
-    with ProcessPoolExecutor(workers, context, initializer=_start_worker, initargs=(model, read)) as pool:
-        pending: deque[Future[T]] = deque()
+    with context.Pool(workers, _start_worker, (model, read, detector)) as pool:
+        pending: deque[AsyncResult[T]] = deque()
         for shot in shots:
-            pending.append(pool.submit(_read_in_worker, shot))
+            pending.append(pool.apply_async(_read_in_worker, (shot,)))
             if len(pending) >= workers * IN_FLIGHT_PER_WORKER:
-                yield pending.popleft().result()
+                yield pending.popleft().get()
         while pending:
-            yield pending.popleft().result()
+            yield pending.popleft().get()
 
 
-def _start_worker(model: DeepMorphModel, read: Callable[[Locator, Any], Any]) -> None:
-    """Each worker's start: one thread for torch, OpenCV and BLAS, and its own locator."""
+def _start_worker(model: DeepMorphModel, read: Callable[[Locator, Any], Any], detector: str | None) -> None:
+    """Each worker's start: one thread for torch and BLAS, its own locator, and Ctrl-C left to
+    the caller (which stops handing out close-ups; a worker's own traceback would only repeat
+    it). OpenCV's thread count is left as forked: ``cv2.setNumThreads`` in a child forked after
+    the caller's OpenCV ran its thread pool waited for ever (the pool's threads are not forked)."""
     global _WORKER
-    from deepmorph_core.threads import use_threads
-
-    use_threads(1)
-    _WORKER = (Locator(model), read)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    torch.set_num_threads(1)
+    threadpool_limits(limits=1, user_api="blas")
+    _WORKER = (Locator(model, detector=detector), read)
 
 
 def _read_in_worker(shot: Any) -> Any:

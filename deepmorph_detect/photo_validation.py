@@ -122,36 +122,36 @@ def validate_close_ups(  # noqa: PLR0913
     severity: str = VALIDATION_SEVERITY,
     print_px: float | None = None,
     detector: str | None = None,
+    workers: int = 1,
 ) -> ValidationRecord:
     """Read ``samples`` fresh payloads from close-up photos through the photo chain: photos
     :data:`PHOTO_PX` wide (a model trained for prints ``model.print_px`` wide: photos whose
     prints span that width or more), or with the drawing about ``print_px`` camera pixels wide; with the
-    model's detector, or the one named by ``detector`` (``"none"``: whole images only).
+    model's detector, or the one named by ``detector`` (``"none"``: whole images only), by
+    ``workers`` processes (:mod:`deepmorph_detect.close_up_pool`: the same record as one).
 
     A model trained for prints at least ``print_px`` wide refuses a narrower one as too small.
     The simulator makes a few close-ups narrower than asked (where no pose of the asked size fits
     the frame, it tries smaller ones): those are not counted, unless they give a wrong payload,
     and the description says how many there were."""
     start = time.perf_counter()
-    locator = Locator(model, detector=detector)
     photo_px = close_up_width(model, print_px)
     low, high = (round(share * photo_px) for share in CLOSE_UP_SIZE)
     tally = PayloadTally()
     right_bits = missed = unread = narrower = 0
-    for shot in close_ups(model, samples, seed, severity, print_px):
-        found = locator.locate(shot.photo)
-        if shot.narrower_than_read(model):
+    shots = close_ups(model, samples, seed, severity, print_px)
+    for seen in read_close_ups(model, shots, _close_up_seen, workers, detector=detector):
+        if seen.narrower:
             narrower += 1
-            vouched = [f.result.payload for f in found if f.result.ok]
-            tally.wrong += any(not np.array_equal(payload, shot.payload) for payload in vouched)
+            tally.wrong += any(not np.array_equal(payload, seen.payload) for payload in seen.vouched)
             continue
-        if not found:
+        if seen.right_bits is None:
             # found but not read (a blind detector reports only what it reads), or not found
-            missed += not locator.aligns(shot.photo)
+            missed += not seen.aligns
             unread += 1
             continue
-        right_bits += int(((found[0].probabilities > 0.5) == (shot.code == 1)).sum())
-        tally.add([f.result.payload for f in found if f.result.ok], shot.payload)
+        right_bits += seen.right_bits
+        tally.add(seen.vouched, seen.payload)
     counted = samples - narrower
     description = f"photos {photo_px} px wide of prints {low}-{high} px wide in them, through the photo chain"
     if narrower:
@@ -167,6 +167,38 @@ def validate_close_ups(  # noqa: PLR0913
         missed=missed,
         seconds=round(time.perf_counter() - start, 2),
     )
+
+
+@dataclass(frozen=True)
+class CloseUpSeen:
+    """What the photo chain made of one validation close-up (:func:`_close_up_seen`).
+
+    Attributes:
+        payload: the payload printed.
+        narrower: the print is narrower than the model reads (not counted).
+        vouched: the payloads reported read.
+        right_bits: the first drawing found's code bits read right; ``None`` where none was found.
+        aligns: where none was found and the print is not narrower, whether the detector's
+            proposals aligned at all; else ``None``.
+    """
+
+    payload: np.ndarray
+    narrower: bool
+    vouched: list[np.ndarray]
+    right_bits: int | None
+    aligns: bool | None
+
+
+def _close_up_seen(locator: Locator, shot: CloseUp) -> CloseUpSeen:
+    """One validation close-up through ``locator``: run in a worker, so a small result."""
+    found = locator.locate(shot.photo)
+    vouched = [f.result.payload for f in found if f.result.ok]
+    if shot.narrower_than_read(locator.model):
+        return CloseUpSeen(shot.payload, True, vouched, None, None)
+    if not found:
+        return CloseUpSeen(shot.payload, False, vouched, None, locator.aligns(shot.photo))
+    right = int(((found[0].probabilities > 0.5) == (shot.code == 1)).sum())
+    return CloseUpSeen(shot.payload, False, vouched, right, None)
 
 
 @dataclass(frozen=True)

@@ -378,7 +378,7 @@ def _validate_close_ups_again(out: Path, seed: int) -> None:
     model = DeepMorphModel.load(out)
     if photos <= 0 or not model.meta.validation:
         return
-    record = validate_close_ups(model, photos, seed)
+    record = validate_close_ups(model, photos, seed, workers=torch.get_num_threads())
     model.meta.validation = [r for r in model.meta.validation if r.name != record.name] + [record]
     model.save(out)
     warning = validation.validation_warning(model.meta.validation, str(out), own_detector=True)

@@ -194,6 +194,16 @@ def test_close_ups_narrower_than_a_model_reads_are_not_counted_unless_wrong(monk
     assert validation.validate_close_ups(model, 4, 0, "easy").wrong == 4
 
 
+def test_close_ups_validated_by_two_processes_give_the_record_of_one() -> None:
+    """Validation's close-ups read by two worker processes give the record one process gives
+    (read, wrong, bits, missed), but for its time."""
+    from deepmorph_detect.photo_validation import validate_close_ups
+
+    model = DeepMorphModel.load(BUNDLED_MODEL)
+    one, two = (validate_close_ups(model, 6, 3, "hard", workers=w) for w in (1, 2))
+    assert one.model_dump(exclude={"seconds"}) == two.model_dump(exclude={"seconds"}) and one.read >= 3
+
+
 def test_a_close_up_carries_the_pose_it_was_photographed_at() -> None:
     """``CloseUp.homography`` is the simulator's pose of the print. There the photo correlates
     with the unmorphed drawing (0.67-0.81 on easy ghost close-ups: the print is morphed), a
