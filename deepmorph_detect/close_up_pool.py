@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import torch
 from threadpoolctl import threadpool_limits
 
+from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.locate import Locator
 
@@ -29,6 +30,9 @@ T = TypeVar("T")
 #: Close-ups handed out ahead per worker: enough to keep it busy while the caller makes the next.
 IN_FLIGHT_PER_WORKER = 2
 
+#: The longest a close-up may take in a worker before the pool is taken for broken (a hard colour
+#: close-up takes 0.2-0.9 s; the slowest seen a few seconds).
+ANSWER_WITHIN_S = 300.0
 #: The worker's reader, set once in each worker process (:func:`_start_worker`).
 _WORKER: tuple[Locator, Callable[[Locator, Any], Any]] | None = None
 
@@ -57,9 +61,21 @@ def read_close_ups(
         for shot in shots:
             pending.append(pool.apply_async(_read_in_worker, (shot,)))
             if len(pending) >= workers * IN_FLIGHT_PER_WORKER:
-                yield pending.popleft().get()
+                yield _answer(pending.popleft())
         while pending:
-            yield pending.popleft().get()
+            yield _answer(pending.popleft())
+
+
+def _answer(result: AsyncResult[T]) -> T:
+    """A worker's result, or an error where none came within :data:`ANSWER_WITHIN_S`: a pool
+    whose worker died (killed for memory, say) never answers for the close-up it held."""
+    try:
+        return result.get(ANSWER_WITHIN_S)
+    except multiprocessing.TimeoutError:
+        raise DeepMorphError(
+            f"a process reading close-ups gave no answer in {ANSWER_WITHIN_S:.0f} s (killed, perhaps for memory); "
+            "run again with --threads 1 to read them in one process"
+        ) from None
 
 
 def _start_worker(model: DeepMorphModel, read: Callable[[Locator, Any], Any], detector: str | None) -> None:
@@ -82,4 +98,4 @@ def _read_in_worker(shot: Any) -> Any:
     return read(locator, shot)
 
 
-__all__ = ["IN_FLIGHT_PER_WORKER", "read_close_ups"]
+__all__ = ["ANSWER_WITHIN_S", "IN_FLIGHT_PER_WORKER", "read_close_ups"]
