@@ -439,18 +439,28 @@ def _planned_code(
     colour emoji's channel of 213 bits would otherwise plan 102). Never less than the default
     training's plan: a ``--pixels`` model reads prints at least as well. A ``colour`` drawing's
     code then gets its longer CRC (:func:`plan_code`)."""
+    bits, spec = _uncoloured_plan(readable_groups, print_px, crc_bits, ecc, channel_payload)
+    return bits, None if spec is None else plan_code(spec, colour, crc_bits)
+
+
+def _uncoloured_plan(
+    readable_groups: int,
+    print_px: int | None,
+    crc_bits: int | None,
+    ecc: tuple[int, ...] | None,
+    channel_payload: int | None,
+) -> tuple[int, CodecSpec | None]:
+    """:func:`_planned_code` before a colour drawing's longer CRC."""
     default_bits = code_bits_for(readable_groups)
     default = largest_payload(default_bits, crc_bits, ECC_CHOICES if ecc is None else ecc)
     if not at_pixels(print_px):
-        return default_bits, None if default is None else plan_code(default, colour, crc_bits)
+        return default_bits, default
     if channel_payload is None:
         raise ValueError(f"a plan for prints {print_px} px wide needs the drawing's channel (capacity.with_channel)")
     spec = _largest_code_within(channel_share(channel_payload), crc_bits, ecc or ECC_AT_PIXELS, LARGEST_CODE_MEASURED)
     if default is not None and (spec is None or default.payload_bits > spec.payload_bits):
-        return default_bits, plan_code(default, colour, crc_bits)
-    if spec is None:
-        return 0, None
-    return spec.code_bits, plan_code(spec, colour, crc_bits)
+        return default_bits, default
+    return (0 if spec is None else spec.code_bits), spec
 
 
 def channel_share(channel_payload: int) -> int:

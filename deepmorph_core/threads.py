@@ -21,16 +21,20 @@ def _controller():  # noqa: ANN202 - threadpoolctl is untyped
     return ThreadpoolController()
 
 
-def use_threads(threads: int | None) -> int:
+def use_threads(threads: int | None, opencv: bool = True) -> int:
     """Run torch, OpenCV and NumPy's BLAS on ``threads`` CPU threads (``None``: torch's
-    default, one per physical core), the same count for all; returns the count in use."""
-    import cv2
+    default, one per physical core), the same count for all; returns the count in use.
+    ``opencv`` false leaves OpenCV's pool as it is: in a process forked after OpenCV's pool had
+    run, ``cv2.setNumThreads`` waits for ever (:mod:`deepmorph_detect.close_up_pool`)."""
     import torch
 
     if threads is not None:
         torch.set_num_threads(threads)
     n = torch.get_num_threads()
-    cv2.setNumThreads(n)
+    if opencv:
+        import cv2
+
+        cv2.setNumThreads(n)
     _controller().limit(limits=n, user_api="blas")
     return n
 

@@ -20,10 +20,10 @@ from multiprocessing.pool import AsyncResult
 from typing import Any, TypeVar
 
 import torch
-from threadpoolctl import threadpool_limits
 
 from deepmorph_core.errors import DeepMorphError
 from deepmorph_core.model import DeepMorphModel
+from deepmorph_core.threads import use_threads
 from deepmorph_detect.locate import Locator
 
 T = TypeVar("T")
@@ -35,6 +35,12 @@ IN_FLIGHT_PER_WORKER = 2
 ANSWER_WITHIN_S = 300.0
 #: The worker's reader, set once in each worker process (:func:`_start_worker`).
 _WORKER: tuple[Locator, Callable[[Locator, Any], Any]] | None = None
+
+
+def one_per_thread() -> int:
+    """The workers a caller reads close-ups with: one process per thread it runs torch on, as a
+    close-up's reading is single-threaded work (training's threads, ``--threads``)."""
+    return torch.get_num_threads()
 
 
 def read_close_ups(
@@ -85,8 +91,7 @@ def _start_worker(model: DeepMorphModel, read: Callable[[Locator, Any], Any], de
     the caller's OpenCV ran its thread pool waited for ever (the pool's threads are not forked)."""
     global _WORKER
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    torch.set_num_threads(1)
-    threadpool_limits(limits=1, user_api="blas")
+    use_threads(1, opencv=False)
     _WORKER = (Locator(model, detector=detector), read)
 
 
@@ -98,4 +103,4 @@ def _read_in_worker(shot: Any) -> Any:
     return read(locator, shot)
 
 
-__all__ = ["ANSWER_WITHIN_S", "IN_FLIGHT_PER_WORKER", "read_close_ups"]
+__all__ = ["ANSWER_WITHIN_S", "IN_FLIGHT_PER_WORKER", "one_per_thread", "read_close_ups"]

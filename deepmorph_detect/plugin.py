@@ -29,10 +29,8 @@ def deepmorph_register_detectors(register: Register) -> None:
 @hookimpl
 def deepmorph_validate_model(model: DeepMorphModel, samples: int, seed: int) -> ValidationRecord:
     """Close-up photos of fresh codes through the photo chain (:mod:`deepmorph_detect.photo_validation`),
-    read by one process per thread the caller runs torch on (a close-up's reading is
-    single-threaded work)."""
-    import torch
-
+    one process per thread the caller runs torch on."""
+    from deepmorph_detect.close_up_pool import one_per_thread
     from deepmorph_detect.photo_validation import validate_close_ups
 
-    return validate_close_ups(model, samples, seed, workers=torch.get_num_threads())
+    return validate_close_ups(model, samples, seed, workers=one_per_thread())

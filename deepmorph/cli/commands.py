@@ -826,13 +826,13 @@ def validate(
     from deepmorph_core.device import resolve_device
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_core.plugins import default_registry
+    from deepmorph_detect.close_up_pool import one_per_thread
 
-    n_threads = use_threads(threads)
+    use_threads(threads)
     where = resolve_device(device)
     m = DeepMorphModel.load(model)
     records = run_validation(m, default_registry(), samples, photos, seed=seed, device=where)
-    # the count's close-ups are read by one process per thread (single-threaded work each)
-    counted = measure_trust(m, trust, seed, workers=n_threads) if trust and m.codec.spec.crc_bits else None
+    counted = measure_trust(m, trust, seed, workers=one_per_thread()) if trust and m.codec.spec.crc_bits else None
     if save:
         m.meta.validation = records
         m.meta.trust = counted or m.meta.trust

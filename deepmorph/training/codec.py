@@ -695,12 +695,12 @@ def _count_wrong_payloads(
     if not close_ups:
         return None
     from deepmorph.training.trust import COUNTED_FROM, check_trust, trust_samples  # the photo chain, here only
+    from deepmorph_detect.close_up_pool import one_per_thread
 
     samples = trust_samples(config.trust_samples, model.drawing.colour)
     if config.trust_samples is None and close_ups[0].rate < COUNTED_FROM:
         return None
-    # one process per thread the training ran on: a close-up's reading is single-threaded work
-    trust = check_trust(model, samples, config.seed, label, warn, workers=torch.get_num_threads())
+    trust = check_trust(model, samples, config.seed, label, warn, workers=one_per_thread())
     if trust is not None:
         model.save(out)
     return trust

@@ -372,13 +372,14 @@ def _validate_close_ups_again(out: Path, seed: int) -> None:
     detector (the one stored after training found prints by framing the whole image), and warn
     when it is weak. A bundle never validated (``--validation 0``) is left so."""
     from deepmorph.training import validation
+    from deepmorph_detect.close_up_pool import one_per_thread
     from deepmorph_detect.photo_validation import validate_close_ups
 
     photos = validation.default_samples()[1]
     model = DeepMorphModel.load(out)
     if photos <= 0 or not model.meta.validation:
         return
-    record = validate_close_ups(model, photos, seed, workers=torch.get_num_threads())
+    record = validate_close_ups(model, photos, seed, workers=one_per_thread())
     model.meta.validation = [r for r in model.meta.validation if r.name != record.name] + [record]
     model.save(out)
     warning = validation.validation_warning(model.meta.validation, str(out), own_detector=True)
