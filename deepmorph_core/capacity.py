@@ -186,7 +186,7 @@ class CapacityReport:
                 f"on eleven colour drawings training kept {least:.2f}-{most:.2f} of it (median {median:.2f}); "
                 "`train --payload-bits auto` cuts a code its renders do not read"
             )
-        if self.colour and self.codec is not None and self.codec.crc_bits > 8:
+        if self.colour and self.codec is not None and default_crc_code(self.codec) != self.codec:
             lines.append(
                 f"a colour drawing's payload gives bits to a CRC of {self.codec.crc_bits} (black ink: 8): wrong words "
                 "from photos of colour prints pass the photo chain's checks far more often; training counts this "
