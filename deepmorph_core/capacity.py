@@ -137,6 +137,8 @@ class CapacityReport:
             :meth:`limits` says by how much.
         found: in how many simulated hard photos the photo chain found the print, of how many
             (:func:`deepmorph_detect.findable.findability`); ``None``: not simulated.
+        crc_bits: the CRC the user fixed (``--crc``); ``None``: the plan's (a colour plan's may be
+            longer than 8, :func:`plan_code`).
     """
 
     n_variables: int
@@ -152,6 +154,7 @@ class CapacityReport:
     channel_payload: int | None = None
     colour: bool = False
     found: tuple[int, int] | None = None
+    crc_bits: int | None = None
 
     def fits(self, spec: CodecSpec) -> bool:
         """Whether a code is within the prediction."""
@@ -186,7 +189,12 @@ class CapacityReport:
                 f"on eleven colour drawings training kept {least:.2f}-{most:.2f} of it (median {median:.2f}); "
                 "`train --payload-bits auto` cuts a code its renders do not read"
             )
-        if self.colour and self.codec is not None and default_crc_code(self.codec) != self.codec:
+        if (
+            self.colour
+            and self.crc_bits is None
+            and self.codec is not None
+            and default_crc_code(self.codec) != self.codec
+        ):
             lines.append(
                 f"a colour drawing's payload gives bits to a CRC of {self.codec.crc_bits} (black ink: 8): wrong words "
                 "from photos of colour prints pass the photo chain's checks far more often; training counts this "
@@ -347,6 +355,7 @@ def predict(
         static,
         [bool(v) for v in shown],
         colour=bool(drawing.colour),
+        crc_bits=crc_bits,
     )
     if at_pixels(print_px):
         report = for_print(with_channel(report, drawing), print_px, crc_bits, ecc)
@@ -402,7 +411,7 @@ def for_print(
         report.readable_groups, print_px, crc_bits, ecc, report.channel_payload, colour=report.colour
     )
     payload = 0 if spec is None else spec.payload_bits
-    return replace(report, code_bits=code_bits, payload_bits=payload, codec=spec, print_px=print_px)
+    return replace(report, code_bits=code_bits, payload_bits=payload, codec=spec, print_px=print_px, crc_bits=crc_bits)
 
 
 def payload_for_width(

@@ -13,7 +13,8 @@ A code that reads fewer than :data:`SHRINK_BELOW` of that window's code words is
   read far better than they did in the crowded code (a colour drawing's 46 code bits read 1 %
   of words at step 2000; the 19 best of them, alone, 99 % 400 steps later);
 * the new payload is the largest whose code fits that size (:func:`smaller_code`), with the CRC
-  and BCH the user fixed, if any, else a BCH strength the plan chooses from (:func:`shrink_ecc`);
+  and BCH the user fixed, if any, else a BCH strength the plan chooses from
+  (:meth:`CutRules.ecc_strengths`);
 * the code bits the decoder read best over the window are kept, with their encoder columns and
   decoder outputs; the others are dropped (:func:`shrink_networks`).
 
@@ -37,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -100,28 +101,50 @@ def information(errors: Tensor) -> float:
     return total
 
 
-def shrink_ecc(auto: AutoPayload, print_px: int | None) -> tuple[int, ...]:
-    """The BCH strengths a cut code may have: the user's, or those the plan for a model trained
-    for prints ``print_px`` wide chooses from (:func:`~deepmorph_core.capacity.plan_ecc`: t = 2
-    alone under ``--pixels 200``, where a t = 1 code cut from a t = 2 one passed a wrong payload
-    in 10,008 close-ups)."""
-    return (auto.ecc_t,) if auto.ecc_t is not None else plan_ecc(print_px)
+@dataclass(frozen=True)
+class CutRules:
+    """What every cut of one training keeps: the CRC and BCH the user fixed (``auto``), the print
+    width the model is trained for (``print_px``, ``None``: the default training) and whether the
+    drawing is in colour (its codes planned with a longer CRC,
+    :func:`~deepmorph_core.capacity.plan_code`)."""
 
+    auto: AutoPayload = field(default_factory=AutoPayload)
+    print_px: int | None = None
+    colour: bool = False
 
-def largest_smaller(
-    spec: CodecSpec, auto: AutoPayload, print_px: int | None, fits: Callable[[CodecSpec], bool], colour: bool = False
-) -> CodecSpec | None:
-    """The code a cut goes on with: the largest payload below ``spec``'s with a code that ``fits``
-    (the user's CRC, :func:`shrink_ecc`'s strengths, the first in their order); where none does,
-    the smallest payload's smallest code. ``None`` where that code is not smaller than ``spec``'s.
-    A ``colour`` drawing's codes are planned as :func:`~deepmorph_core.capacity.plan_code` plans
-    them (payload bits given to a longer CRC), counted from the code ``spec`` was planned from."""
-    base = default_crc_code(spec) if colour and auto.crc_bits is None else spec
-    for payload in range(base.payload_bits - 1, 0, -1):
-        codes = [
-            plan_code(c, colour, auto.crc_bits)
-            for c in payload_codes(payload, auto.crc_bits, shrink_ecc(auto, print_px))
+    @classmethod
+    def of(cls, model: DeepMorphModel, auto: AutoPayload) -> CutRules:
+        """The rules for cutting ``model``'s code, sized by ``auto``."""
+        return cls(auto, model.print_px, bool(model.drawing.colour))
+
+    def ecc_strengths(self) -> tuple[int, ...]:
+        """The BCH strengths a cut code may have: the user's, or those the plan for the print
+        width chooses from (:func:`~deepmorph_core.capacity.plan_ecc`: t = 2 alone under
+        ``--pixels 200``, where a t = 1 code cut from a t = 2 one passed a wrong payload in
+        10,008 close-ups)."""
+        return (self.auto.ecc_t,) if self.auto.ecc_t is not None else plan_ecc(self.print_px)
+
+    def planned_from(self, spec: CodecSpec) -> CodecSpec:
+        """The code the plan made ``spec`` from: a colour code's CRC-8 form where the CRC is
+        DeepMorph's (:func:`~deepmorph_core.capacity.default_crc_code`), else ``spec``."""
+        return default_crc_code(spec) if self.colour and self.auto.crc_bits is None else spec
+
+    def codes(self, payload_bits: int) -> list[CodecSpec]:
+        """The codes a cut to ``payload_bits`` may go on with, in the plan's order."""
+        return [
+            plan_code(c, self.colour, self.auto.crc_bits)
+            for c in payload_codes(payload_bits, self.auto.crc_bits, self.ecc_strengths())
         ]
+
+
+def largest_smaller(spec: CodecSpec, rules: CutRules, fits: Callable[[CodecSpec], bool]) -> CodecSpec | None:
+    """The code a cut goes on with: the largest payload below ``spec``'s with a code that ``fits``
+    (of :meth:`CutRules.codes`, the first in their order); where none does, the smallest
+    payload's smallest code. ``None`` where that code is not smaller than ``spec``'s. Payloads
+    are counted from the code ``spec`` was planned from (:meth:`CutRules.planned_from`), so a
+    colour code loses what its CRC-8 form would."""
+    for payload in range(rules.planned_from(spec).payload_bits - 1, 0, -1):
+        codes = rules.codes(payload)
         fitting = [c for c in codes if fits(c)]
         if fitting or payload == 1:
             new = fitting[0] if fitting else min(codes, key=lambda c: c.code_bits, default=None)
@@ -129,19 +152,15 @@ def largest_smaller(
     return None
 
 
-def code_halfway(
-    spec: CodecSpec, toward_bits: float, auto: AutoPayload, print_px: int | None, colour: bool = False
-) -> CodecSpec | None:
+def code_halfway(spec: CodecSpec, toward_bits: float, rules: CutRules) -> CodecSpec | None:
     """The largest payload below ``spec``'s (:func:`largest_smaller`) whose code fits halfway, in
     code bits, between ``spec``'s (less one) and ``toward_bits``: how far both cuts go when they
     go halfway (:func:`smaller_code`, and :func:`code_fitting`'s first)."""
     size = math.ceil((toward_bits + spec.code_bits - 1) / 2)
-    return largest_smaller(spec, auto, print_px, lambda c: c.code_bits <= size, colour)
+    return largest_smaller(spec, rules, lambda c: c.code_bits <= size)
 
 
-def smaller_code(
-    errors: Tensor, spec: CodecSpec, auto: AutoPayload, print_px: int | None = None, colour: bool = False
-) -> tuple[CodecSpec, list[int], float] | None:
+def smaller_code(errors: Tensor, spec: CodecSpec, rules: CutRules) -> tuple[CodecSpec, list[int], float] | None:
     """The code to go on with, the current code bits it keeps (the best read, ascending) and
     the information the window's bits carried: the largest payload below ``spec``'s whose
     code fits halfway between ``spec``'s code bits (less one) and that information; where none
@@ -150,11 +169,10 @@ def smaller_code(
     Args:
         errors: ``(R, N_b)`` bool, the code bits each capture of the window read wrong.
         spec: the code now.
-        auto: the CRC and BCH the user fixed.
-        colour: the drawing is in colour (its codes planned with a longer CRC).
+        rules: what the cut keeps (the user's CRC and BCH, the print width, colour).
     """
     carried = information(errors)
-    new = code_halfway(spec, carried, auto, print_px, colour)
+    new = code_halfway(spec, carried, rules)
     if new is None:
         return None
     order = torch.argsort(errors.sum(0), stable=True)  # best read first
@@ -186,34 +204,28 @@ def simulated_read(right: np.ndarray, spec: CodecSpec, rng: np.random.Generator)
 
 
 def code_fitting(
-    right: np.ndarray,
-    spec: CodecSpec,
-    auto: AutoPayload,
-    rng: np.random.Generator,
-    print_px: int | None = None,
-    halfway: bool = False,
-    colour: bool = False,
+    right: np.ndarray, spec: CodecSpec, rules: CutRules, rng: np.random.Generator, halfway: bool = False
 ) -> tuple[CodecSpec, list[int]] | None:
     """The code to go on with and the current code bits it keeps (ascending, the most reliable),
     for a code whose bits were read with the reliabilities ``right`` (``(R, spec.code_bits)``,
     each capture's probability of each bit's right value): the largest payload below ``spec``'s
-    (with the CRC and BCH the user fixed in ``auto``, else :func:`shrink_ecc`'s for prints
-    ``print_px`` wide) whose code, on the most reliable bits, reads at least :data:`RENDER_FIT` of
-    the captures (:func:`simulated_read`); otherwise as :func:`largest_smaller` says. ``halfway``:
-    the largest payload whose code fits halfway between ``spec``'s code bits (less one) and that
-    code's. A `--pixels 200` `cpu` whose 24-bit payload read 96.9 % of renders fitted 15 bits so,
-    where the halfway code (19 bits), trained on, read 99.4 % of them and 99.5-100 % of close-ups."""
+    (of :meth:`CutRules.codes`) whose code, on the most reliable bits, reads at least
+    :data:`RENDER_FIT` of the captures (:func:`simulated_read`); otherwise as
+    :func:`largest_smaller` says. ``halfway``: the largest payload whose code fits halfway
+    between ``spec``'s code bits (less one) and that code's. A `--pixels 200` `cpu` whose 24-bit
+    payload read 96.9 % of renders fitted 15 bits so, where the halfway code (19 bits), trained
+    on, read 99.4 % of them and 99.5-100 % of close-ups."""
     order = np.argsort(-right.mean(0), kind="stable")  # most reliable first
 
     def fits(code: CodecSpec) -> bool:  # read on its best bits (a code no smaller is not tried)
         best = right[:, order[: code.code_bits]]
         return code.code_bits < spec.code_bits and simulated_read(best, code, rng) >= RENDER_FIT
 
-    new = largest_smaller(spec, auto, print_px, fits, colour)
+    new = largest_smaller(spec, rules, fits)
     if new is None:
         return None
     if halfway:
-        new = code_halfway(spec, new.code_bits, auto, print_px, colour) or new
+        new = code_halfway(spec, new.code_bits, rules) or new
     return new, sorted(int(k) for k in order[: new.code_bits])
 
 
@@ -239,7 +251,7 @@ def code_for_renders(
     if read >= RENDER_SHRINK_BELOW:
         return None
     right = np.where(words == 1, probs, 1.0 - probs)
-    found = code_fitting(right, spec, auto, rng, model.print_px, halfway, bool(model.drawing.colour))
+    found = code_fitting(right, spec, CutRules.of(model, auto), rng, halfway)
     if found is None:
         return None
     return RenderShrink(found[0], found[1], read, information(torch.from_numpy(right < 0.5)))
@@ -297,6 +309,7 @@ __all__ = [
     "RENDER_SHRINK_BELOW",
     "SHRINK_BELOW",
     "SHRINK_BELOW_AT_PIXELS",
+    "CutRules",
     "RenderShrink",
     "code_fitting",
     "code_halfway",
@@ -306,7 +319,6 @@ __all__ = [
     "largest_smaller",
     "read_share",
     "shrink_below",
-    "shrink_ecc",
     "shrink_networks",
     "simulated_read",
     "smaller_code",

@@ -38,6 +38,7 @@ from torch import Tensor, nn
 from deepmorph.training.code_shrink import (
     RENDER_ROUNDS,
     RENDER_SEED_OFFSET,
+    CutRules,
     code_for_renders,
     describe,
     read_share,
@@ -491,7 +492,8 @@ class CodecRun:
         read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
         if read >= shrink_below(cfg.print_px):
             return
-        smaller = smaller_code(errors, spec, rec.payload_auto, cfg.print_px, bool(self.model.drawing.colour))
+        rules = CutRules(rec.payload_auto, cfg.print_px, bool(self.model.drawing.colour))
+        smaller = smaller_code(errors, spec, rules)
         if smaller is None:
             return
         new, keep, carried = smaller

@@ -15,6 +15,7 @@ from deepmorph.cli import application
 from deepmorph.training.code_shrink import (
     RENDER_FIT,
     RENDER_ROUNDS,
+    CutRules,
     code_fitting,
     information,
     read_share,
@@ -56,23 +57,23 @@ def test_the_smaller_code_is_halfway_to_the_information_its_bits_carried() -> No
     errors[:, good] = False
     assert information(errors) == pytest.approx(14, abs=0.2)
     assert information(torch.zeros(10, 7, dtype=torch.bool)) == 7.0
-    new, keep, carried = smaller_code(errors, spec, AutoPayload())
+    new, keep, carried = smaller_code(errors, spec, CutRules())
     size = math.ceil((carried + spec.code_bits - 1) / 2)
     assert (
         new.code_bits <= size < min(c.code_bits for c in (choose_codec(new.payload_bits + 1, None, t) for t in (1, 2)))
     )
     assert len(keep) == new.code_bits and set(good.tolist()) <= set(keep)
     assert read_share(errors, good, 0) == 1.0 > read_share(errors, torch.tensor(keep), new.bch_t)
-    fixed, _, _ = smaller_code(errors, spec, AutoPayload(crc_bits=16, ecc_t=1))
+    fixed, _, _ = smaller_code(errors, spec, CutRules(AutoPayload(crc_bits=16, ecc_t=1)))
     assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
-    at_pixels, _, _ = smaller_code(errors, spec, AutoPayload(), print_px=200)
+    at_pixels, _, _ = smaller_code(errors, spec, CutRules(print_px=200))
     assert at_pixels.bch_t == 2  # the --pixels plan's strength
     # nothing carried: halfway is below the smallest code, which is taken; below it, nothing
     noise = torch.rand(4000, 24, generator=gen) < 0.5
     small = choose_codec(4, None, 1)
-    smallest, _, _ = smaller_code(noise[:, : small.code_bits], small, AutoPayload())
+    smallest, _, _ = smaller_code(noise[:, : small.code_bits], small, CutRules())
     assert smallest == min((choose_codec(1, None, t) for t in (1, 2)), key=lambda c: c.code_bits)
-    assert smaller_code(noise[:, : smallest.code_bits], smallest, AutoPayload()) is None
+    assert smaller_code(noise[:, : smallest.code_bits], smallest, CutRules()) is None
 
 
 def test_shrunk_networks_are_the_kept_bits_of_the_old_ones(tiny_svg: Path, tmp_path: Path) -> None:
@@ -159,21 +160,21 @@ def test_the_code_fitted_to_measured_reliabilities_keeps_the_reliable_bits() -> 
     right = _reliabilities(rates, 1000, rng)
     assert simulated_read(_reliabilities(np.zeros(spec.code_bits), 300, rng), spec, rng) == 1.0
     assert simulated_read(_reliabilities(np.full(spec.code_bits, 0.5), 300, rng), spec, rng) < 0.05
-    new, keep = code_fitting(right, spec, AutoPayload(), rng)
+    new, keep = code_fitting(right, spec, CutRules(), rng)
     assert new.payload_bits < spec.payload_bits and len(keep) == new.code_bits
     assert set(keep) <= set(reliable.tolist()) or set(reliable.tolist()) <= set(keep)  # the best bits
     assert simulated_read(right[:, keep], new, rng) >= RENDER_FIT
     order = np.argsort(-right.mean(0), kind="stable")
     for bigger in (choose_codec(new.payload_bits + 1, None, t) for t in (2, 1)):
         assert simulated_read(right[:, order[: bigger.code_bits]], bigger, rng) < RENDER_FIT
-    fixed, _ = code_fitting(right, spec, AutoPayload(crc_bits=16, ecc_t=1), rng)
+    fixed, _ = code_fitting(right, spec, CutRules(AutoPayload(crc_bits=16, ecc_t=1)), rng)
     assert (fixed.crc_bits, fixed.bch_t) == (16, 1)
     assert new.bch_t == 1  # the 96-px plan's strengths: a t = 1 code fits more here
-    at_pixels, _ = code_fitting(right, spec, AutoPayload(), rng, print_px=200)
+    at_pixels, _ = code_fitting(right, spec, CutRules(print_px=200), rng)
     assert at_pixels.bch_t == 2 and at_pixels.payload_bits < new.payload_bits  # --pixels plans t = 2 alone
     smallest = min((choose_codec(1, None, t) for t in (1, 2)), key=lambda c: c.code_bits)
     noise = _reliabilities(np.full(smallest.code_bits, 0.5), 100, rng)
-    assert code_fitting(noise, smallest, AutoPayload(), rng) is None
+    assert code_fitting(noise, smallest, CutRules(), rng) is None
 
 
 def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
@@ -185,8 +186,8 @@ def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
     rates = np.full(spec.code_bits, 0.5)
     rates[rng.permutation(spec.code_bits)[:30]] = 0.0005
     right = _reliabilities(rates, 1000, rng)
-    fitted, _ = code_fitting(right, spec, AutoPayload(), np.random.default_rng(2), print_px=200)
-    half, keep = code_fitting(right, spec, AutoPayload(), np.random.default_rng(2), print_px=200, halfway=True)
+    fitted, _ = code_fitting(right, spec, CutRules(print_px=200), np.random.default_rng(2))
+    half, keep = code_fitting(right, spec, CutRules(print_px=200), np.random.default_rng(2), halfway=True)
     size = math.ceil((spec.code_bits - 1 + fitted.code_bits) / 2)
     assert fitted.payload_bits < half.payload_bits < spec.payload_bits and half.code_bits <= size
     assert choose_codec(half.payload_bits + 1, None, 2).code_bits > size and half.bch_t == 2
@@ -194,7 +195,7 @@ def test_the_first_cut_goes_halfway_to_the_code_the_reliabilities_fit() -> None:
     assert keep == sorted(int(k) for k in order[: half.code_bits])  # the most reliable bits
     smallest = choose_codec(1, None, 2)
     noise = _reliabilities(np.full(smallest.code_bits, 0.5), 100, rng)
-    assert code_fitting(noise, smallest, AutoPayload(), rng, print_px=200, halfway=True) is None
+    assert code_fitting(noise, smallest, CutRules(print_px=200), rng, halfway=True) is None
 
 
 #: A few steps with no corruption: the batches read, and the renders, read at ``medium``, do not.
@@ -207,12 +208,12 @@ def test_a_colour_codes_cut_keeps_the_colour_crc_and_loses_what_the_black_codes_
     gen = torch.Generator().manual_seed(0)
     errors = torch.rand(4000, black.code_bits, generator=gen) < 0.5
     errors[:, torch.randperm(black.code_bits, generator=gen)[:14]] = False
-    cut_black, keep_black, _ = smaller_code(errors, black, AutoPayload())
-    cut_colour, keep_colour, _ = smaller_code(errors, colour, AutoPayload(), colour=True)
+    cut_black, keep_black, _ = smaller_code(errors, black, CutRules())
+    cut_colour, keep_colour, _ = smaller_code(errors, colour, CutRules(colour=True))
     assert keep_colour == keep_black and cut_colour.code_bits == cut_black.code_bits
     assert cut_colour == plan_code(cut_black, colour=True) and cut_colour.crc_bits > 8
     assert cut_colour.payload_bits + cut_colour.crc_bits == cut_black.payload_bits + cut_black.crc_bits
-    fixed, _, _ = smaller_code(errors, choose_codec(20, 12, 2), AutoPayload(crc_bits=12), colour=True)
+    fixed, _, _ = smaller_code(errors, choose_codec(20, 12, 2), CutRules(AutoPayload(crc_bits=12), colour=True))
     assert fixed.crc_bits == 12
 
 

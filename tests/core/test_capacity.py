@@ -248,6 +248,10 @@ def test_a_colour_plan_gives_payload_bits_to_a_longer_crc_in_the_same_code() -> 
     assert payload_for_width(replace(for_colour, channel_payload=40), 250, 96)[0] == wide.payload_bits
     chosen = predict(coloured, crc_bits=8)  # the user's CRC stands
     assert chosen.codec is not None and chosen.codec.crc_bits == 8
+    own_12 = predict(coloured, crc_bits=COLOUR_CRC)  # the user's CRC-12: nothing was given to it
+    assert own_12.codec is not None and own_12.codec.crc_bits == COLOUR_CRC and own_12.crc_bits == COLOUR_CRC
+    assert not any("black ink: 8" in line for line in own_12.limits())
+    assert not any("black ink: 8" in line for line in for_print(replace(own_12, channel_payload=40), 250, 12).limits())
     large = replace(for_colour, codec=choose_codec(40, None, 2))  # CRC-16: black ink's too above 32 bits
     assert not any("black ink: 8" in line for line in large.limits())
 
