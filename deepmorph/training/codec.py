@@ -492,8 +492,7 @@ class CodecRun:
         read = read_share(errors, torch.arange(spec.code_bits), spec.bch_t)
         if read >= shrink_below(cfg.print_px):
             return
-        rules = CutRules(rec.payload_auto, cfg.print_px, bool(self.model.drawing.colour))
-        smaller = smaller_code(errors, spec, rules)
+        smaller = smaller_code(errors, spec, CutRules.of(self.model, rec.payload_auto))
         if smaller is None:
             return
         new, keep, carried = smaller
