@@ -10,6 +10,14 @@ confidence, how much the decoder's probabilities prefer it to its nearest rival 
 log-odds, ``DecodeResult.rival_log_odds``, computed here for every word), its morph's fit, and
 the verdict (passed with or without the per-bit check, or withdrawn).
 
+``--crc-checked K`` reads as training's count of wrong payloads does
+(``deepmorph_detect.photo_validation.count_wrong_payloads``): the CRC checked on its first K bits
+only, so that wrong words reach the payload check ``2**(crc_bits - K)`` times as often. In
+close-ups, where the simulator's pose is known, each wrong word the check passed is asked again
+there: whether its bits, and the printed word's, agree with the photo at the pose, each refined
+to its own morph; and how far the alignment it passed at was from that pose (the mean distance
+of the drawing's corners, a share of the print's width), beside the right words'.
+
 The table: photos read, photos that gave a wrong payload, wrong words that reached the check
 with their highest log-odds and confidence, wrong words the check passed, right words passed
 without the per-bit check although the code corrected them
@@ -19,6 +27,7 @@ without the per-bit check although the code corrected them
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --width 240 --samples 5000 --seed 41
     .venv/bin/python bench/repair_trust.py model.dmm --severity hard --frame 1280x720 --samples 400
     .venv/bin/python bench/repair_trust.py model.dmm --unrelated --icons ../shared/data/drawings/feather
+    .venv/bin/python bench/repair_trust.py model.dmm --crc-checked 4 --samples 300 --seed 4217
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +45,8 @@ from _common import RESULTS, add_close_up_options, environment, frame_size, set_
 NOT_A_PAYLOAD = 2  # a bit value no payload has: the truth of an unrelated image
 
 
-def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any]]:
-    """``(image, camera or None, true payload)`` for each photo asked."""
+def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any, Any]]:
+    """``(image, camera or None, true payload, close-up or None)`` for each photo asked."""
     import numpy as np
 
     if args.unrelated:
@@ -44,7 +54,7 @@ def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any
 
         nothing = np.full(model.codec.spec.payload_bits, NOT_A_PAYLOAD, dtype=np.uint8)
         for _, image in unrelated_images(args.samples, args.icons, {model.meta.drawing_name}, args.seed):
-            yield image, None, nothing
+            yield image, None, nothing, None
     elif args.frame is not None:
         from deepmorph_detect.scenes import SceneMaker
 
@@ -52,17 +62,44 @@ def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any
         for _ in range(args.samples):
             scene = maker.make(drawings=1, distractors=1, aruco=True)
             (truth,) = [p for p in scene.placements if p.kind == "drawing"]
-            yield scene.image, scene.camera, truth.payload
+            yield scene.image, scene.camera, truth.payload, None
     else:
         from deepmorph_detect.photo_validation import close_ups
 
         for shot in close_ups(model, args.samples, args.seed, args.severity, args.width):
-            yield shot.photo, None, shot.payload
+            yield shot.photo, None, shot.payload, shot
+
+
+def alignment_error(checker: Any, fit: Any, shot: Any) -> float:
+    """How far the alignment ``fit`` is from the simulator's pose of the close-up ``shot``: the
+    mean distance of the drawing's corners, a share of the print's width."""
+    import numpy as np
+
+    from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.metrics import corner_error
+
+    frame = viewbox_corners(checker.template.viewbox)
+    true_quad = project(shot.homography, frame)
+    return corner_error(project(fit.homography, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
+
+
+def agrees_at_pose(checker: Any, code: Any, shot: Any) -> bool | None:
+    """Whether the bits of the close-up ``shot``'s photo, as it is (not relit as the chain may
+    have asked), agree with the code word ``code`` at the simulator's pose, refined to ``code``'s
+    morph (``None``: the alignment diverged)."""
+    from deepmorph_detect.check import MORPH_WIDTH
+    from deepmorph_detect.refine import refine_at
+
+    pyramid = checker.pyramid(shot.photo)
+    aligned = refine_at(pyramid, shot.homography, checker.morphs.of_code(code), MORPH_WIDTH)
+    return None if aligned is None else checker.synthesis.evidence(pyramid, aligned.homography, code).agrees
 
 
 def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any]) -> None:
     """Wrap ``locator``'s payload check (and its reader's looks, for the probabilities read) so
-    that each verdict is appended to ``records`` with ``photo``'s index and truth."""
+    that each verdict is appended to ``records`` with ``photo``'s index and truth; a word passed
+    in a close-up (``photo["shot"]``) also with its :func:`alignment_error`, and a wrong one with
+    whether its bits and the printed word's agree at the pose (:func:`agrees_at_pose`)."""
     import numpy as np
 
     codec = locator.model.codec
@@ -80,18 +117,28 @@ def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any])
         # rest: unmorphed, bitwise, blind, whole_frame, relit_from and (a cast shadow's retry) light_grid
         light_grid = rest[5] if len(rest) > 5 else keywords.get("light_grid", 0)
         code = codec.encode(np.asarray(result.payload, dtype=np.uint8))
+        right = bool(np.array_equal(result.payload, photo["truth"]))
+        shot = photo.get("shot")
+        posed: dict[str, Any] = {}
+        if shot is not None and out.status == "passed":
+            posed["alignment_error"] = round(alignment_error(checker, out.fit, shot), 4)
+            if not right:
+                posed["agrees_at_pose"] = agrees_at_pose(checker, code, shot)
+                posed["printed_agrees_at_pose"] = agrees_at_pose(checker, shot.code, shot)
         records.append(
             {
                 "photo": photo["index"],
-                "right": bool(np.array_equal(result.payload, photo["truth"])),
+                "right": right,
                 "corrected_bits": int(result.corrected_bits),
                 "confidence": round(float(result.confidence), 5),
                 "rival_log_odds": round(codec.rival_log_odds(code, read["probabilities"]), 3),
                 "morph_fit": None if out.fit is None else round(float(out.fit.correlation), 4),
                 "light_grid": int(light_grid),
+                "relit": (rest[4] if len(rest) > 4 else keywords.get("relit_from")) is not None,
                 "status": out.status,
                 "bit_by_bit": out.bits is not None,
                 "screened": out.screened,
+                **posed,
             }
         )
         return out
@@ -119,6 +166,27 @@ def summary(records: list[dict[str, Any]], read: int, wrong_payloads: int, sampl
         "repaired_right_spared": sum(1 for r in spared if not r["bit_by_bit"] and not r["screened"]),
         "right_screened": sum(1 for r in first if r["right"] and r["screened"]),
         "wrong_screened": sum(1 for r in first if not r["right"] and r["screened"]),
+        **posed_summary(records),
+    }
+
+
+def posed_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Of the wrong words passed that were asked at the simulator's pose (:func:`agrees_at_pose`):
+    how many, how many the photo contradicts there, how many the printed word agrees with there,
+    and their alignments' median distance from it (:func:`alignment_error`), beside the right
+    words passed."""
+    import numpy as np
+
+    posed = [r for r in records if "agrees_at_pose" in r]
+    right = [r["alignment_error"] for r in records if r["right"] and "alignment_error" in r]
+    if not posed:
+        return {}
+    return {
+        "wrong_passed_posed": len(posed),
+        "contradicted_at_pose": sum(1 for r in posed if r["agrees_at_pose"] is False),
+        "printed_agrees_at_pose": sum(1 for r in posed if r["printed_agrees_at_pose"]),
+        "median_alignment_error": round(float(np.median([r["alignment_error"] for r in posed])), 4),
+        "right_median_alignment_error": round(float(np.median(right)), 4) if right else None,
     }
 
 
@@ -129,6 +197,9 @@ def main() -> None:
     ap.add_argument("--frame", type=frame_size, default=None, help="scenes of this size, WxH, instead of close-ups")
     ap.add_argument("--unrelated", action="store_true", help="images that show none of the drawing instead")
     ap.add_argument("--icons", type=Path, default=None, help="other drawings for --unrelated")
+    ap.add_argument(
+        "--crc-checked", type=int, default=None, help="check only the CRC's first K bits, as the count does"
+    )
     args = ap.parse_args()
     threads = set_threads(1)
     import cv2
@@ -139,13 +210,16 @@ def main() -> None:
 
     cv2.setNumThreads(1)
     model = DeepMorphModel.load(args.bundle)
+    if args.crc_checked is not None:
+        model = replace(model, codec=model.codec.narrowed(args.crc_checked))
     locator = Locator(model)
     records: list[dict[str, Any]] = []
     photo: dict[str, Any] = {}
     recorded(locator, records, photo)
     read = wrong_payloads = 0
-    for index, (image, camera, truth) in enumerate(photos(args, model)):
-        photo.update(index=index, truth=truth)
+    for index, (image, camera, truth, shot) in enumerate(photos(args, model)):
+        photo.update(index=index, truth=truth, shot=shot)
+        model.codec.forget()
         found = locator.locate(image, camera) if camera is not None else locator.locate(image)
         read += any(f.result.ok and np.array_equal(f.result.payload, truth) for f in found)
         wrong_payloads += any(f.result.ok and not np.array_equal(f.result.payload, truth) for f in found)
@@ -157,9 +231,13 @@ def main() -> None:
                "wrong_max_log_odds": "their max log-odds", "wrong_max_confidence": "their max confidence",
                "wrong_passed": "wrong passed", "repaired_right_passed": "right repaired passed",
                "repaired_right_spared": "of them spared the bits", "right_screened": "right passed on a few bits",
-               "wrong_screened": "wrong passed on a few bits"}  # fmt: skip
+               "wrong_screened": "wrong passed on a few bits", "wrong_passed_posed": "wrong passed asked at the pose",
+               "contradicted_at_pose": "contradicted there", "printed_agrees_at_pose": "printed word agrees there",
+               "median_alignment_error": "their alignments off (median)",
+               "right_median_alignment_error": "right words' alignments off (median)"}  # fmt: skip
     print(f"{kind}{size}, {'' if args.unrelated else args.severity + ', '}seed {args.seed}, {threads} thread")
-    print(table(["bundle", *columns.values()], [[args.bundle.stem, *(row[k] for k in columns)]]))
+    shown = {k: v for k, v in columns.items() if k in row}
+    print(table(["bundle", *shown.values()], [[args.bundle.stem, *(row[k] for k in shown)]]))
     report = {
         "environment": environment(),
         "bundle": str(args.bundle),
@@ -167,6 +245,7 @@ def main() -> None:
         "severity": args.severity,
         "width": args.width,
         "seed": args.seed,
+        "crc_checked": args.crc_checked,
         "summary": row,
         "records": records,
     }
