@@ -205,13 +205,17 @@ def main() -> None:
     import cv2
     import numpy as np
 
+    from deepmorph_core.errors import DeepMorphError
     from deepmorph_core.model import DeepMorphModel
     from deepmorph_detect.locate import Locator
 
     cv2.setNumThreads(1)
     model = DeepMorphModel.load(args.bundle)
     if args.crc_checked is not None:
-        model = replace(model, codec=model.codec.narrowed(args.crc_checked))
+        try:
+            model = replace(model, codec=model.codec.narrowed(args.crc_checked))
+        except DeepMorphError as exc:
+            ap.error(f"--crc-checked: {exc}")
     locator = Locator(model)
     records: list[dict[str, Any]] = []
     photo: dict[str, Any] = {}

@@ -77,7 +77,14 @@ def main() -> None:
     import cv2
 
     cv2.setNumThreads(1)
-    rows = [measure(bundle, args.samples, args.seed, args.workers, args.crc) for bundle in args.bundles]
+    from pydantic import ValidationError
+
+    from deepmorph_core.codec import format_codec_error
+
+    try:
+        rows = [measure(bundle, args.samples, args.seed, args.workers, args.crc) for bundle in args.bundles]
+    except ValidationError as exc:  # a --crc the code's bits cannot hold
+        ap.error(f"--crc {args.crc}: {format_codec_error(exc)}")
     columns = {"bundle": "bundle", "colour": "colour", "code": "payload + CRC", "samples": "hard close-ups",
                "print_px": "print px", "wrong": "wrong (6 CRC bits unchecked)", "per_10k": "per 10k, its CRC",
                "meets": "at most 0.1", "rule_crc": "CRC the rule picks", "rule_payload": "payload then",
