@@ -153,3 +153,17 @@ def load_scene_model(args: argparse.Namespace) -> tuple[Path, Any]:
     cv2.setNumThreads(args.threads)
     path = args.model or BUNDLED_MODEL
     return path, DeepMorphModel.load(path)
+
+
+def pose_error(viewbox: Any, found: Any, truth: Any) -> float:
+    """How far the homography ``found`` (SVG units -> photo pixels) places the drawing from the
+    simulator's pose ``truth``: the mean distance of the viewBox's corners, a share of the print's
+    width at the pose."""
+    import numpy as np
+
+    from deepmorph_detect.camera import project, viewbox_corners
+    from deepmorph_detect.metrics import corner_error
+
+    frame = viewbox_corners(viewbox)
+    true_quad = project(truth, frame)
+    return corner_error(project(found, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))

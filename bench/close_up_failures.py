@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, environment, set_threads, table, write_json  # noqa: E402
+from _common import RESULTS, environment, pose_error, set_threads, table, write_json  # noqa: E402
 
 KINDS = ("read", "not aligned", "no word", "right word withdrawn", "other words only", "wrong", "narrower")
 
@@ -62,9 +62,7 @@ def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None, float | 
     below 0 the photo does not show the morph to template matching even there."""
     from dataclasses import replace
 
-    from deepmorph_detect.camera import project, viewbox_corners
     from deepmorph_detect.check import MORPH_WIDTH, RECHECK_ITERATIONS, MorphFit
-    from deepmorph_detect.metrics import corner_error
     from deepmorph_detect.refine import LEVELS, aligned_at, refine_at
 
     gray, camera, pyramid = locator.frame(shot.photo, None)
@@ -83,11 +81,8 @@ def read_at_truth(locator: Any, shot: Any) -> tuple[bool, float | None, float | 
     aligned = locator.alignments(shot.photo)
     if not aligned:
         return read, None, gain
-    frame = viewbox_corners(locator.template.viewbox)
-    true_quad = project(shot.homography, frame)
     best = max(aligned, key=lambda a: a.alignment.correlation).alignment.homography
-    error = corner_error(project(best, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
-    return read, error, gain
+    return read, pose_error(locator.template.viewbox, best, shot.homography), gain
 
 
 def classify(

@@ -40,7 +40,16 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, add_close_up_options, environment, frame_size, set_threads, table, write_json  # noqa: E402
+from _common import (  # noqa: E402
+    RESULTS,
+    add_close_up_options,
+    environment,
+    frame_size,
+    pose_error,
+    set_threads,
+    table,
+    write_json,
+)
 
 NOT_A_PAYLOAD = 2  # a bit value no payload has: the truth of an unrelated image
 
@@ -70,36 +79,23 @@ def photos(args: argparse.Namespace, model: Any) -> Iterator[tuple[Any, Any, Any
             yield shot.photo, None, shot.payload, shot
 
 
-def alignment_error(checker: Any, fit: Any, shot: Any) -> float:
-    """How far the alignment ``fit`` is from the simulator's pose of the close-up ``shot``: the
-    mean distance of the drawing's corners, a share of the print's width."""
-    import numpy as np
-
-    from deepmorph_detect.camera import project, viewbox_corners
-    from deepmorph_detect.metrics import corner_error
-
-    frame = viewbox_corners(checker.template.viewbox)
-    true_quad = project(shot.homography, frame)
-    return corner_error(project(fit.homography, frame), true_quad) / float(np.linalg.norm(true_quad[1] - true_quad[0]))
-
-
-def agrees_at_pose(checker: Any, code: Any, shot: Any) -> bool | None:
-    """Whether the bits of the close-up ``shot``'s photo, as it is (not relit as the chain may
-    have asked), agree with the code word ``code`` at the simulator's pose, refined to ``code``'s
-    morph (``None``: the alignment diverged)."""
+def agrees_at_pose(checker: Any, pyramid: Any, code: Any, pose: Any) -> bool | None:
+    """Whether the photo's bits (``pyramid``: the close-up as it is, not relit as the chain may
+    have asked) agree with the code word ``code`` at the simulator's ``pose``, refined to
+    ``code``'s morph (``None``: the alignment diverged)."""
     from deepmorph_detect.check import MORPH_WIDTH
     from deepmorph_detect.refine import refine_at
 
-    pyramid = checker.pyramid(shot.photo)
-    aligned = refine_at(pyramid, shot.homography, checker.morphs.of_code(code), MORPH_WIDTH)
+    aligned = refine_at(pyramid, pose, checker.morphs.of_code(code), MORPH_WIDTH)
     return None if aligned is None else checker.synthesis.evidence(pyramid, aligned.homography, code).agrees
 
 
 def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any]) -> None:
     """Wrap ``locator``'s payload check (and its reader's looks, for the probabilities read) so
     that each verdict is appended to ``records`` with ``photo``'s index and truth; a word passed
-    in a close-up (``photo["shot"]``) also with its :func:`alignment_error`, and a wrong one with
-    whether its bits and the printed word's agree at the pose (:func:`agrees_at_pose`)."""
+    in a close-up (``photo["shot"]``) also with how far its alignment was from the simulator's
+    pose (``pose_error``), and a wrong one with whether its bits and the printed word's agree at
+    the pose (:func:`agrees_at_pose`)."""
     import numpy as np
 
     codec = locator.model.codec
@@ -121,10 +117,13 @@ def recorded(locator: Any, records: list[dict[str, Any]], photo: dict[str, Any])
         shot = photo.get("shot")
         posed: dict[str, Any] = {}
         if shot is not None and out.status == "passed":
-            posed["alignment_error"] = round(alignment_error(checker, out.fit, shot), 4)
+            posed["alignment_error"] = round(
+                pose_error(checker.template.viewbox, out.fit.homography, shot.homography), 4
+            )
             if not right:
-                posed["agrees_at_pose"] = agrees_at_pose(checker, code, shot)
-                posed["printed_agrees_at_pose"] = agrees_at_pose(checker, shot.code, shot)
+                as_it_is = checker.pyramid(shot.photo)
+                posed["agrees_at_pose"] = agrees_at_pose(checker, as_it_is, code, shot.homography)
+                posed["printed_agrees_at_pose"] = agrees_at_pose(checker, as_it_is, shot.code, shot.homography)
         records.append(
             {
                 "photo": photo["index"],
@@ -173,7 +172,7 @@ def summary(records: list[dict[str, Any]], read: int, wrong_payloads: int, sampl
 def posed_summary(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Of the wrong words passed that were asked at the simulator's pose (:func:`agrees_at_pose`):
     how many, how many the photo contradicts there, how many the printed word agrees with there,
-    and their alignments' median distance from it (:func:`alignment_error`), beside the right
+    and their alignments' median distance from it (``pose_error``), beside the right
     words passed."""
     import numpy as np
 

@@ -34,13 +34,12 @@ def measure(bundle: Path, samples: int, seed: int, workers: int, crc: int | None
     from deepmorph.training.trust import TRUST_TARGET, crc_for, crc_needed, measure_trust
     from deepmorph_core.bundle import per_10k
     from deepmorph_core.capacity import default_crc_code, plan_code
-    from deepmorph_core.codec import PayloadCodec, with_crc
+    from deepmorph_core.codec import with_crc
     from deepmorph_core.model import DeepMorphModel
 
     model = DeepMorphModel.load(bundle)
     if crc is not None:
-        model.codec = PayloadCodec(with_crc(model.codec.spec, crc))
-        model.meta.codec = model.codec.spec
+        model.use_code(with_crc(model.codec.spec, crc))
     spec = model.codec.spec
     record = measure_trust(model, samples, seed, workers)
     width = crc_for(record, spec)

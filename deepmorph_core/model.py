@@ -270,6 +270,12 @@ class DeepMorphModel:
             return False
         return True
 
+    def use_code(self, spec: CodecSpec) -> None:
+        """Read and write payloads with the code ``spec`` from now on: the codec and the bundle's
+        metadata, which must agree (a cut code, a lengthened CRC)."""
+        self.codec = PayloadCodec(spec)
+        self.meta.codec = spec
+
     def eval(self) -> DeepMorphModel:
         self.encoder.eval()
         self.decoder.eval()

@@ -283,8 +283,7 @@ def shrink_networks(model: DeepMorphModel, keep: list[int], spec: CodecSpec) -> 
         readout = model.decoder.readout
         if readout is not None:
             model.decoder.readout = _linear(readout.weight[index], readout.bias[index], readout)
-    model.codec = PayloadCodec(spec)
-    model.meta.codec = spec
+    model.use_code(spec)
     model.graphs.clear()  # made for the old code
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from deepmorph_core.bundle import TrustRecord, per_10k
-from deepmorph_core.codec import CodecSpec, PayloadCodec, widths_within, with_crc
+from deepmorph_core.codec import CodecSpec, widths_within, with_crc
 from deepmorph_core.model import DeepMorphModel
 from deepmorph_detect.photo_validation import close_up_width, count_wrong_payloads
 from deepmorph_detect.scenes import CLOSE_UP_SIZE
@@ -101,8 +101,7 @@ def lengthen_crc(model: DeepMorphModel, record: TrustRecord) -> TrustRecord:
     if width <= spec.crc_bits:
         return record
     longer = with_crc(spec, width)
-    model.codec = PayloadCodec(longer)
-    model.meta.codec = longer
+    model.use_code(longer)
     return record.model_copy(
         update={"crc_bits": (spec.crc_bits, width), "payload_bits": (spec.payload_bits, longer.payload_bits)}
     )
