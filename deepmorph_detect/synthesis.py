@@ -135,6 +135,11 @@ class BitEvidence:
         rival_margin: how many times :attr:`deviation` the rival's must reach for the word to
             pass: 1, or more where the photo cannot tell near words apart as well
             (:data:`~deepmorph_detect.check.RELIT_RIVAL_MARGIN`).
+        runner_up_passes: the decoder's runner-up word passes every other rule too
+            (:meth:`PayloadChecker.runner_up_passes <deepmorph_detect.check.PayloadChecker.runner_up_passes>`).
+        realigned_disagrees: asked again at a second alignment to its morph, in a grid of light,
+            the photo does not show the word (:meth:`PayloadChecker.shown_realigned
+            <deepmorph_detect.check.PayloadChecker.shown_realigned>`).
     """
 
     code: np.ndarray
@@ -145,6 +150,7 @@ class BitEvidence:
     rival_deviation: float | None = None
     rival_margin: float = 1.0
     runner_up_passes: bool = False
+    realigned_disagrees: bool = False
 
     @property
     def contradicted(self) -> int:
@@ -182,7 +188,8 @@ class BitEvidence:
         (:attr:`deviation` at most :data:`MAX_DEVIATION`), and its nearest rival word, whose bits
         the photo shows where the two differ, not explaining the photo better
         (:attr:`rival_deviation` below :attr:`rival_margin` times :attr:`deviation`), and the
-        decoder's runner-up word not passing all of this too (:attr:`runner_up_passes`)."""
+        decoder's runner-up word not passing all of this too (:attr:`runner_up_passes`), nor the
+        photo failing to show it at a second alignment (:attr:`realigned_disagrees`)."""
         return not self.reason
 
     def to_json(self) -> dict[str, Any]:
@@ -198,14 +205,16 @@ class BitEvidence:
                 fields["rival_margin"] = self.rival_margin
         if self.runner_up_passes:
             fields["runner_up_passes"] = True
+        if self.realigned_disagrees:
+            fields["realigned_disagrees"] = True
         return fields
 
     @property
-    def _rule_inputs(self) -> tuple[int, float, float, float | None, float, bool]:
+    def _rule_inputs(self) -> tuple[int, float, float, float | None, float, bool, bool]:
         """What the bit rules are asked of (:func:`broken_rules`, :func:`disagreement`), in their order."""
         return (
             self.contradicted, self.weakest_sum, self.deviation, self.rival_deviation, self.rival_margin,
-            self.runner_up_passes,
+            self.runner_up_passes, self.realigned_disagrees,
         )  # fmt: skip
 
     @property
@@ -221,7 +230,7 @@ class BitEvidence:
 
 
 #: The per-bit check's rules (:attr:`BitEvidence.agrees`), by name, in the order they are asked.
-BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up")
+BIT_RULES = ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up", "realigned")
 
 
 def broken_rules(
@@ -231,18 +240,21 @@ def broken_rules(
     rival_deviation: float | None = None,
     rival_margin: float = 1.0,
     runner_up_passes: bool = False,
+    realigned_disagrees: bool = False,
 ) -> tuple[str, ...]:
     """The :data:`BIT_RULES` a code word breaks (empty when it agrees): too many bits shown
     flipped, its weakest bits barely shown, a photo its morph does not explain, or a photo that
     the nearest rival word explains better, or not ``rival_margin`` times worse, its bits shown
-    where the two differ (``rival_deviation``), or the decoder's runner-up word passing every
-    rule too (``runner_up_passes``)."""
+    where the two differ (``rival_deviation``), the decoder's runner-up word passing every
+    rule too (``runner_up_passes``), or the photo not showing the word at a second alignment to
+    its morph (``realigned_disagrees``)."""
     broken = (
         contradicted > MAX_CONTRADICTED,
         weakest_sum < MIN_WEAKEST_SUM,
         deviation > MAX_DEVIATION,
         rival_deviation is not None and rival_deviation < rival_margin * deviation,
         runner_up_passes,
+        realigned_disagrees,
     )
     return tuple(rule for rule, hit in zip(BIT_RULES, broken) if hit)
 
@@ -254,9 +266,12 @@ def disagreement(
     rival_deviation: float | None = None,
     rival_margin: float = 1.0,
     runner_up_passes: bool = False,
+    realigned_disagrees: bool = False,
 ) -> str:
     """The first of :func:`broken_rules` a code word breaks, in words (empty when none)."""
-    broken = broken_rules(contradicted, weakest_sum, deviation, rival_deviation, rival_margin, runner_up_passes)
+    broken = broken_rules(
+        contradicted, weakest_sum, deviation, rival_deviation, rival_margin, runner_up_passes, realigned_disagrees
+    )
     first = next(iter(broken), "")
     if first == "bits flipped":
         return f"the photo shows {contradicted} of its code bits flipped"
@@ -278,6 +293,8 @@ def disagreement(
         )
     if first == "runner-up":
         return "the code word the decoder read next passes the check too: the photo does not tell them apart"
+    if first == "realigned":
+        return "aligned again to its morph in a grid of light, the photo does not show its bits"
     return ""
 
 
@@ -286,7 +303,7 @@ def disagreement_in(fields: dict[str, Any]) -> str:
     return disagreement(
         fields["bits_contradicted"], fields["weakest_bits_support"], fields["bits_deviation"],
         fields.get("nearest_rival_deviation"), fields.get("rival_margin", 1.0),
-        fields.get("runner_up_passes", False),
+        fields.get("runner_up_passes", False), fields.get("realigned_disagrees", False),
     )  # fmt: skip
 
 

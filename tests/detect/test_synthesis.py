@@ -349,8 +349,8 @@ def test_a_word_the_photo_barely_supports_does_not_pass_the_bits() -> None:
     assert replace(said, runner_up_passes=True).broken == ("weakest bits", "runner-up")
     assert disagreement(3, 2.0, 0.2) == "the photo shows 3 of its code bits flipped"
     # every rule a word breaks, by name and in the order asked (the first is the reason given)
-    assert broken_rules(3, -1.0, 1.5, 0.4, 1.0, True) == BIT_RULES
-    assert BIT_RULES == ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up")
+    assert broken_rules(3, -1.0, 1.5, 0.4, 1.0, True, True) == BIT_RULES
+    assert BIT_RULES == ("bits flipped", "weakest bits", "unexplained", "rival", "runner-up", "realigned")
     assert broken_rules(0, -1.0, 1.5) == ("weakest bits", "unexplained") and broken_rules(2, 5.0, 1.0, 1.0) == ()
     assert disagreement(0, 5.0, 0.5, 0.3).startswith("the nearest other code word explains the photo better")
 
@@ -577,6 +577,62 @@ def test_a_word_whose_runner_up_passes_too_is_withdrawn(
     shown["runner-up"] = False
     decided = checker.check(image, np.eye(3), read, probabilities=probs)
     assert decided.status == "passed" and "runner_up_passes" not in decided.bits.to_json()
+
+
+def test_a_word_is_asked_again_at_a_second_alignment_to_its_morph(model: DeepMorphModel, locator: Locator) -> None:
+    """From an alignment a few pixels off, the photo aligned again to the printed word's morph in a
+    grid of light still shows it; a near word (one payload bit flipped, several code bits), asked
+    the same way from the same start, is not shown."""
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(5))[0]
+    photo, H = _small_print(model, payload, 160, seed=2)
+    pyramid = ImagePyramid(photo)
+    off = np.array([[1.0, 0.0, 2.0], [0.0, 1.0, -1.5], [0.0, 0.0, 1.0]]) @ H  # 2.5 px off
+    fit = MorphFit(off, 0.9, 0.9)
+    printed = model.codec.encode(payload)
+    near = min((model.codec.encode(p) for p in _near_payloads(payload)), key=lambda c: int((c != printed).sum()))
+    assert checker.shown_realigned(pyramid, fit, printed, 0.9, 0)
+    assert not checker.shown_realigned(pyramid, fit, near, 0.9, 0)
+
+
+def test_a_colour_repair_the_photo_does_not_show_once_aligned_again_is_withdrawn(
+    model: DeepMorphModel, locator: Locator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A colour drawing's word the code corrected, which every bit rule passes, is withdrawn where
+    the photo aligned again to its morph does not show it (``shown_realigned``), with that reason
+    in its JSON; a word read without corrections is not asked, nor a black-and-white drawing's."""
+    from deepmorph_detect.check import PayloadChecker
+
+    checker = locator.checker
+    payload = random_payloads(1, model.codec.spec.payload_bits, np.random.default_rng(31))[0]
+    code = model.codec.encode(payload)
+    asked: list[np.ndarray] = []
+
+    def shown_realigned(pyramid, fit, asked_code, aligned, light_grid) -> bool:
+        asked.append(asked_code)
+        return False
+
+    monkeypatch.setattr(
+        checker.synthesis,
+        "evidence",
+        lambda p, h, c, *a, **k: BitEvidence(np.asarray(c), np.ones(len(code), np.float32), 0.9, 1.0),
+    )
+    monkeypatch.setattr(checker, "fit_morph", lambda *args, **kwargs: MorphFit(np.eye(3), 0.9, 0.85))
+    monkeypatch.setattr(checker, "rival_deviation", lambda *args, **kwargs: None)
+    monkeypatch.setattr(checker, "shown_realigned", shown_realigned)
+    image = np.full((64, 64), 0.8, np.float32)
+    repaired = DecodeResult(payload, True, 1, 0.92)
+    assert not checker.asks_realigned
+    assert checker.check(image, np.eye(3), repaired, bitwise=True).status == "passed" and not asked
+    monkeypatch.setattr(PayloadChecker, "asks_realigned", property(lambda self: True))  # as a colour drawing's
+    withdrawn = checker.check(image, np.eye(3), repaired, bitwise=True)
+    assert withdrawn.status == "contradicted" and not withdrawn.result.ok
+    assert withdrawn.bits.realigned_disagrees and np.array_equal(asked[0], code)
+    reason = "aligned again to its morph in a grid of light, the photo does not show its bits"
+    assert withdrawn.bits.reason == reason and disagreement_in(withdrawn.bits.to_json()) == reason
+    asked.clear()
+    clean = DecodeResult(payload, True, 0, 0.92)
+    assert checker.check(image, np.eye(3), clean, bitwise=True).status == "passed" and not asked
 
 
 def test_a_word_its_morph_leaves_unexplained_is_withdrawn_whatever_flat_light_shows(
