@@ -969,24 +969,36 @@ def test_a_colour_print_is_asked_in_colour_only_where_the_drawing_aligned(
 ) -> None:
     """The colours' extra freedom also explains clutter; a weak reading is asked in colour where
     the unmorphed drawing aligned at 0.8 or better (in a lit photo: where the photo itself did),
-    else in the reading channel's gray."""
+    else in the reading channel's gray; at its second alignment (``shown_realigned``) as there."""
     from deepmorph_detect.check import DRAWING_LIKE_ALIGNMENT
 
     locator = Locator(face, detector=None)
+    checker = locator.checker
     payload = random_payloads(1, 12, np.random.default_rng(6))[0]
     photo, H = _colour_photo(face, face.codec.encode(payload), np.random.default_rng(6))
     asked: list[tuple[bytes, bool]] = []  # (code word, in colour) of every word asked
-    synthesis = locator.checker.synthesis
-    evidence, shown_on = synthesis.evidence, synthesis.shown_on
+    realigned: list[bool] = []  # in colour, of each ask at a second alignment
+    synthesis = checker.synthesis
+    evidence, shown_on, shown_realigned = synthesis.evidence, synthesis.shown_on, checker.shown_realigned
+
+    def realigning(*a):
+        asks = len(asked)
+        shown = shown_realigned(*a)
+        realigned.extend(colour for _, colour in asked[asks:])
+        del asked[asks:]
+        return shown
+
     monkeypatch.setattr(synthesis, "evidence", lambda *a: asked.append((a[2].tobytes(), a[3])) or evidence(*a))
     monkeypatch.setattr(synthesis, "shown_on", lambda *a: asked.append((a[2].tobytes(), a[4])) or shown_on(*a))
+    monkeypatch.setattr(checker, "shown_realigned", realigning)
     weak = DecodeResult(payload, ok=True, corrected_bits=1, confidence=0.9)
     pyramid = ImagePyramid(photo)
-    assert locator.checker.check(pyramid, H, weak).status == "passed"
+    assert checker.check(pyramid, H, weak).status == "passed"
     for relit_from in (DRAWING_LIKE_ALIGNMENT - 0.2, DRAWING_LIKE_ALIGNMENT + 0.1):
-        locator.checker.check(pyramid, H, weak, relit_from=relit_from)
+        checker.check(pyramid, H, weak, relit_from=relit_from)
     word = face.codec.encode(payload).tobytes()
     assert [colour for code, colour in asked if code == word] == [True, False, True]
+    assert realigned == [True, False, True]
     # a rival word passing too is asked as the word before it was
     for (before, colour_before), (code, colour) in zip(asked, asked[1:]):
         if code != word:
